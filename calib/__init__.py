@@ -1,0 +1,1 @@
+"""Calibration mathematics: pure functions on arrays (no I/O)."""

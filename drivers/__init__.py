@@ -1,0 +1,1 @@
+"""Instrument drivers: drawstring sensor, dial indicator, robot joint source."""

@@ -1,0 +1,1 @@
+"""Simulated world and simulated devices speaking the real protocols."""

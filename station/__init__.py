@@ -1,0 +1,1 @@
+"""The station: configuration, sessions, command line, live view."""

@@ -1,0 +1,40 @@
+"""Console script ``station``: parse, call, print. Each command lives in ``station.commands``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from station.errors import DeviceError, InputError
+
+# One module per command; each exposes ``register(subparsers)`` which sets ``func`` on its parser.
+COMMANDS = ("demo", "calibrate")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="station", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        importlib.import_module(f"station.commands.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"station: error: {exc}", file=sys.stderr)
+        return 2
+    except DeviceError as exc:
+        print(f"station: device error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("station: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
