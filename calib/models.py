@@ -1,0 +1,214 @@
+"""Measurement models: what the solver minimises, without the solver looking inside.
+
+A model owns its data and maps a full parameter vector ``x`` to whitened residuals (each divided by
+its noise) and their Jacobian. It exposes, for the solver and the analyses around it:
+
+- ``names``: one name per entry of ``x``; the first 24 are the D-H table (``calib.params.DH_NAMES``),
+  internal units (rad, mm);
+- ``x0``: the starting vector;
+- ``setup_mask``: boolean mask of the setup unknowns (everything that is not the robot's table);
+- ``groups``: per residual, which instrument it comes from (robust scales are estimated per group);
+- ``rows``: per residual, the 0-based sample row it belongs to;
+- ``residuals(x)`` and ``residuals_and_jacobian(x)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from calib.identifiability import structural_holds
+from calib.kinematics import tcp_jacobian, tcp_position
+from calib.lines import N_LINE_PARAMS, LineReference, fit_line, line_residual
+from calib.params import DH_NAMES
+
+N_DH = 24
+GROUP_LENGTH, GROUP_LINE = 0, 1
+
+
+class MeasurementModel(Protocol):
+    names: tuple[str, ...]
+    x0: np.ndarray
+    setup_mask: np.ndarray
+    groups: np.ndarray
+    rows: np.ndarray
+
+    def residuals(self, x: np.ndarray) -> np.ndarray: ...
+
+    def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True) -> tuple: ...
+
+    def gauges(self) -> dict[str, str]:
+        """Parameters that no data of this kind can determine, with the reason."""
+        ...
+
+
+@dataclass(frozen=True)
+class DrawstringSamples:
+    """Drawstring samples: joints ``q`` (N, 6) [rad], readings ``length`` (N,) [mm],
+    ``dial`` (N,) [mm] (NaN where absent) and ``line`` (N,) ids (-1: no line constraint)."""
+
+    q: np.ndarray
+    length: np.ndarray
+    dial: np.ndarray
+    line: np.ndarray
+
+    def __len__(self) -> int:
+        return self.q.shape[0]
+
+    def subset(self, rows: np.ndarray) -> DrawstringSamples:
+        return DrawstringSamples(self.q[rows], self.length[rows], self.dial[rows], self.line[rows])
+
+
+@dataclass(frozen=True)
+class DrawstringSetup:
+    """Station geometry and noise: rough ``anchor`` [mm] and ``length_offset`` [mm], reading noise
+    ``sigma_length`` [mm], line-contact noise ``sigma_line`` [mm], per line id the ``dial_axis``
+    (unit, base frame; absent: the dial only gates captures) and ``rho`` (line-term weight)."""
+
+    anchor: np.ndarray
+    length_offset: float
+    sigma_length: float = 0.02
+    sigma_line: float = 0.01
+    dial_axis: dict[int, np.ndarray] = field(default_factory=dict)
+    rho: float = 1.0
+
+
+@dataclass(frozen=True)
+class DrawstringFrame:
+    """What a training fit fixes for every later evaluation: the line references (by line id),
+    the anchor's starting point [mm] and the basis its three unknowns move it along."""
+
+    lines: dict[int, LineReference]
+    anchor0: np.ndarray
+    anchor_basis: np.ndarray
+
+    @classmethod
+    def from_nominal(cls, samples: DrawstringSamples, setup: DrawstringSetup, dh, tool):
+        """Lines fitted to the nominal TCPs of each line's samples; with a single line the anchor
+        moves in (radial, along, tangential) coordinates so that its free rotation about the line
+        is one named unknown."""
+        p = tcp_position(dh, samples.q, tool)
+        ids = sorted(int(i) for i in np.unique(samples.line) if i >= 0)
+        lines = {i: fit_line(p[samples.line == i]) for i in ids}
+        anchor0 = np.asarray(setup.anchor, float)
+        basis = np.eye(3)
+        if len(lines) == 1:
+            ref = next(iter(lines.values()))
+            rel = anchor0 - ref.point
+            radial = rel - (rel @ ref.direction) * ref.direction
+            radial /= np.linalg.norm(radial)
+            basis = np.column_stack([radial, ref.direction, np.cross(ref.direction, radial)])
+        return cls(lines, anchor0, basis)
+
+    def anchor_names(self) -> tuple[str, str, str]:
+        if np.allclose(self.anchor_basis, np.eye(3)):
+            return ("anchor.x_mm", "anchor.y_mm", "anchor.z_mm")
+        return ("anchor.radial_mm", "anchor.along_mm", "anchor.about_line_mm")
+
+
+class DrawstringLineModel:
+    """Drawstring distances to a ground anchor plus gauge-block line contacts (the paper's LMLC).
+
+    Unknowns ``x = [dh (24), anchor (3), length_offset (1), 4 per line]``. Residuals, in this order:
+
+    - drawstring, every row: ``(|p - anchor| - length_offset - Y) / sigma_length``
+    - line, two per row on a line: ``sqrt(rho) * offset(p - dial * dial_axis, line) / sigma_line``
+    """
+
+    def __init__(self, samples, setup: DrawstringSetup, frame: DrawstringFrame, dh0, tool):
+        self.samples, self.setup_values, self.frame = samples, setup, frame
+        self.tool = np.asarray(tool, float)
+        self.line_ids = sorted(frame.lines)
+        self._line_cols = {
+            lid: slice(N_DH + 4 + N_LINE_PARAMS * k, N_DH + 4 + N_LINE_PARAMS * (k + 1))
+            for k, lid in enumerate(self.line_ids)
+        }
+        line_names = tuple(f"line{lid}.{n}" for lid in self.line_ids for n in ("c1_mm", "c2_mm", "b1", "b2"))
+        self.names = DH_NAMES + frame.anchor_names() + ("length_offset_mm",) + line_names
+        self.x0 = np.concatenate(
+            [np.ravel(dh0), np.zeros(3), [setup.length_offset], np.zeros(len(line_names))]
+        )
+        self.setup_mask = np.arange(len(self.names)) >= N_DH
+        self._on_line = {lid: np.flatnonzero(samples.line == lid) for lid in self.line_ids}
+        line_rows = np.concatenate([self._on_line[lid] for lid in self.line_ids] or [[]]).astype(int)
+        n = len(samples)
+        self.rows = np.concatenate([np.arange(n), np.repeat(line_rows, 2)])
+        self.groups = np.concatenate([np.full(n, GROUP_LENGTH), np.full(2 * line_rows.size, GROUP_LINE)])
+
+    def gauges(self) -> dict[str, str]:
+        held = structural_holds(self.x0[:N_DH].reshape(6, 4), self.tool, "anchor and the lines")
+        if len(self.line_ids) == 1:
+            held["anchor.about_line_mm"] = (
+                "a single line: turning the anchor about it keeps every distance to the line"
+            )
+        return held
+
+    def with_samples(self, samples: DrawstringSamples) -> DrawstringLineModel:
+        """The same model (frame, setup) on other rows, e.g. a hold-out set."""
+        return DrawstringLineModel(samples, self.setup_values, self.frame, self.x0[:N_DH], self.tool)
+
+    # -- unpacking ---------------------------------------------------------------------------
+    def dh(self, x: np.ndarray) -> np.ndarray:
+        return x[:N_DH].reshape(6, 4)
+
+    def anchor(self, x: np.ndarray) -> np.ndarray:
+        return self.frame.anchor0 + self.frame.anchor_basis @ x[N_DH : N_DH + 3]
+
+    def length_offset(self, x: np.ndarray) -> float:
+        return float(x[N_DH + 3])
+
+    def line(self, x: np.ndarray, lid: int) -> tuple[np.ndarray, np.ndarray]:
+        """Line ``lid`` as (point [mm], unit direction)."""
+        return self.frame.lines[lid].line(x[self._line_cols[lid]])
+
+    # -- residuals ---------------------------------------------------------------------------
+    def length_error_mm(self, x: np.ndarray) -> np.ndarray:
+        """Drawstring residuals ``Y - Y_model`` [mm], one per row (the contract's metric)."""
+        p = tcp_position(self.dh(x), self.samples.q, self.tool)
+        model = np.linalg.norm(p - self.anchor(x), axis=1) - self.length_offset(x)
+        return self.samples.length - model
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        return self._evaluate(x, jacobian=False)[0]
+
+    def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
+        return self._evaluate(x, jacobian)
+
+    def _evaluate(self, x, jacobian):
+        st = self.setup_values
+        if jacobian:
+            p, dp = tcp_jacobian(self.dh(x), self.samples.q, self.tool)
+        else:
+            p = tcp_position(self.dh(x), self.samples.q, self.tool)
+        rel = p - self.anchor(x)
+        dist = np.linalg.norm(rel, axis=1)
+        r_len = (dist - self.length_offset(x) - self.samples.length) / st.sigma_length
+        parts, jparts = [r_len], []
+        if jacobian:
+            n = rel / dist[:, None]
+            j = np.zeros((len(self.samples), x.size))
+            j[:, :N_DH] = np.einsum("nk,nkj->nj", n, dp)
+            j[:, N_DH : N_DH + 3] = -n @ self.frame.anchor_basis
+            j[:, N_DH + 3] = -1.0
+            jparts.append(j / st.sigma_length)
+        w_line = np.sqrt(st.rho) / st.sigma_line
+        for lid in self.line_ids:
+            rows = self._on_line[lid]
+            pc = p[rows] - self._dial_shift(rows, lid)
+            r, dr_dp, dr_dl = line_residual(self.frame.lines[lid], x[self._line_cols[lid]], pc)
+            parts.append(w_line * r.ravel())
+            if jacobian:
+                j = np.zeros((rows.size, 2, x.size))
+                j[:, :, :N_DH] = np.einsum("nik,nkj->nij", dr_dp, dp[rows])
+                j[:, :, self._line_cols[lid]] = dr_dl
+                jparts.append(w_line * j.reshape(2 * rows.size, x.size))
+        r = np.concatenate(parts)
+        return (r, np.concatenate(jparts)) if jacobian else (r, None)
+
+    def _dial_shift(self, rows: np.ndarray, lid: int) -> np.ndarray:
+        axis = self.setup_values.dial_axis.get(lid)
+        if axis is None:
+            return np.zeros((rows.size, 3))
+        return np.nan_to_num(self.samples.dial[rows])[:, None] * np.asarray(axis, float)

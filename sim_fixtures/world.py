@@ -1,0 +1,308 @@
+"""A simulated calibration cell: a true robot, gauge-block lines, a drawstring anchor, noisy instruments.
+
+Deliberately independent of ``calib/``: its own forward kinematics (a plain loop over 4x4 link
+transforms) and its own inverse kinematics (damped Newton on the geometric Jacobian), so that the
+calibration maths can be judged against it.
+
+Units as a person measures them: mm and degrees. The physics:
+
+- the true robot is the nominal table plus errors of a machined, assembled arm: N(0, 0.15 deg) on
+  each angle, N(0, 0.75 mm) on each length;
+- each gauge-block line is a straight edge the tool touches; the operator's placement leaves the
+  TCP off the edge along the dial axis by U(-0.3, 0.3) mm, which the dial reads;
+- the drawstring reads ``|p_TCP - anchor| - length_offset`` with N(0, 0.02 mm) noise and 1 um
+  resolution; the dial N(0, 0.002 mm); the controller's joint readings N(0, 0.0005 deg);
+- a gross reading (cable slip, bumped probe) adds 2-5 mm, either sign, to the drawstring.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+NOMINAL_JR680 = np.array(  # alpha_deg, a_mm, d_mm, theta_deg (the paper's Table I)
+    [
+        [-90.0, 250.0, 653.5, 0.0],
+        [0.0, 900.0, 0.0, -90.0],
+        [-90.0, -205.0, 0.0, 180.0],
+        [90.0, 0.0, 1030.2, 0.0],
+        [-90.0, 0.0, 0.0, 90.0],
+        [0.0, 0.0, 200.6, 0.0],
+    ]
+)
+JR680_LIMITS_DEG = np.array(
+    [[-170, 170], [-150, 90], [-90, 200], [-180, 180], [-135, 135], [-360, 360]], float
+)
+WORKING_POSE_DEG = np.array([0.0, -50.0, -20.0, 0.0, -90.0, 0.0])
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Instrument noise (1 sigma) and resolution, in mm and degrees."""
+
+    length_mm: float = 0.02
+    length_resolution_mm: float = 0.001
+    dial_mm: float = 0.002
+    dial_resolution_mm: float = 0.001
+    q_deg: float = 0.0005
+    placement_mm: float = 0.3
+
+
+@dataclass(frozen=True)
+class GaugeLine:
+    """A gauge-block edge: its centre [mm], unit direction, usable length [mm], the dial axis (unit,
+    perpendicular to the edge) and the tool approach direction used there (unit, base frame)."""
+
+    id: int
+    centre: np.ndarray
+    direction: np.ndarray
+    length_mm: float
+    dial_axis: np.ndarray
+    approach: np.ndarray
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+DEFAULT_LINES = (
+    GaugeLine(
+        0, np.array([-1100.0, 0.0, 150.0]), _unit([0, 1, 0]), 500.0, _unit([0, 0, 1]), _unit([0, 0, -1])
+    ),
+    GaugeLine(
+        1, np.array([-1050.0, -450.0, 450.0]), _unit([1, 0, 0]), 400.0, _unit([0, 0, 1]), _unit([0, 0, -1])
+    ),
+    GaugeLine(
+        2,
+        np.array([-1000.0, 450.0, 600.0]),
+        _unit([0.2, 0, 1]),
+        400.0,
+        _unit([-1, 0, 0.2]),
+        _unit([-1, 0, 0.2]),
+    ),
+)
+
+
+def link(alpha, a, d, theta) -> np.ndarray:
+    """Standard D-H link transform ``Rz(theta) Tz(d) Tx(a) Rx(alpha)``, angles in radians."""
+    ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
+    return np.array(
+        [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1]]
+    )
+
+
+@dataclass
+class Robot:
+    """A D-H robot: ``table`` rows (alpha_deg, a_mm, d_mm, theta_deg), TCP ``tool`` [mm], limits."""
+
+    table: np.ndarray
+    tool: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    limits_deg: np.ndarray = field(default_factory=lambda: JR680_LIMITS_DEG.copy())
+
+    def frames(self, q_deg) -> list[np.ndarray]:
+        """Base-frame poses of frames 0..6 for one configuration."""
+        out = [np.eye(4)]
+        for (alpha, a, d, theta), q in zip(self.table, q_deg, strict=True):
+            out.append(out[-1] @ link(np.radians(alpha), a, d, np.radians(theta + q)))
+        return out
+
+    def pose(self, q_deg) -> np.ndarray:
+        """Base-frame pose of the TCP (rotation of the flange, position of the tool point)."""
+        t = self.frames(q_deg)[-1].copy()
+        t[:3, 3] = t[:3, :3] @ self.tool + t[:3, 3]
+        return t
+
+    def tcp(self, q_deg) -> np.ndarray:
+        """TCP positions [mm] for configurations (N, 6) or (6,) in degrees."""
+        q = np.atleast_2d(q_deg)
+        p = np.array([self.pose(qi)[:3, 3] for qi in q])
+        return p if np.ndim(q_deg) == 2 else p[0]
+
+    def ik(self, target: np.ndarray, seed_deg, iters: int = 60) -> np.ndarray | None:
+        """Joint angles [deg] reaching the 4x4 ``target`` pose, by damped Newton from ``seed_deg``;
+        None if it does not converge to 1e-7 mm / rad or leaves the joint limits."""
+        q = np.radians(np.array(seed_deg, float))
+        for _ in range(iters):
+            frames = self.frames(np.degrees(q))
+            tcp = frames[-1][:3, :3] @ self.tool + frames[-1][:3, 3]
+            err_p = target[:3, 3] - tcp
+            r_err = target[:3, :3] @ frames[-1][:3, :3].T
+            err_w = 0.5 * np.array(
+                [r_err[2, 1] - r_err[1, 2], r_err[0, 2] - r_err[2, 0], r_err[1, 0] - r_err[0, 1]]
+            )
+            err = np.concatenate([err_p, 1000.0 * err_w])
+            if np.max(np.abs(err)) < 1e-7:
+                q_deg = np.degrees(q)
+                inside = np.all((q_deg >= self.limits_deg[:, 0]) & (q_deg <= self.limits_deg[:, 1]))
+                return q_deg if inside else None
+            jac = np.empty((6, 6))
+            for i in range(6):
+                z, o = frames[i][:3, 2], frames[i][:3, 3]
+                jac[:3, i] = np.cross(z, tcp - o)
+                jac[3:, i] = 1000.0 * z
+            dq = np.linalg.solve(jac.T @ jac + 1e-6 * np.eye(6), jac.T @ err)
+            q += dq / max(1.0, np.max(np.abs(dq)) / 0.2)
+        return None
+
+
+def tool_pose(position, approach, roll_rad) -> np.ndarray:
+    """A TCP pose whose z axis is ``approach``, rolled by ``roll_rad`` about it."""
+    z = _unit(approach)
+    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
+    x = _unit(np.cross(helper, z))
+    y = np.cross(z, x)
+    c, s = np.cos(roll_rad), np.sin(roll_rad)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2] = c * x + s * y, -s * x + c * y, z
+    pose[:3, 3] = position
+    return pose
+
+
+def tilted(axis: np.ndarray, max_tilt_deg: float, rng: np.random.Generator) -> np.ndarray:
+    """``axis`` tilted by up to ``max_tilt_deg`` towards a random perpendicular direction."""
+    perp = _unit(np.cross(axis, rng.normal(size=3)))
+    tilt = np.radians(rng.uniform(0.0, max_tilt_deg))
+    return _unit(np.cos(tilt) * axis + np.sin(tilt) * perp)
+
+
+@dataclass
+class SampleSet:
+    """What the station would record: joint readings [deg], drawstring [mm], dial [mm], line ids,
+    plus the truth behind them (true joints, indices of the gross readings)."""
+
+    q_deg: np.ndarray
+    length_mm: np.ndarray
+    dial_mm: np.ndarray
+    line: np.ndarray
+    q_true_deg: np.ndarray
+    outliers: np.ndarray
+
+    def __len__(self) -> int:
+        return self.q_deg.shape[0]
+
+    def to_csv(self, path) -> None:
+        """Write as the contract's samples CSV."""
+        header = "sample,line," + ",".join(f"q{i}_deg" for i in range(1, 7)) + ",length_mm,dial_mm"
+        rows = np.column_stack([np.arange(len(self)), self.line, self.q_deg, self.length_mm, self.dial_mm])
+        fmt = ["%d", "%d"] + ["%.6f"] * 6 + ["%.4f", "%.4f"]
+        np.savetxt(path, rows, fmt=fmt, delimiter=",", header=header, comments="")
+
+
+@dataclass
+class World:
+    """The true cell. Build one with ``World.create(seed)``."""
+
+    nominal: Robot
+    true: Robot
+    anchor_mm: np.ndarray
+    length_offset_mm: float
+    lines: tuple[GaugeLine, ...]
+    noise: Noise = field(default_factory=Noise)
+
+    @classmethod
+    def create(cls, seed: int = 0, n_lines: int = 3, noise: Noise | None = None) -> World:
+        """A JR680 with random geometric errors, ``n_lines`` of the default gauge-block placements."""
+        rng = np.random.default_rng(seed)
+        nominal = Robot(NOMINAL_JR680.copy())
+        error = np.column_stack(
+            [rng.normal(0, 0.15, 6), rng.normal(0, 0.75, 6), rng.normal(0, 0.75, 6), rng.normal(0, 0.15, 6)]
+        )
+        true = Robot(NOMINAL_JR680 + error)
+        anchor = np.array([-800.0, 600.0, -600.0]) + rng.normal(0, 5.0, 3)
+        return cls(
+            nominal, true, anchor, 200.0 + rng.normal(0, 2.0), DEFAULT_LINES[:n_lines], noise or Noise()
+        )
+
+    def rough_setup(self, rng: np.random.Generator) -> dict:
+        """Setup values as a person would measure them: anchor to +-30 mm, offset to +-8 mm."""
+        return {
+            "anchor_mm": self.anchor_mm + rng.uniform(-30, 30, 3),
+            "length_offset_mm": self.length_offset_mm + rng.uniform(-8, 8),
+            "sigma_mm": self.noise.length_mm,
+            "dial_sigma_mm": self.noise.dial_mm,
+            "dial_axes": {ln.id: ln.dial_axis for ln in self.lines},
+        }
+
+    def true_tcp_mm(self, q_deg) -> np.ndarray:
+        return self.true.tcp(q_deg)
+
+    def true_length_mm(self, q_deg) -> np.ndarray:
+        """Noise-free drawstring reading [mm] for configurations (N, 6) [deg]."""
+        return (
+            np.linalg.norm(self.true.tcp(np.atleast_2d(q_deg)) - self.anchor_mm, axis=1)
+            - self.length_offset_mm
+        )
+
+    def true_dial_mm(self, q_deg, line_ids) -> np.ndarray:
+        """Noise-free dial reading [mm]: the TCP's offset from its line along the dial axis."""
+        p = self.true.tcp(np.atleast_2d(q_deg))
+        by_id = {ln.id: ln for ln in self.lines}
+        return np.array(
+            [
+                (pi - by_id[int(k)].centre) @ by_id[int(k)].dial_axis
+                for pi, k in zip(p, np.atleast_1d(line_ids), strict=True)
+            ]
+        )
+
+    def line_configurations(self, n_per_line: int, rng: np.random.Generator, max_tilt_deg: float = 25.0):
+        """True joint configurations [deg] (N, 6) and line ids (N,) whose TRUE TCPs touch the lines,
+        evenly spread along each edge, each with a random tool tilt and roll."""
+        q_all, ids = [], []
+        for ln in self.lines:
+            seed = self._seed_for(ln)
+            for s in np.linspace(-0.5, 0.5, n_per_line) * ln.length_mm:
+                q = None
+                while q is None:
+                    offset = rng.uniform(-1, 1) * self.noise.placement_mm
+                    pos = ln.centre + s * ln.direction + offset * ln.dial_axis
+                    pose = tool_pose(pos, tilted(ln.approach, max_tilt_deg, rng), rng.uniform(-np.pi, np.pi))
+                    q = self.true.ik(pose, seed)
+                q_all.append(q)
+                ids.append(ln.id)
+                seed = q
+        return np.array(q_all), np.array(ids)
+
+    def _seed_for(self, ln: GaugeLine) -> np.ndarray:
+        """A configuration at the line's centre with the tool along its approach direction: of the
+        IK solutions from 40 seeded restarts, the one closest to the working pose."""
+        restarts = np.random.default_rng(ln.id).uniform(*self.true.limits_deg.T, (40, 6))
+        target = tool_pose(ln.centre, ln.approach, 0.0)
+        found = [q for q in (self.true.ik(target, q0, iters=200) for q0 in restarts) if q is not None]
+        if not found:
+            raise RuntimeError(f"gauge line {ln.id} is out of the robot's reach")
+        return min(found, key=lambda q: np.linalg.norm(q - WORKING_POSE_DEG))
+
+    def measure(self, q_true_deg, line_ids, rng, outlier_fraction: float = 0.0) -> SampleSet:
+        """Instrument readings at true configurations, with noise, resolution and gross readings."""
+        nz = self.noise
+        n = q_true_deg.shape[0]
+        length = self.true_length_mm(q_true_deg) + rng.normal(0, nz.length_mm, n)
+        outliers = np.sort(rng.choice(n, size=int(round(outlier_fraction * n)), replace=False))
+        length[outliers] += rng.choice([-1.0, 1.0], outliers.size) * rng.uniform(2.0, 5.0, outliers.size)
+        dial = self.true_dial_mm(q_true_deg, line_ids) + rng.normal(0, nz.dial_mm, n)
+        return SampleSet(
+            q_deg=q_true_deg + rng.normal(0, nz.q_deg, q_true_deg.shape),
+            length_mm=_quantise(length, nz.length_resolution_mm),
+            dial_mm=_quantise(dial, nz.dial_resolution_mm),
+            line=np.asarray(line_ids),
+            q_true_deg=q_true_deg,
+            outliers=outliers,
+        )
+
+    def sample_set(
+        self, n_per_line: int, rng: np.random.Generator, outlier_fraction: float = 0.0
+    ) -> SampleSet:
+        """A measured session: ``n_per_line`` samples on every line."""
+        q, ids = self.line_configurations(n_per_line, rng)
+        return self.measure(q, ids, rng, outlier_fraction)
+
+    def random_configurations(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """Configurations [deg] (n, 6) uniform within the joint limits (the workspace test set)."""
+        lim = self.nominal.limits_deg
+        return rng.uniform(lim[:, 0], lim[:, 1], (n, 6))
+
+
+def _quantise(x: np.ndarray, step: float) -> np.ndarray:
+    return np.round(x / step) * step
