@@ -336,7 +336,11 @@ _SEARCHES = {
 
 
 def run_method(
-    method: str, model: MeasurementModel, x0: np.ndarray, free: np.ndarray, options: BaselineOptions = None
+    method: str,
+    model: MeasurementModel,
+    x0: np.ndarray,
+    free: np.ndarray,
+    options: BaselineOptions | None = None,
 ) -> MethodResult:
     """Run one of ``METHODS`` on ``model`` from ``x0`` over the ``free`` parameters (boolean mask)."""
     if method not in METHODS:

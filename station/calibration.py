@@ -12,7 +12,7 @@ import numpy as np
 from calib.calibrate import Calibration, CalibrationOptions, calibrate
 from calib.metrics import error_metrics
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
-from calib.params import DH_NAMES, display_factor, dh_from_degrees, dh_to_degrees
+from calib.params import DH_NAMES, dh_from_degrees, dh_to_degrees, display_factor
 from station.errors import InputError
 from station.files import RobotFile, Samples, SetupFile
 
@@ -69,15 +69,15 @@ def run(
     """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows."""
     t0 = time.perf_counter()
     model = build_model(samples, robot, setup, setup_where)
-    _check_enough(samples, model)
+    check_enough(samples, model)
     cal = calibrate(model, CalibrationOptions())
     elapsed = time.perf_counter() - t0
-    hold_model = model.with_samples(_drawstring_samples(holdout)) if holdout is not None else None
+    hold_model = holdout_model(model, holdout)
     report = {
         "kind": samples.kind,
         "method": method,
-        "before": _metrics(model, hold_model, cal.before.x),
-        "after": _metrics(model, hold_model, cal.x),
+        "before": metrics(model, hold_model, cal.before.x),
+        "after": metrics(model, hold_model, cal.x),
         **_setup_unknowns(model, cal.x),
         "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
         "held": [{"param": p, "reason": r} for p, r in cal.held.items()],
@@ -120,7 +120,8 @@ def _drawstring_samples(s: Samples) -> DrawstringSamples:
     return DrawstringSamples(np.radians(s.q_deg), s.measured, s.dial_mm, s.line)
 
 
-def _check_enough(samples: Samples, model) -> None:
+def check_enough(samples: Samples, model) -> None:
+    """Bad input unless there are at least as many samples as unknowns."""
     unknowns = len(model.names) - len(model.gauges())
     if len(samples) < unknowns:
         raise InputError(
@@ -129,7 +130,13 @@ def _check_enough(samples: Samples, model) -> None:
         )
 
 
-def _metrics(model, hold_model, x) -> dict:
+def holdout_model(model, holdout: Samples | None):
+    """The training ``model`` (its frame and setup) on the hold-out rows; None without them."""
+    return model.with_samples(_drawstring_samples(holdout)) if holdout is not None else None
+
+
+def metrics(model, hold_model, x) -> dict:
+    """The contract's ``{"train": M, "holdout": M}`` of parameters ``x`` (holdout only with rows)."""
     out = {"train": error_metrics(model.length_error_mm(x))}
     if hold_model is not None:
         out["holdout"] = error_metrics(hold_model.length_error_mm(x))

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 from station import calibration
 from station.errors import InputError
 from station.files import (
+    RobotFile,
+    Samples,
+    SetupFile,
     atomic_write,
     check_writable,
     load_robot,
@@ -45,6 +49,31 @@ def calibrate_from_paths(args) -> calibration.Outcome:
     check_writable(args.out, "--out")
     if args.report:
         check_writable(args.report, "--report")
+    inputs = load_inputs(args)
+    return calibration.run(
+        inputs.samples,
+        inputs.robot,
+        inputs.setup,
+        setup_where=inputs.setup_where,
+        holdout=inputs.holdout,
+        method=args.method,
+    )
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """Validated inputs of a command that takes ``SAMPLES [--robot] [--setup] [--holdout]``."""
+
+    samples: Samples
+    robot: RobotFile
+    setup: SetupFile | None
+    setup_where: str
+    holdout: Samples | None
+
+
+def load_inputs(args) -> Inputs:
+    """Samples (CSV or session folder), robot, setup and hold-out from ``args``; the flags override
+    what a session folder embeds."""
     robot = setup = None
     setup_where = str(args.setup)
     if args.samples.is_dir():
@@ -62,9 +91,7 @@ def calibrate_from_paths(args) -> calibration.Outcome:
     holdout = load_samples(args.holdout) if args.holdout else None
     if holdout is not None and holdout.kind != samples.kind:
         raise InputError(f"{args.holdout}: a {holdout.kind} set cannot hold out for a {samples.kind} set")
-    return calibration.run(
-        samples, robot, setup, setup_where=setup_where, holdout=holdout, method=args.method
-    )
+    return Inputs(samples, robot, setup, setup_where, holdout)
 
 
 def summary(report: dict) -> str:

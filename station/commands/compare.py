@@ -1,0 +1,78 @@
+"""``station compare``: every method of the paper's Table II on the same samples, one table."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+from calib.baselines import METHODS, BaselineOptions
+from station import comparison
+from station.commands.calibrate import load_inputs
+from station.files import atomic_write, check_writable
+
+
+def register(sub) -> None:
+    p = sub.add_parser("compare", help="run every calibrator of the paper's Table II on the same samples")
+    p.add_argument("samples", type=Path, help="samples CSV or a session folder")
+    p.add_argument("--robot", type=Path, help="robot model TOML (required for a CSV)")
+    p.add_argument("--setup", type=Path, help="setup TOML (required for a drawstring CSV)")
+    p.add_argument("--holdout", type=Path, help="samples CSV evaluated with each method's training fit")
+    p.add_argument("--report", type=Path, help="comparison JSON to write")
+    p.add_argument("--plot", type=Path, help="PNG to write: accuracy bars, training curves, time")
+    p.add_argument(
+        "--methods",
+        type=_methods,
+        default=METHODS,
+        help=f"comma-separated subset of {','.join(METHODS)} (default: all)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    for path, flag in ((args.report, "--report"), (args.plot, "--plot")):
+        if path:
+            check_writable(path, flag)
+    inputs = load_inputs(args)
+    result = comparison.compare(
+        inputs.samples,
+        inputs.robot,
+        inputs.setup,
+        setup_where=inputs.setup_where,
+        holdout=inputs.holdout,
+        methods=args.methods,
+        options=BaselineOptions(seed=args.seed),
+    )
+    print(comparison.table(result.report))
+    if args.report:
+        atomic_write(args.report, json.dumps(result.report, indent=2) + "\n")
+        print(f"wrote {args.report}")
+    if args.plot:
+        _write_plot(result.report, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def _write_plot(report: dict, path: Path) -> None:
+    """Draw into a temporary file beside ``path`` and rename, so a failed plot leaves no half file."""
+    from station.plots import comparison_figure
+
+    with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".png", delete=False) as tmp:
+        tmp_path = Path(tmp.name)
+    try:
+        comparison_figure(report, tmp_path, comparison.LABELS)
+        tmp_path.replace(path)
+    finally:
+        tmp_path.unlink(missing_ok=True)
+
+
+def _methods(text: str) -> tuple[str, ...]:
+    names = tuple(m.strip() for m in text.split(",") if m.strip())
+    unknown = [m for m in names if m not in METHODS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown method {unknown[0] if unknown else text!r}; choose from {METHODS}"
+        )
+    return names

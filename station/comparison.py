@@ -1,0 +1,90 @@
+"""Every calibrator of the paper's Table II on the same samples: the data behind ``station compare``.
+
+One common start for all methods: the pipeline's setup-only fit of the nominal table (the contract's
+"before") and its identification of the free parameters (``calib.calibrate.calibrate``). Each
+method then runs from that point over those parameters; its ``time_s`` covers only its own search.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.baselines import METHODS, BaselineOptions, MethodResult, run_method
+from calib.calibrate import calibrate
+from station import calibration
+from station.files import RobotFile, Samples, SetupFile
+
+LABELS = {
+    "pso": "M1 PSO",
+    "ekf": "M2 EKF",
+    "ukf": "M3 UKF",
+    "gn": "M4 LS (Gauss-Newton)",
+    "sa": "M5 SA",
+    "pf": "M6 PF",
+    "de": "M7 DE",
+    "lmlc": "M8 LMLC",
+}
+
+
+@dataclass
+class Comparison:
+    """The ``report`` (JSON-ready dict) and each method's raw result."""
+
+    report: dict
+    results: list[MethodResult]
+
+
+def compare(
+    samples: Samples,
+    robot: RobotFile,
+    setup: SetupFile | None,
+    *,
+    setup_where: str = "setup",
+    holdout: Samples | None = None,
+    methods: tuple[str, ...] = METHODS,
+    options: BaselineOptions | None = None,
+) -> Comparison:
+    """Run ``methods`` on ``samples`` from the common start; metrics on training and hold-out rows."""
+    options = options or BaselineOptions()
+    model = calibration.build_model(samples, robot, setup, setup_where)
+    calibration.check_enough(samples, model)
+    start = calibrate(model, options.calibration)
+    hold_model = calibration.holdout_model(model, holdout)
+    results = [run_method(m, model, start.before.x, start.identified, options) for m in methods]
+    free = np.asarray(model.names)[start.identified]
+    report = {
+        "kind": samples.kind,
+        "seed": options.seed,
+        "before": calibration.metrics(model, hold_model, start.before.x),
+        "free": free.tolist(),
+        "methods": [
+            {
+                "name": r.method,
+                **calibration.metrics(model, hold_model, r.x),
+                "time_s": round(r.time_s, 4),
+                "iterations": r.iterations,
+                "evaluations": r.nfev,
+                "history": [float(c) for c in r.history],
+            }
+            for r in results
+        ],
+    }
+    return Comparison(report, results)
+
+
+def table(report: dict) -> str:
+    """The paper's Tables III-IV in one: RMSE / MEAN / MAX [mm] on training and hold-out rows, wall
+    time and iterations, one row per method after the "before" row."""
+    parts = ("train", "holdout") if "holdout" in report["before"] else ("train",)
+    head = f"{'method':22}" + "".join(f"{p + ' RMSE':>14}{'MEAN':>8}{'MAX':>8}" for p in parts)
+    lines = [head + f"{'time s':>10}{'iters':>7}"]
+    rows = [{"name": "before", **report["before"]}] + report["methods"]
+    for row in rows:
+        cells = "".join(
+            f"{row[p]['rmse_mm']:14.4f}{row[p]['mean_mm']:8.4f}{row[p]['max_mm']:8.4f}" for p in parts
+        )
+        tail = f"{row['time_s']:10.2f}{row['iterations']:7d}" if "time_s" in row else ""
+        lines.append(f"{LABELS.get(row['name'], row['name']):22}{cells}{tail}")
+    return "\n".join(lines)
