@@ -30,10 +30,11 @@ LABELS = {
 
 @dataclass
 class Comparison:
-    """The ``report`` (JSON-ready dict) and each method's raw result."""
+    """The ``report`` (JSON-ready dict), each method's raw result and the common start ``x0``."""
 
     report: dict
     results: list[MethodResult]
+    x0: np.ndarray
 
 
 def compare(
@@ -71,7 +72,7 @@ def compare(
             for r in results
         ],
     }
-    return Comparison(report, results)
+    return Comparison(report, results, start.before.x)
 
 
 def table(report: dict) -> str:
