@@ -12,7 +12,7 @@ import numpy as np
 from calib.calibrate import Calibration, CalibrationOptions, calibrate
 from calib.metrics import error_metrics
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
-from calib.params import DH_NAMES, display_factor, dh_from_degrees, dh_to_degrees
+from calib.params import DH_NAMES, dh_from_degrees, dh_to_degrees, display_factor
 from station.errors import InputError
 from station.files import RobotFile, Samples, SetupFile
 
