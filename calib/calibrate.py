@@ -59,14 +59,16 @@ class CalibrationOptions:
 @dataclass
 class Calibration:
     """Result: the ``before`` (setup-only) and ``after`` fits, the ``identified`` table/setup mask
-    (free in the final fit), ``held`` parameters with reasons, parameter ``sigma`` (internal units,
-    NaN where held), the residual ``scale`` per group and the ``downweighted`` sample rows."""
+    (free in the final fit), ``held`` parameters with reasons, the prior sigma of those ``weak``ly
+    determined (by index), parameter ``sigma`` (internal units, NaN where held), the residual
+    ``scale`` per group and the ``downweighted`` sample rows."""
 
     names: tuple[str, ...]
     before: LMResult
     after: LMResult
     identified: np.ndarray
     held: dict[str, str]
+    weak: dict[int, float]
     sigma: np.ndarray
     covariance: np.ndarray
     scale: np.ndarray
@@ -128,7 +130,7 @@ def identify(
         )
     table = np.zeros(len(names), bool)
     table[[k for k in kept_table if k not in weak]] = True
-    return table, held
+    return table, held, {k: float(tol[k]) for k in weak}
 
 
 def calibrate(
@@ -140,7 +142,7 @@ def calibrate(
     free_setup = model.setup_mask & ~np.isin(names, list(gauges))
     prior = WithPrior(model, model.x0)
     before, _ = robust_fit(prior, model.x0, free_setup, options)
-    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol)
+    table, held, weak = identify(model, before.x, free_setup, gauges, options.rank_rtol)
     free = free_setup | table
     after, scale = robust_fit(prior, before.x, free, options, callback)
     sigma, cov = _uncertainty(after)
@@ -152,6 +154,7 @@ def calibrate(
         after=after,
         identified=free,
         held=held,
+        weak=weak,
         sigma=full_sigma,
         covariance=cov,
         scale=scale,

@@ -79,7 +79,7 @@ def redundancy_partners(jac: np.ndarray, k: int, kept: np.ndarray, names, top: i
     """Names of the kept parameters that best reproduce column ``k`` (largest scaled coefficients)."""
     cols = np.flatnonzero(kept)
     scaled = jac[:, cols] / np.maximum(np.linalg.norm(jac[:, cols], axis=0), 1e-300)
-    coef = np.linalg.lstsq(scaled, jac[:, k], rcond=None)[0]
+    coef = np.linalg.solve(scaled.T @ scaled, scaled.T @ jac[:, k])
     best = np.argsort(-np.abs(coef))[:top]
     return [names[cols[i]] for i in best if abs(coef[i]) > 1e-3 * np.abs(coef).max()]
 

@@ -9,6 +9,7 @@ from datetime import datetime, timezone
 
 import numpy as np
 
+from calib.accuracy import predicted_workspace_rmse, table_covariance
 from calib.calibrate import Calibration, CalibrationOptions, calibrate
 from calib.metrics import error_metrics
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
@@ -17,6 +18,7 @@ from station.errors import InputError
 from station.files import RobotFile, Samples, SetupFile
 
 METHODS = ("lmlc",)
+WORKSPACE_POSES = 1000
 
 
 @dataclass
@@ -83,11 +85,48 @@ def run(
         "held": [{"param": p, "reason": r} for p, r in cal.held.items()],
         "parameters": _parameters(cal),
         "downweighted": [int(r) for r in cal.downweighted],
+        "workspace": {
+            "predicted_rmse_mm": predicted_workspace(robot, cal),
+            "configurations": WORKSPACE_POSES,
+        },
         "warnings": [],
         "iterations": int(cal.after.nit),
         "time_s": round(elapsed, 4),
     }
+    report["warnings"] = warnings(report, model)
     return Outcome(report, corrected_table(robot, cal, samples, method), cal)
+
+
+def predicted_workspace(robot: RobotFile, cal: Calibration) -> float:
+    """Predicted RMS TCP error [mm] over random configurations within the joint limits."""
+    limits = np.radians(robot.limits_deg())
+    q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    cov = table_covariance(cal.covariance, cal.identified, cal.weak)
+    return predicted_workspace_rmse(cal.x[:N_DH].reshape(6, 4), np.asarray(robot.tool_mm), q, cov)
+
+
+def warnings(report: dict, model) -> list[str]:
+    """Say when the samples fit well but cannot deliver that accuracy over the workspace."""
+    fit = report["after"]["train"]["rmse_mm"]
+    predicted = report["workspace"]["predicted_rmse_mm"]
+    if predicted <= max(10 * fit, 0.5):
+        return []
+    directions = np.array([ln["direction"] for ln in report["lines"]])
+    suggestion = _new_direction(directions)
+    where = "its own line" if len(directions) == 1 else f"its own {len(directions)} lines"
+    return [
+        f"fits {where} to {fit:.3f} mm; predicted workspace error {predicted:.2f} mm; add a line placement "
+        f"along [{suggestion[0]:.2f}, {suggestion[1]:.2f}, {suggestion[2]:.2f}] (base frame), "
+        "elsewhere in the workspace and with varied tool orientations"
+    ]
+
+
+def _new_direction(directions: np.ndarray) -> np.ndarray:
+    """A unit direction least aligned with every present line direction (perpendicular to all of
+    them while there are fewer than three)."""
+    if directions.size == 0:
+        return np.array([1.0, 0.0, 0.0])
+    return np.linalg.svd(directions)[2][-1]
 
 
 def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:

@@ -76,7 +76,7 @@ def test_structural_holds_agree_with_the_numbers(three):
     model = calibration.build_model(
         load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup), "setup"
     )
-    table, numeric_held = identify(model, out.calibration.before.x, model.setup_mask, {}, rtol=1e-6)
+    table, numeric_held, _ = identify(model, out.calibration.before.x, model.setup_mask, {}, rtol=1e-6)
     assert set(structural) <= set(numeric_held)
     assert not table[[DH_NAMES.index(n) for n in structural]].any()
 
