@@ -209,7 +209,17 @@ class LinkedPtyPair:
     def __init__(self, link_device: Path, link: Path):
         self.a = PtyPort(link_device)
         self.b = PtyPort(link)
+        self._unplug = threading.Event()
         self._loop = _Loop(f"sim-cable-{self.b.link.name}", self._pump)
+
+    def unplug(self) -> None:
+        """Pull the cable at the station's end (done by the pump thread, between transfers)."""
+        self._unplug.set()
+
+    def replug(self) -> None:
+        """Plug the station's end back in, at the same link on a new ``/dev/pts/N``."""
+        if not self.b.plugged:
+            self.b.replug()
 
     def start(self) -> None:
         self._loop.start()
@@ -220,6 +230,9 @@ class LinkedPtyPair:
         self.b.unplug()
 
     def _pump(self) -> None:
+        if self._unplug.is_set():
+            self._unplug.clear()
+            self.b.unplug()
         ends = [p.master for p in (self.a, self.b) if p.plugged]
         if len(ends) < 2:
             self._loop.idle()
