@@ -154,9 +154,7 @@ class PositionModel:
         self.reference = reference or TrackerReference.kabsch(samples, self.dh0, self.probe0)
         self.compliance = compliance
         joints = compliance.joints if compliance else ()
-        self.torques = (
-            gravity_torques(self.dh0, samples.q, compliance.links, joints) if compliance else None
-        )
+        self.torques = gravity_torques(self.dh0, samples.q, compliance.links, joints) if compliance else None
         comp_names = tuple(f"J{j + 1}.compliance_urad_per_Nm" for j in joints)
         self.names = DH_NAMES + TRACKER_NAMES + PROBE_NAMES + comp_names
         self.x0 = np.concatenate([self.dh0.ravel(), np.zeros(6), self.probe0, np.zeros(len(joints))])
