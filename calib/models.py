@@ -65,13 +65,15 @@ class DrawstringSamples:
 class DrawstringSetup:
     """Station geometry and noise: rough ``anchor`` [mm] and ``length_offset`` [mm], reading noise
     ``sigma_length`` [mm], line-contact noise ``sigma_line`` [mm], per line id the ``dial_axis``
-    (unit, base frame; absent: the dial only gates captures) and ``rho`` (line-term weight)."""
+    (unit, base frame), else ``default_dial_axis`` (neither: the dial only gates captures), and
+    ``rho`` (line-term weight)."""
 
     anchor: np.ndarray
     length_offset: float
     sigma_length: float = 0.02
     sigma_line: float = 0.01
     dial_axis: dict[int, np.ndarray] = field(default_factory=dict)
+    default_dial_axis: np.ndarray | None = None
     rho: float = 1.0
 
 
@@ -208,7 +210,7 @@ class DrawstringLineModel:
         return (r, np.concatenate(jparts)) if jacobian else (r, None)
 
     def _dial_shift(self, rows: np.ndarray, lid: int) -> np.ndarray:
-        axis = self.setup_values.dial_axis.get(lid)
+        axis = self.setup_values.dial_axis.get(lid, self.setup_values.default_dial_axis)
         if axis is None:
             return np.zeros((rows.size, 3))
         return np.nan_to_num(self.samples.dial[rows])[:, None] * np.asarray(axis, float)

@@ -1,0 +1,158 @@
+"""From validated files to a calibration and back: builds the measurement model, runs ``calib``,
+and turns its arrays into the contract's report and corrected table (display units)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+import numpy as np
+
+from calib.calibrate import Calibration, CalibrationOptions, calibrate
+from calib.metrics import error_metrics
+from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.params import DH_NAMES, display_factor, dh_from_degrees, dh_to_degrees
+from station.errors import InputError
+from station.files import RobotFile, Samples, SetupFile
+
+METHODS = ("lmlc",)
+
+
+@dataclass
+class Outcome:
+    """A finished calibration: the contract's report and the corrected robot table (both dicts)."""
+
+    report: dict
+    table: dict
+    calibration: Calibration
+
+
+def drawstring_setup(setup: SetupFile, where: str) -> DrawstringSetup:
+    """The maths' view of a setup file; a drawstring set needs its ``[drawstring]`` table."""
+    if setup.drawstring is None:
+        raise InputError(f"{where}: missing table [drawstring] (anchor_mm, length_offset_mm)")
+    default_axis = setup.dial.axis if setup.dial else None
+    return DrawstringSetup(
+        anchor=np.array(setup.drawstring.anchor_mm),
+        length_offset=setup.drawstring.length_offset_mm,
+        sigma_length=setup.drawstring.sigma_mm,
+        sigma_line=setup.line_sigma_mm,
+        dial_axis={ln.id: _unit(ln.dial_axis) for ln in setup.lines if ln.dial_axis is not None},
+        default_dial_axis=None if default_axis is None else _unit(default_axis),
+        rho=setup.rho,
+    )
+
+
+def build_model(samples: Samples, robot: RobotFile, setup: SetupFile | None, setup_where: str):
+    """The measurement model for a training set."""
+    dh0 = dh_from_degrees(robot.table_deg())
+    if samples.kind != "drawstring":
+        raise InputError(f"{samples.path}: position sets are not supported yet")
+    if setup is None:
+        raise InputError(f"{samples.path}: a drawstring set needs --setup")
+    ds_setup = drawstring_setup(setup, setup_where)
+    data = _drawstring_samples(samples)
+    frame = DrawstringFrame.from_nominal(data, ds_setup, dh0, robot.tool_mm)
+    return DrawstringLineModel(data, ds_setup, frame, dh0, robot.tool_mm)
+
+
+def run(
+    samples: Samples,
+    robot: RobotFile,
+    setup: SetupFile | None,
+    *,
+    setup_where: str = "setup",
+    holdout: Samples | None = None,
+    method: str = "lmlc",
+) -> Outcome:
+    """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows."""
+    t0 = time.perf_counter()
+    model = build_model(samples, robot, setup, setup_where)
+    _check_enough(samples, model)
+    cal = calibrate(model, CalibrationOptions())
+    elapsed = time.perf_counter() - t0
+    hold_model = model.with_samples(_drawstring_samples(holdout)) if holdout is not None else None
+    report = {
+        "kind": samples.kind,
+        "method": method,
+        "before": _metrics(model, hold_model, cal.before.x),
+        "after": _metrics(model, hold_model, cal.x),
+        **_setup_unknowns(model, cal.x),
+        "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
+        "held": [{"param": p, "reason": r} for p, r in cal.held.items()],
+        "parameters": _parameters(cal),
+        "downweighted": [int(r) for r in cal.downweighted],
+        "warnings": [],
+        "iterations": int(cal.after.nit),
+        "time_s": round(elapsed, 4),
+    }
+    return Outcome(report, corrected_table(robot, cal, samples, method), cal)
+
+
+def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:
+    """The robot file with the calibrated table, per-joint sigmas and provenance."""
+    table = dh_to_degrees(cal.x[:N_DH].reshape(6, 4))
+    sigma = (cal.sigma[:N_DH] * display_factor(DH_NAMES)).reshape(6, 4)
+    joints = []
+    for j, joint in enumerate(robot.joints):
+        entry = joint.model_dump(exclude={"sigma"})
+        entry.update(theta_deg=table[j, 0], d_mm=table[j, 1], a_mm=table[j, 2], alpha_deg=table[j, 3])
+        cols = ("theta_deg", "d_mm", "a_mm", "alpha_deg")
+        entry["sigma"] = {c: float(sigma[j, k]) for k, c in enumerate(cols) if np.isfinite(sigma[j, k])}
+        joints.append({k: float(v) if isinstance(v, np.floating) else v for k, v in entry.items()})
+    return {
+        "name": robot.name,
+        "convention": "dh",
+        "tool_mm": list(robot.tool_mm),
+        "calibration": {
+            "method": method,
+            "samples": samples.path,
+            "n_samples": len(samples),
+            "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
+        },
+        "joints": joints,
+    }
+
+
+def _drawstring_samples(s: Samples) -> DrawstringSamples:
+    return DrawstringSamples(np.radians(s.q_deg), s.measured, s.dial_mm, s.line)
+
+
+def _check_enough(samples: Samples, model) -> None:
+    unknowns = len(model.names) - len(model.gauges())
+    if len(samples) < unknowns:
+        raise InputError(
+            f"{samples.path}: {len(samples)} samples cannot determine {unknowns} unknowns "
+            f"(table and setup): measure at least {unknowns}"
+        )
+
+
+def _metrics(model, hold_model, x) -> dict:
+    out = {"train": error_metrics(model.length_error_mm(x))}
+    if hold_model is not None:
+        out["holdout"] = error_metrics(hold_model.length_error_mm(x))
+    return out
+
+
+def _setup_unknowns(model: DrawstringLineModel, x) -> dict:
+    lines = []
+    for lid in model.line_ids:
+        point, direction = model.line(x, lid)
+        lines.append({"id": lid, "point_mm": point.tolist(), "direction": direction.tolist()})
+    return {"anchor_mm": model.anchor(x).tolist(), "length_offset_mm": model.length_offset(x), "lines": lines}
+
+
+def _parameters(cal: Calibration) -> dict:
+    factor = display_factor(cal.names)
+    return {
+        name: {"value": float(cal.x[k] * factor[k]), "sigma": float(cal.sigma[k] * factor[k])}
+        for k, name in enumerate(cal.names[:N_DH])
+        if cal.identified[k]
+    }
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)

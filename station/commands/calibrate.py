@@ -1,0 +1,91 @@
+"""``station calibrate``: samples (CSV or session folder) to a corrected D-H table and a report."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from station import calibration
+from station.errors import InputError
+from station.files import (
+    atomic_write,
+    check_writable,
+    load_robot,
+    load_samples,
+    load_session,
+    load_setup,
+    toml_text,
+)
+
+
+def register(sub) -> None:
+    p = sub.add_parser("calibrate", help="identify the robot's D-H table from samples")
+    p.add_argument("samples", type=Path, help="samples CSV or a session folder")
+    p.add_argument("--robot", type=Path, help="robot model TOML (required for a CSV)")
+    p.add_argument("--setup", type=Path, help="setup TOML (required for a drawstring CSV)")
+    p.add_argument("--out", type=Path, required=True, help="corrected table TOML to write")
+    p.add_argument("--holdout", type=Path, help="samples CSV evaluated with the training setup fit")
+    p.add_argument("--method", default="lmlc", choices=calibration.METHODS)
+    p.add_argument("--report", type=Path, help="report JSON to write")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    outcome = calibrate_from_paths(args)
+    atomic_write(args.out, toml_text(outcome.table))
+    if args.report:
+        atomic_write(args.report, json.dumps(outcome.report, indent=2) + "\n")
+    print(summary(outcome.report))
+    print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+    return 0
+
+
+def calibrate_from_paths(args) -> calibration.Outcome:
+    """Load and validate every input (and check the outputs are writable) before any maths."""
+    check_writable(args.out, "--out")
+    if args.report:
+        check_writable(args.report, "--report")
+    robot = setup = None
+    setup_where = str(args.setup)
+    if args.samples.is_dir():
+        robot, setup, samples_path = load_session(args.samples)
+        setup_where = f"{args.samples / 'session.toml'} [setup]"
+    else:
+        samples_path = args.samples
+        if args.robot is None:
+            raise InputError(f"{args.samples}: a samples CSV needs --robot")
+    if args.robot:
+        robot = load_robot(args.robot)
+    if args.setup:
+        setup, setup_where = load_setup(args.setup), str(args.setup)
+    samples = load_samples(samples_path)
+    holdout = load_samples(args.holdout) if args.holdout else None
+    if holdout is not None and holdout.kind != samples.kind:
+        raise InputError(f"{args.holdout}: a {holdout.kind} set cannot hold out for a {samples.kind} set")
+    return calibration.run(
+        samples, robot, setup, setup_where=setup_where, holdout=holdout, method=args.method
+    )
+
+
+def summary(report: dict) -> str:
+    """A short human summary: before -> after on training and hold-out, time, what was held."""
+    lines = [
+        f"{report['kind']} calibration, method {report['method']}: "
+        f"{report['iterations']} iterations, {report['time_s']:.3f} s",
+        f"{'':18}{'RMSE':>8}{'MEAN':>8}{'MAX':>8}  mm",
+    ]
+    for part in ("train", "holdout"):
+        if part in report["before"]:
+            for when in ("before", "after"):
+                m = report[when][part]
+                lines.append(
+                    f"{part + ' ' + when:18}{m['rmse_mm']:8.3f}{m['mean_mm']:8.3f}{m['max_mm']:8.3f}"
+                )
+    held = ", ".join(h["param"] for h in report["held"])
+    lines.append(f"identified {len(report['identified'])} table parameters; held: {held}")
+    if report["downweighted"]:
+        lines.append(f"down-weighted rows: {report['downweighted']}")
+    if "workspace" in report:
+        lines.append(f"predicted workspace error: {report['workspace']['predicted_rmse_mm']:.3f} mm RMS")
+    lines += [f"warning: {w}" for w in report["warnings"]]
+    return "\n".join(lines)
