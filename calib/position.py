@@ -188,9 +188,10 @@ class PositionModel:
         px, py, pz = self.probe0
         return float(np.hypot(a6 + px, np.cos(alpha6) * py - np.sin(alpha6) * pz))
 
-    def with_samples(self, samples: PositionSamples, reference: TrackerReference | None = None):
-        """The same model (start, noise, compliance) on other rows, with their own reference."""
-        return PositionModel(samples, self.dh0, self.probe0, reference, self.sigma, self.compliance)
+    def with_samples(self, samples: PositionSamples) -> PositionModel:
+        """The same model (start, reference, noise, compliance) on other rows measured from the same
+        tracker placement, e.g. a hold-out set."""
+        return PositionModel(samples, self.dh0, self.probe0, self.reference, self.sigma, self.compliance)
 
     def with_start(self, dh0: np.ndarray, probe0: np.ndarray) -> PositionModel:
         """The same rows started from another table and probe (new Kabsch reference)."""

@@ -34,7 +34,9 @@ def write_position_csv(path: Path, q_rad: np.ndarray, position_mm: np.ndarray) -
     rows = np.column_stack([np.arange(len(q_rad)), np.degrees(q_rad), position_mm])
     tmp = path.with_name(path.name + ".tmp")
     try:
-        np.savetxt(tmp, rows, fmt=["%d"] + ["%.9f"] * 6 + ["%.6f"] * 3, delimiter=",", header=HEADER, comments="")
+        np.savetxt(
+            tmp, rows, fmt=["%d"] + ["%.9f"] * 6 + ["%.6f"] * 3, delimiter=",", header=HEADER, comments=""
+        )
         tmp.replace(path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
