@@ -158,7 +158,7 @@ class PositionModel:
         comp_names = tuple(f"J{j + 1}.compliance_urad_per_Nm" for j in joints)
         self.names = DH_NAMES + TRACKER_NAMES + PROBE_NAMES + comp_names
         self.x0 = np.concatenate([self.dh0.ravel(), np.zeros(6), self.probe0, np.zeros(len(joints))])
-        self.setup_mask = (np.arange(len(self.names)) >= N_DH) & (np.arange(len(self.names)) < N_DH + 9)
+        self.setup_mask = np.arange(len(self.names)) >= N_DH  # everything but the table (solver's view)
         n = len(samples)
         self.rows = np.repeat(np.arange(n), 3)
         self.groups = np.full(3 * n, GROUP_POSITION)
@@ -277,6 +277,7 @@ def register(
     x0 = started.x0.copy()
     if compliance is not None:
         x0[N_DH + 9 :] = compliance
-    free = started.setup_mask & ~np.isin(started.names, list(started.gauges()))
+    free = np.zeros(len(started.names), bool)
+    free[N_DH : N_DH + 9] = True  # transform and probe only: the compliances are the robot's
     result, _ = robust_fit(started, x0, free, options or CalibrationOptions())
     return started, result
