@@ -133,32 +133,48 @@ def identify(
     return table, held, {k: float(tol[k]) for k in weak}
 
 
+@dataclass
+class Prepared:
+    """The setup-only fit (``before``), the prior-augmented model it used, the identified mask
+    (``free``), the ``held`` reasons and the ``weak`` priors: all a table fit starts from."""
+
+    prior: WithPrior
+    before: LMResult
+    free: np.ndarray
+    held: dict[str, str]
+    weak: dict[int, float]
+
+
+def prepare(model: MeasurementModel, options: CalibrationOptions = CalibrationOptions()) -> Prepared:
+    """Steps 1-2 of the pipeline: fit the setup unknowns with the nominal table, then identify."""
+    gauges = model.gauges()
+    free_setup = model.setup_mask & ~np.isin(model.names, list(gauges))
+    prior = WithPrior(model, model.x0)
+    before, _ = robust_fit(prior, model.x0, free_setup, options)
+    table, held, weak = identify(model, before.x, free_setup, gauges, options.rank_rtol)
+    return Prepared(prior, before, free_setup | table, held, weak)
+
+
 def calibrate(
     model: MeasurementModel, options: CalibrationOptions = CalibrationOptions(), callback=None
 ) -> Calibration:
     """Run the whole pipeline on ``model`` (see the module docstring)."""
-    names = model.names
-    gauges = model.gauges()
-    free_setup = model.setup_mask & ~np.isin(names, list(gauges))
-    prior = WithPrior(model, model.x0)
-    before, _ = robust_fit(prior, model.x0, free_setup, options)
-    table, held, weak = identify(model, before.x, free_setup, gauges, options.rank_rtol)
-    free = free_setup | table
-    after, scale = robust_fit(prior, before.x, free, options, callback)
+    prep = prepare(model, options)
+    after, scale = robust_fit(prep.prior, prep.before.x, prep.free, options, callback)
     sigma, cov = _uncertainty(after)
-    full_sigma = np.full(len(names), np.nan)
-    full_sigma[free] = sigma
+    full_sigma = np.full(len(model.names), np.nan)
+    full_sigma[prep.free] = sigma
     return Calibration(
-        names=names,
-        before=before,
+        names=model.names,
+        before=prep.before,
         after=after,
-        identified=free,
-        held=held,
-        weak=weak,
+        identified=prep.free,
+        held=prep.held,
+        weak=prep.weak,
         sigma=full_sigma,
         covariance=cov,
         scale=scale,
-        downweighted=_downweighted_rows(prior, after, scale, options),
+        downweighted=_downweighted_rows(prep.prior, after, scale, options),
     )
 
 

@@ -3,6 +3,7 @@ and turns its arrays into the contract's report and corrected table (display uni
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -10,15 +11,16 @@ from datetime import datetime, timezone
 import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, table_covariance
-from calib.calibrate import Calibration, CalibrationOptions, calibrate
+from calib.calibrate import Calibration, CalibrationOptions, calibrate, prepare
 from calib.metrics import error_metrics
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.observability import MCSResult, select_configurations
 from calib.params import DH_NAMES, dh_from_degrees, dh_to_degrees, display_factor
 from calib.position import PositionModel, PositionSamples
 from station.errors import InputError
 from station.files import RobotFile, Samples, SetupFile
 
-METHODS = ("lmlc",)
+METHODS = ("lmlc", "mcs-lmlc")
 WORKSPACE_POSES = 1000
 
 
@@ -69,12 +71,26 @@ def run(
     setup_where: str = "setup",
     holdout: Samples | None = None,
     method: str = "lmlc",
+    select: int | None = None,
 ) -> Outcome:
-    """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows."""
+    """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows.
+    ``mcs-lmlc`` first selects ``select`` configurations (default: where O1 flattens)."""
     t0 = time.perf_counter()
     model = build_model(samples, robot, setup, setup_where)
     _check_enough(samples, model)
-    cal = calibrate(model, CalibrationOptions())
+    mcs = None
+    if select is not None and method != "mcs-lmlc":
+        raise InputError(f"--select {select}: selecting configurations needs --method mcs-lmlc")
+    if select is not None and not len(model.names) - len(model.gauges()) <= select <= len(samples):
+        unknowns = len(model.names) - len(model.gauges())
+        raise InputError(
+            f"--select {select}: must lie between the {unknowns} unknowns and the {len(samples)} samples"
+        )
+    if method == "mcs-lmlc":
+        mcs = select_measurements(model, select)
+        cal = calibrate(model.with_samples(_subset(samples, mcs.selection.rows)), CalibrationOptions())
+    else:
+        cal = calibrate(model, CalibrationOptions())
     elapsed = time.perf_counter() - t0
     hold_model = model.with_samples(_model_samples(holdout)) if holdout is not None else None
     report = {
@@ -95,8 +111,38 @@ def run(
         "iterations": int(cal.after.nit),
         "time_s": round(elapsed, 4),
     }
+    if mcs is not None:
+        report["selection"] = {
+            "rows": mcs.selection.rows.tolist(),
+            "n": int(mcs.n_select),
+            "index": "O1",
+            "value": mcs.selection.value,
+        }
+        report["downweighted"] = [int(mcs.selection.rows[r]) for r in cal.downweighted]
     report["warnings"] = warnings(report, model)
     return Outcome(report, corrected_table(robot, cal, samples, method), cal)
+
+
+def select_measurements(model, n_select: int | None) -> MCSResult:
+    """MCS at the setup fit: the identified table's observability, setup unknowns projected out."""
+    prep = prepare(model)
+    _, jac = model.residuals_and_jacobian(prep.before.x)
+    line = getattr(model.samples, "line", np.zeros(len(model.samples), int))
+    return select_configurations(
+        jac, model.rows, prep.free, line, np.random.default_rng(0), n_select=n_select
+    )
+
+
+def _subset(samples: Samples, rows: np.ndarray):
+    return _model_samples(
+        dataclasses.replace(
+            samples,
+            q_deg=samples.q_deg[rows],
+            measured=samples.measured[rows],
+            dial_mm=samples.dial_mm[rows],
+            line=samples.line[rows],
+        )
+    )
 
 
 def predicted_workspace(robot: RobotFile, cal: Calibration) -> float:

@@ -40,8 +40,7 @@ class Flaky(Driver):
 
 
 def test_backoff_delays_grow_and_saturate():
-    assert list(Backoff(attempts=5, initial_s=0.1, factor=2, max_s=0.3).delays()) == [
-        0.1, 0.2, 0.3, 0.3]
+    assert list(Backoff(attempts=5, initial_s=0.1, factor=2, max_s=0.3).delays()) == [0.1, 0.2, 0.3, 0.3]
     with pytest.raises(ValueError, match="attempts"):
         Backoff(attempts=0)
 

@@ -27,7 +27,10 @@ def test_shipped_config_points_at_the_contract_addresses():
     cfg = load_station_config(configs.path("station.toml"))
     assert (cfg.robot.kind, cfg.robot.host, cfg.robot.frequency_hz) == ("rtde", "127.0.0.1", 500)
     assert (cfg.drawstring.kind, cfg.drawstring.host, cfg.drawstring.port) == (
-        "modbus_tcp", "127.0.0.1", 5020)
+        "modbus_tcp",
+        "127.0.0.1",
+        5020,
+    )
     assert cfg.dial.port == "/tmp/station-sim/dial" and cfg.dial.dialect == "sylvac"
     assert isinstance(cfg.drawstring.build(), ModbusDrawstring)
     assert isinstance(cfg.dial.build(), DialIndicator)
@@ -39,28 +42,34 @@ def test_defaults_and_register_map(tmp_path):
     cfg = load_station_config(path)
     assert cfg.dial is None and cfg.time_scale == 1.0 and cfg.reconnect.attempts == 4
     driver = cfg.drawstring.build()
-    assert driver.registers == RegisterMap(address=40, encoding="float32_mm", word_order="little",
-                                           device_id=7)
+    assert driver.registers == RegisterMap(
+        address=40, encoding="float32_mm", word_order="little", device_id=7
+    )
     assert driver.client.comm_params.baudrate == 115200
     assert list(cfg.devices()) == ["robot", "drawstring"]
 
 
 def test_ascii_drawstring_and_mitutoyo_dial(tmp_path):
     path = tmp_path / "station.toml"
-    path.write_text('[robot]\nkind = "rtde"\n[drawstring]\nkind = "ascii"\nport = "/dev/ttyS0"\n'
-                    '[dial]\nport = "/dev/ttyS1"\ndialect = "mitutoyo"\n')
+    path.write_text(
+        '[robot]\nkind = "rtde"\n[drawstring]\nkind = "ascii"\nport = "/dev/ttyS0"\n'
+        '[dial]\nport = "/dev/ttyS1"\ndialect = "mitutoyo"\n'
+    )
     cfg = load_station_config(path)
     assert isinstance(cfg.drawstring.build(), AsciiDrawstring)
     assert cfg.dial.build().dialect.request == b"R\r"
 
 
-@pytest.mark.parametrize("edit, message", [
-    (("address = 40", "address = -1"), r"drawstring\.registers\.address: Input should be greater"),
-    (('encoding = "float32_mm"', 'encoding = "int16"'), r"drawstring\.registers\.encoding: "),
-    (('kind = "rtde"', 'kind = "ros"'), r"robot: Input tag 'ros' found using 'kind' does not"),
-    (("device_id = 7", "device_id = 7\nbaud = 9600"), r"drawstring\.baud: Extra inputs"),
-    (('[robot]\nkind = "rtde"', ""), r": robot: Field required"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (("address = 40", "address = -1"), r"drawstring\.registers\.address: Input should be greater"),
+        (('encoding = "float32_mm"', 'encoding = "int16"'), r"drawstring\.registers\.encoding: "),
+        (('kind = "rtde"', 'kind = "ros"'), r"robot: Input tag 'ros' found using 'kind' does not"),
+        (("device_id = 7", "device_id = 7\nbaud = 9600"), r"drawstring\.baud: Extra inputs"),
+        (('[robot]\nkind = "rtde"', ""), r": robot: Field required"),
+    ],
+)
 def test_bad_key_names_file_and_key(tmp_path, edit, message):
     path = tmp_path / "station.toml"
     path.write_text(MINIMAL.replace(*edit))
@@ -79,9 +88,16 @@ def test_unreadable_or_broken_file(tmp_path):
 
 def test_modbus_joint_robot_section_builds_its_driver(tmp_path):
     path = tmp_path / "station.toml"
-    path.write_text(MINIMAL.replace('kind = "rtde"', 'kind = "modbus_tcp"\nhost = "10.0.0.5"\n'
-                                    'address = 200\nencoding = "float32_deg"\ndevice_id = 2'))
+    path.write_text(
+        MINIMAL.replace(
+            'kind = "rtde"',
+            'kind = "modbus_tcp"\nhost = "10.0.0.5"\naddress = 200\nencoding = "float32_deg"\ndevice_id = 2',
+        )
+    )
     robot = load_station_config(path).robot.build()
     assert robot.name == "robot" and robot.client.comm_params.host == "10.0.0.5"
     assert (robot.registers.address, robot.registers.encoding, robot.registers.device_id) == (
-        200, "float32_deg", 2)
+        200,
+        "float32_deg",
+        2,
+    )

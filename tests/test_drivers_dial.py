@@ -101,8 +101,12 @@ def test_reads_the_simulated_indicator_with_its_noise(sim_dial):
 def test_simulated_faults_give_named_errors_then_recover(sim_dial):
     dev, dial = sim_dial
     with dial:
-        for fault, error in [("error", DeviceReplyError), ("garbled", GarbledReply),
-                             ("silence", DeviceTimeout), ("unplug", DeviceUnreachable)]:
+        for fault, error in [
+            ("error", DeviceReplyError),
+            ("garbled", GarbledReply),
+            ("silence", DeviceTimeout),
+            ("unplug", DeviceUnreachable),
+        ]:
             dev.faults.inject(fault)
             with pytest.raises(error, match="^dial: "):
                 dial.read()

@@ -43,11 +43,14 @@ def rtu_driver(link, registers=DEFAULT_MAP):
         # a negative INT32: 0xFFFFF63C = -2500 um
         (RegisterMap(), H("01 03 00 00 00 02 c4 0b"), H("01 03 04 ff ff f6 3c bd a6"), -2.5),
         # FLOAT32 mm, low word first, device 5, register 100: 0x449A5000 = 1234.5
-        (RegisterMap(address=100, encoding="float32_mm", word_order="little", device_id=5),
-         H("05 03 00 64 00 02 84 50"), H("05 03 04 50 00 44 9a 1d 98"), 1234.5),
+        (
+            RegisterMap(address=100, encoding="float32_mm", word_order="little", device_id=5),
+            H("05 03 00 64 00 02 84 50"),
+            H("05 03 04 50 00 44 9a 1d 98"),
+            1234.5,
+        ),
         # same INT32 with a scale of 2 (e.g. a 2:1 cable pulley)
-        (RegisterMap(scale=2.0), H("01 03 00 00 00 02 c4 0b"), H("01 03 04 00 01 e2 40 e2 a3"),
-         246.912),
+        (RegisterMap(scale=2.0), H("01 03 00 00 00 02 c4 0b"), H("01 03 04 00 01 e2 40 e2 a3"), 246.912),
     ],
 )
 def test_rtu_frames_byte_exact(tmp_path, registers, request_frame, reply, length_mm):
@@ -111,15 +114,12 @@ def sim_modbus(request, tmp_path):
     """Simulated drawstring at a true 1234.5 mm, sigma 20 um, INT32 um at register 10, id 3."""
     regs = RegisterMap(address=10, device_id=3)
     noise = Instrument(0.02, 0.001, np.random.default_rng(11))
-    transport = ({"tcp": ("127.0.0.1", 0)} if request.param == "tcp"
-                 else {"rtu_link": tmp_path / "ds-rtu"})
+    transport = {"tcp": ("127.0.0.1", 0)} if request.param == "tcp" else {"rtu_link": tmp_path / "ds-rtu"}
     with ModbusDevice(regs, lambda: noise.measure(TRUE_MM), **transport) as dev:
         if request.param == "tcp":
-            client = ModbusTcpClient("127.0.0.1", port=dev.address["port"], timeout=TIMEOUT_S,
-                                     retries=0)
+            client = ModbusTcpClient("127.0.0.1", port=dev.address["port"], timeout=TIMEOUT_S, retries=0)
         else:
-            client = ModbusSerialClient(dev.address["port"], baudrate=115200, timeout=TIMEOUT_S,
-                                        retries=0)
+            client = ModbusSerialClient(dev.address["port"], baudrate=115200, timeout=TIMEOUT_S, retries=0)
         yield dev, ModbusDrawstring(client, regs)
 
 
@@ -133,12 +133,15 @@ def test_reads_the_simulated_sensor_with_its_noise(sim_modbus):
     assert np.allclose(values * 1000, np.round(values * 1000), atol=1e-6)  # 1 um steps
 
 
-@pytest.mark.parametrize("fault, error, match", [
-    ("error", DeviceReplyError, "Modbus exception code 4"),
-    ("garbled", GarbledReply, "unparseable reply"),
-    ("silence", DeviceTimeout, "no reply from"),
-    ("unplug", DeviceUnreachable, "link lost"),
-])
+@pytest.mark.parametrize(
+    "fault, error, match",
+    [
+        ("error", DeviceReplyError, "Modbus exception code 4"),
+        ("garbled", GarbledReply, "unparseable reply"),
+        ("silence", DeviceTimeout, "no reply from"),
+        ("unplug", DeviceUnreachable, "link lost"),
+    ],
+)
 def test_simulated_faults_give_named_errors_then_reconnect(sim_modbus, fault, error, match):
     dev, ds = sim_modbus
     with ds:

@@ -48,6 +48,7 @@ def read_until(driver, error, timeout_s, tolerate=()):
 
 # --- RTDE -----------------------------------------------------------------------------------
 
+
 @pytest.fixture
 def rtde_server():
     srv = start_on_free_loopback(make_robot())
@@ -69,8 +70,7 @@ def test_rtde_reads_joints_in_degrees_as_simulated(rtde_server):
             states.add(truth.dwelling)
             time.sleep(0.03)
     assert states == {True, False}
-    assert reading.units == {"q_deg": "deg", "qd_deg_s": "deg/s", "robot_mode": "",
-                             "controller_time_s": "s"}
+    assert reading.units == {"q_deg": "deg", "qd_deg_s": "deg/s", "robot_mode": "", "controller_time_s": "s"}
     assert reading.device == "robot" and abs(reading.t_wall - time.time()) < 5
 
 
@@ -89,8 +89,11 @@ def test_rtde_controller_goes_away_and_comes_back(rtde_server):
         rtde_server.stop()
         exc = read_until(source, DeviceUnreachable, timeout_s=3.0)
         assert str(exc).startswith("robot: ") and "connection lost" in str(exc)
-        with pytest.raises(DeviceUnreachable, match=r"unreachable after 2 attempts \(cannot "
-                                                    r"connect to RTDE"):
+        with pytest.raises(
+            DeviceUnreachable,
+            match=r"unreachable after 2 attempts \(cannot "
+            r"connect to RTDE",
+        ):
             call_with_reconnect(source, source.read, Backoff(attempts=2, initial_s=0.01))
         rtde_server.start()
         reading = call_with_reconnect(source, source.read, QUICK)
@@ -155,18 +158,21 @@ def test_rtde_hung_controller_fails_the_probe_within_its_timeout(mute_listener):
 def test_rtde_refuses_bad_frequency_and_read_before_open():
     with pytest.raises(ValueError, match="frequency_hz"):
         RtdeJointSource("127.0.0.1", 1000.0)
-    with pytest.raises(DeviceUnreachable, match=r"robot: RTDE 127.0.0.1:30004 not connected "
-                                                r"\(open\(\) first\)"):
+    with pytest.raises(
+        DeviceUnreachable,
+        match=r"robot: RTDE 127.0.0.1:30004 not connected "
+        r"\(open\(\) first\)",
+    ):
         RtdeJointSource("127.0.0.1").read()
 
 
 # --- Modbus TCP joint registers -------------------------------------------------------------
 
+
 def test_joint_registers_layout_int32_millidegrees_high_word_first():
     regs = JointRegisterMap()
     words = regs.encode_deg([1.5, -2.25, 0.0, 90.0, -180.0, 0.001])
-    assert words == [0x0000, 0x05DC, 0xFFFF, 0xF736, 0, 0, 0x0001, 0x5F90,
-                     0xFFFD, 0x40E0, 0x0000, 0x0001]
+    assert words == [0x0000, 0x05DC, 0xFFFF, 0xF736, 0, 0, 0x0001, 0x5F90, 0xFFFD, 0x40E0, 0x0000, 0x0001]
     assert regs.count == 12
     assert regs.decode_deg(words) == pytest.approx((1.5, -2.25, 0.0, 90.0, -180.0, 0.001))
 
@@ -195,8 +201,9 @@ def modbus_robot():
 
 
 def modbus_source(server, retries=0):
-    client = ModbusTcpClient(server.address["host"], port=server.address["port"], timeout=0.3,
-                             retries=retries)
+    client = ModbusTcpClient(
+        server.address["host"], port=server.address["port"], timeout=0.3, retries=retries
+    )
     return ModbusJointSource(client, server.registers)
 
 
@@ -209,11 +216,14 @@ def test_modbus_reads_the_simulated_controllers_joints(modbus_robot):
     assert modbus_robot.requests == 1
 
 
-@pytest.mark.parametrize("fault, error, match", [
-    ("error", DeviceReplyError, "Modbus exception code 4 reading joint registers 100..111"),
-    ("silence", DeviceTimeout, "no reply from 127.0.0.1"),
-    ("unplug", DeviceUnreachable, "link lost"),
-])
+@pytest.mark.parametrize(
+    "fault, error, match",
+    [
+        ("error", DeviceReplyError, "Modbus exception code 4 reading joint registers 100..111"),
+        ("silence", DeviceTimeout, "no reply from 127.0.0.1"),
+        ("unplug", DeviceUnreachable, "link lost"),
+    ],
+)
 def test_modbus_faults_are_named_then_reconnect_reads(modbus_robot, fault, error, match):
     with modbus_source(modbus_robot) as source:
         modbus_robot.faults.inject(fault)

@@ -16,11 +16,13 @@ from sim_fixtures.robot_program import (
     trapezoid,
 )
 
-TARGETS = np.array([
-    [0.0, -50.0, -20.0, 0.0, -90.0, 0.0],
-    [60.0, -40.0, -30.0, 5.0, -80.0, 10.0],   # joint 1 leads: 60 deg
-    [61.0, -40.5, -30.0, 5.0, -80.0, 10.0],   # short hop: triangular profile
-])
+TARGETS = np.array(
+    [
+        [0.0, -50.0, -20.0, 0.0, -90.0, 0.0],
+        [60.0, -40.0, -30.0, 5.0, -80.0, 10.0],  # joint 1 leads: 60 deg
+        [61.0, -40.5, -30.0, 5.0, -80.0, 10.0],  # short hop: triangular profile
+    ]
+)
 SPEED, ACCEL, DWELL = 30.0, 60.0, 1.0
 
 
@@ -123,11 +125,14 @@ def test_jitter_fault_never_settles_and_is_reproducible():
     assert 0.03 < (qa - TARGETS[0]).std() < 0.07
 
 
-@pytest.mark.parametrize("kw, message", [
-    (dict(speed_deg_s=0.0), "speed_deg_s"),
-    (dict(dwell_s=-1.0), "dwell_s"),
-    (dict(faults=[RobotFault(0, 1, jitter_deg=0.1)]), "rng"),
-])
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        (dict(speed_deg_s=0.0), "speed_deg_s"),
+        (dict(dwell_s=-1.0), "dwell_s"),
+        (dict(faults=[RobotFault(0, 1, jitter_deg=0.1)]), "rng"),
+    ],
+)
 def test_bad_arguments_are_named(kw, message):
     with pytest.raises(ValueError, match=message):
         robot(**kw)

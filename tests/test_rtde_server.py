@@ -37,6 +37,7 @@ def server():
 
 # --- byte layouts ---------------------------------------------------------------------------
 
+
 def test_protocol_version_request_and_reply_bytes():
     request = bytes.fromhex("0005 56 0002")  # what ur_rtde sends: size 5, 'V', uint16 2
     (package,), rest = wire.split(request)
@@ -47,8 +48,7 @@ def test_protocol_version_request_and_reply_bytes():
 
 
 def test_controller_version_reply_bytes():
-    assert wire.version_reply(5, 12, 3, 1234) == bytes.fromhex(
-        "0013 76 00000005 0000000c 00000003 000004d2")
+    assert wire.version_reply(5, 12, 3, 1234) == bytes.fromhex("0013 76 00000005 0000000c 00000003 000004d2")
 
 
 def test_setup_outputs_request_and_reply_bytes():
@@ -58,12 +58,20 @@ def test_setup_outputs_request_and_reply_bytes():
     (package,), _ = wire.split(request)
     assert wire.parse_setup_outputs(package.payload) == (500.0, ["timestamp", "actual_q"])
     assert wire.setup_outputs_reply(1, ["DOUBLE", "VECTOR6D"]) == (
-        bytes.fromhex("0013 4f 01") + b"DOUBLE,VECTOR6D")
+        bytes.fromhex("0013 4f 01") + b"DOUBLE,VECTOR6D"
+    )
 
 
 def test_output_types_are_the_controllers_and_unknown_names_are_not_found():
     assert wire.output_types(VARIABLES + ["joint_mode", "runtime_state", "no_such_thing"]) == [
-        "DOUBLE", "VECTOR6D", "VECTOR6D", "INT32", "VECTOR6INT32", "UINT32", "NOT_FOUND"]
+        "DOUBLE",
+        "VECTOR6D",
+        "VECTOR6D",
+        "INT32",
+        "VECTOR6INT32",
+        "UINT32",
+        "NOT_FOUND",
+    ]
 
 
 def test_data_package_bytes_and_round_trip():
@@ -72,11 +80,12 @@ def test_data_package_bytes_and_round_trip():
     q = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
     frame = wire.data_package(1, fmt, types, [0.5, 7, q])
     assert frame == bytes.fromhex(
-        "0040 55 01"                    # size 64, 'U', recipe 1
-        "3fe0000000000000"              # timestamp 0.5
-        "00000007"                      # robot_mode 7
+        "0040 55 01"  # size 64, 'U', recipe 1
+        "3fe0000000000000"  # timestamp 0.5
+        "00000007"  # robot_mode 7
         "3ff0000000000000 4000000000000000 4008000000000000"
-        "4010000000000000 4014000000000000 4018000000000000")
+        "4010000000000000 4014000000000000 4018000000000000"
+    )
     (package,), _ = wire.split(frame)
     assert wire.unpack_data(package.payload, fmt, types) == (1, {0: 0.5, 1: 7, 2: q})
 
@@ -92,7 +101,8 @@ def test_data_formats_of_integer_and_short_vector_types():
 
 def test_text_message_bytes():
     assert wire.text_message("hi", "s", 3) == bytes.fromhex("0009 4d 02") + b"hi" + bytes.fromhex(
-        "01") + b"s" + bytes.fromhex("03")
+        "01"
+    ) + b"s" + bytes.fromhex("03")
 
 
 def test_split_keeps_partial_packages_and_rejects_impossible_sizes():
@@ -105,6 +115,7 @@ def test_split_keeps_partial_packages_and_rejects_impossible_sizes():
 
 
 # --- the protocol on a raw socket -----------------------------------------------------------
+
 
 class RawClient:
     """A minimal RTDE client on a plain socket, every wait bounded."""
@@ -121,7 +132,7 @@ class RawClient:
         while True:
             packages, rest = wire.split(self.buffer)
             if packages:
-                self.buffer = self.buffer[wire.HEADER_SIZE + len(packages[0].payload):]
+                self.buffer = self.buffer[wire.HEADER_SIZE + len(packages[0].payload) :]
                 return packages[0]
             chunk = self.sock.recv(65536)
             if not chunk:
@@ -131,8 +142,9 @@ class RawClient:
     def handshake(self, frequency, names):
         assert self.request(wire.REQUEST_PROTOCOL_VERSION, b"\x00\x02").payload == b"\x01"
         version = self.request(wire.GET_URCONTROL_VERSION)
-        setup = self.request(wire.SETUP_OUTPUTS,
-                             struct.pack(">d", frequency) + (",".join(names) + ",").encode())
+        setup = self.request(
+            wire.SETUP_OUTPUTS, struct.pack(">d", frequency) + (",".join(names) + ",").encode()
+        )
         return version, setup
 
 
@@ -198,6 +210,7 @@ def test_eof_mid_package_is_tolerated(server):
 
 # --- the real ur_rtde client ----------------------------------------------------------------
 
+
 def test_ur_rtde_reads_the_held_robot_exactly():
     with start_on_free_loopback(make_robot(hold=True)) as srv:
         rtde = rtde_receive.RTDEReceiveInterface(srv.host, 500.0, VARIABLES)
@@ -258,7 +271,8 @@ def test_ur_rtde_sees_the_controller_go_and_reconnects_when_it_returns(server):
         assert rtde.reconnect() and rtde.isConnected()
         t0 = rtde.getTimestamp()
         assert wait_until(lambda: rtde.getTimestamp() > t0, timeout_s=1.0)
-        np.testing.assert_allclose(np.degrees(rtde.getActualQ()),
-                                   make_robot().state(rtde.getTimestamp()).q_deg, atol=0.5)
+        np.testing.assert_allclose(
+            np.degrees(rtde.getActualQ()), make_robot().state(rtde.getTimestamp()).q_deg, atol=0.5
+        )
     finally:
         rtde.disconnect()

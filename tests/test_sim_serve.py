@@ -19,10 +19,15 @@ from sim_fixtures.station_sim import make_cell
 
 # The real entry point, limited to the commands present on this branch (siblings such as
 # ``demo`` arrive with other branches).
-CLI = [sys.executable, "-c", (
-    "import importlib.util, sys, station.cli as c; "
-    "c.COMMANDS = tuple(n for n in c.COMMANDS "
-    "if importlib.util.find_spec('station.commands.' + n)); sys.exit(c.main())")]
+CLI = [
+    sys.executable,
+    "-c",
+    (
+        "import importlib.util, sys, station.cli as c; "
+        "c.COMMANDS = tuple(n for n in c.COMMANDS "
+        "if importlib.util.find_spec('station.commands.' + n)); sys.exit(c.main())"
+    ),
+]
 assert importlib.util.find_spec("station.commands.sim")
 
 CONFIG = """
@@ -86,8 +91,12 @@ def served(tmp_path):
         config = tmp_path / "station.toml"
         config.write_text(CONFIG.format(host=host, port=free_port(), dial=tmp_path / "dial"))
         with open(tmp_path / "serve.err", "w") as err:
-            proc = subprocess.Popen([*CLI, "sim", "serve", "--config", str(config), "--hold"],
-                                    stdout=subprocess.PIPE, stderr=err, text=True)
+            proc = subprocess.Popen(
+                [*CLI, "sim", "serve", "--config", str(config), "--hold"],
+                stdout=subprocess.PIPE,
+                stderr=err,
+                text=True,
+            )
         out = lines_of(proc)
         try:
             addresses = [json.loads(out.get(timeout=30)) for _ in range(3)]
@@ -137,12 +146,10 @@ def test_sim_serve_stops_on_sigterm_and_removes_links(served):
 def test_read_exits_1_naming_the_unreachable_device(served):
     _, config, addresses = served
     dead = config.parent / "dead.toml"
-    dead.write_text(config.read_text().replace(f"port = {addresses[1]['port']}",
-                                               f"port = {free_port()}"))
+    dead.write_text(config.read_text().replace(f"port = {addresses[1]['port']}", f"port = {free_port()}"))
     result = run_cli("read", "--config", str(dead))
     assert result.returncode == 1
-    assert result.stderr.startswith(
-        "station: device error: drawstring: unreachable after 2 attempts")
+    assert result.stderr.startswith("station: device error: drawstring: unreachable after 2 attempts")
     assert result.stdout == ""
 
 
@@ -152,23 +159,27 @@ def test_bad_config_exits_2_with_one_line(tmp_path, command):
     bad.write_text(CONFIG.format(host="127.0.0.1", port=0, dial=tmp_path / "dial"))
     result = run_cli(*command, "--config", str(bad), timeout=30)
     assert result.returncode == 2
-    assert result.stderr == (f"station: error: {bad}: drawstring.port: "
-                             "Input should be greater than 0\n")
+    assert result.stderr == (f"station: error: {bad}: drawstring.port: Input should be greater than 0\n")
 
 
-@pytest.mark.parametrize("drawstring", [
-    'kind = "modbus_rtu"\nport = "{dir}/ds-rtu"\ndevice_id = 4\n'
-    '[drawstring.registers]\naddress = 30\nencoding = "float32_mm"\nword_order = "little"',
-    'kind = "ascii"\nport = "{dir}/ds-ascii"\nbaudrate = 115200',
-])
+@pytest.mark.parametrize(
+    "drawstring",
+    [
+        'kind = "modbus_rtu"\nport = "{dir}/ds-rtu"\ndevice_id = 4\n'
+        '[drawstring.registers]\naddress = 30\nencoding = "float32_mm"\nword_order = "little"',
+        'kind = "ascii"\nport = "{dir}/ds-ascii"\nbaudrate = 115200',
+    ],
+)
 def test_serial_drawstrings_are_served_where_the_config_says(tmp_path, drawstring):
     from drivers.config import load_station_config
     from sim_fixtures.station_sim import SimStation
     from station.commands.read import read_once
 
     config = tmp_path / "station.toml"
-    config.write_text(f'[robot]\nkind = "rtde"\nhost = "127.0.0.{random.randint(2, 250)}"\n'
-                      f'[drawstring]\n{drawstring.format(dir=tmp_path)}\n')
+    config.write_text(
+        f'[robot]\nkind = "rtde"\nhost = "127.0.0.{random.randint(2, 250)}"\n'
+        f"[drawstring]\n{drawstring.format(dir=tmp_path)}\n"
+    )
     cfg = load_station_config(config)
     station = SimStation(cfg, hold=True)
     try:

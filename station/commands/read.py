@@ -17,8 +17,11 @@ from drivers.config import load_station_config
 
 def register(subparsers) -> None:
     read = subparsers.add_parser("read", help="read every device once (a wiring check)")
-    read.add_argument("--config", default=str(configs.path("station.toml")),
-                      help="station config (default: the shipped one, simulated devices)")
+    read.add_argument(
+        "--config",
+        default=str(configs.path("station.toml")),
+        help="station config (default: the shipped one, simulated devices)",
+    )
     read.set_defaults(func=read_command)
 
 
@@ -51,8 +54,6 @@ def read_command(args) -> int:
     cfg = load_station_config(args.config)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # failures are raised, named
     backoff = cfg.reconnect.backoff()
-    readings = {
-        name: read_once(section.build(), backoff) for name, section in cfg.devices().items()
-    }
+    readings = {name: read_once(section.build(), backoff) for name, section in cfg.devices().items()}
     print(json.dumps(as_json(readings)))
     return 0

@@ -21,10 +21,14 @@ def register(subparsers) -> None:
     sim = subparsers.add_parser("sim", help="simulated devices")
     actions = sim.add_subparsers(dest="action", required=True, metavar="ACTION")
     serve = actions.add_parser("serve", help="serve the simulated devices until interrupted")
-    serve.add_argument("--config", default=str(configs.path("station.toml")),
-                       help="station config (default: the shipped one, contract addresses)")
-    serve.add_argument("--hold", action="store_true",
-                       help="keep the simulated robot still at its first target")
+    serve.add_argument(
+        "--config",
+        default=str(configs.path("station.toml")),
+        help="station config (default: the shipped one, contract addresses)",
+    )
+    serve.add_argument(
+        "--hold", action="store_true", help="keep the simulated robot still at its first target"
+    )
     serve.set_defaults(func=serve_command)
 
 
