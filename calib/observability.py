@@ -23,9 +23,14 @@ import numpy as np
 INDICES = ("O1", "O2", "O3", "O4", "O5")
 
 
-def configuration_information(jac: np.ndarray, rows: np.ndarray, n_rows: int) -> np.ndarray:
+def configuration_information(
+    jac: np.ndarray, rows: np.ndarray, n_rows: int, table: np.ndarray
+) -> np.ndarray:
     """Per-configuration information matrices (n_rows, n, n) of the column-normalised ``jac``
-    (m, n); ``rows`` (m,) maps each residual to its configuration (rows < 0 are ignored)."""
+    (m, n), columns reordered so the ``table`` ones (boolean mask) come first; ``rows`` (m,) maps
+    each residual to its configuration (rows < 0 are ignored)."""
+    order = np.concatenate([np.flatnonzero(table), np.flatnonzero(~table)])
+    jac = jac[:, order]
     scaled = jac / np.maximum(np.linalg.norm(jac[rows >= 0], axis=0), 1e-300)
     info = np.zeros((n_rows, jac.shape[1], jac.shape[1]))
     for r in range(n_rows):
@@ -34,13 +39,16 @@ def configuration_information(jac: np.ndarray, rows: np.ndarray, n_rows: int) ->
     return info
 
 
-def singular_values(info: np.ndarray, table: np.ndarray) -> np.ndarray:
-    """Singular values of the table columns with the other columns projected out, from a summed
-    information matrix ``info`` (n, n) and the boolean ``table`` mask (n,)."""
-    t, s = np.flatnonzero(table), np.flatnonzero(~table)
-    m = info[np.ix_(t, t)]
-    if s.size:
-        m = m - info[np.ix_(t, s)] @ np.linalg.pinv(info[np.ix_(s, s)]) @ info[np.ix_(s, t)]
+def singular_values(info: np.ndarray, n_table: int) -> np.ndarray:
+    """Singular values of the first ``n_table`` (table) columns with the others projected out,
+    from a summed information matrix ``info`` (n, n)."""
+    m = info[:n_table, :n_table]
+    cross, setup = info[:n_table, n_table:], info[n_table:, n_table:]
+    if setup.size:
+        try:
+            m = m - cross @ np.linalg.solve(setup, cross.T)
+        except np.linalg.LinAlgError:
+            m = m - cross @ np.linalg.pinv(setup) @ cross.T
     return np.sqrt(np.clip(np.linalg.eigvalsh(m)[::-1], 0.0, None))
 
 
@@ -58,14 +66,14 @@ def indices(sv: np.ndarray, n_configurations: int) -> dict[str, float]:
 
 
 def index_curve(
-    info: np.ndarray, table: np.ndarray, sizes, rng: np.random.Generator, index: str = "O1", repeats: int = 5
+    info: np.ndarray, n_table: int, sizes, rng: np.random.Generator, index: str = "O1", repeats: int = 5
 ) -> np.ndarray:
     """Mean ``index`` of random subsets of each size in ``sizes`` (the paper's Fig. 5a)."""
     n = info.shape[0]
     out = []
     for size in sizes:
         vals = [
-            indices(singular_values(info[rng.choice(n, size, replace=False)].sum(0), table), size)[index]
+            indices(singular_values(info[rng.choice(n, size, replace=False)].sum(0), n_table), size)[index]
             for _ in range(repeats)
         ]
         out.append(np.mean(vals))
@@ -88,7 +96,7 @@ class Selection:
 
 def anneal(
     info: np.ndarray,
-    table: np.ndarray,
+    n_table: int,
     n_select: int,
     groups: np.ndarray,
     rng: np.random.Generator,
@@ -98,27 +106,32 @@ def anneal(
     iterations: int = 3000,
 ) -> Selection:
     """Choose ``n_select`` of the configurations maximising ``index`` by simulated annealing with
-    swap moves, keeping at least ``min_per_group`` configurations of every group (gauge line)."""
+    swap moves, keeping at least ``min_per_group`` configurations of every group (gauge line).
+    ``n_select`` must be smaller than the number of configurations."""
     n = info.shape[0]
     chosen = _initial(groups, n_select, min_per_group, rng)
     total = info[chosen].sum(0)
-    value = indices(singular_values(total, table), n_select)[index]
+    value = indices(singular_values(total, n_table), n_select)[index]
     best, best_value = chosen.copy(), value
     temp0 = 0.05 * max(abs(value), 1e-12)
     trace = np.empty(iterations)
+    inside = np.zeros(n, bool)
+    inside[chosen] = True
     for it in range(iterations):
         temp = temp0 * (1e-3 ** (it / iterations))
         out_pos = rng.integers(n_select)
-        candidates = np.setdiff1d(np.arange(n), chosen, assume_unique=True)
-        new = candidates[rng.integers(candidates.size)]
+        new = rng.integers(n)
+        while inside[new]:
+            new = rng.integers(n)
         old = chosen[out_pos]
         if groups[new] != groups[old] and np.sum(groups[chosen] == groups[old]) <= min_per_group:
             trace[it] = best_value
             continue
         trial = total - info[old] + info[new]
-        trial_value = indices(singular_values(trial, table), n_select)[index]
+        trial_value = indices(singular_values(trial, n_table), n_select)[index]
         if trial_value >= value or rng.random() < np.exp((trial_value - value) / temp):
             chosen[out_pos], total, value = new, trial, trial_value
+            inside[old], inside[new] = False, True
             if value > best_value:
                 best, best_value = chosen.copy(), value
         trace[it] = best_value
@@ -161,10 +174,15 @@ def select_configurations(
     ``rows`` (m,) configuration of each residual, ``free`` (n,) fitted unknowns (the first
     ``n_table`` are the table's), ``line`` (N0,) each configuration's gauge line."""
     n0 = line.size
-    info = configuration_information(jac[:, free], rows, n0)
     table = np.flatnonzero(free) < n_table
-    start = max(int(table.sum()), 8)
-    sizes = np.unique(np.linspace(start, n0, 12).astype(int))
-    curve = index_curve(info, table, sizes, rng, index)
+    info = configuration_information(jac[:, free], rows, n0, table)
+    n_tab = int(table.sum())
+    sizes = np.unique(np.linspace(max(n_tab, 8), n0, 12).astype(int))
+    curve = index_curve(info, n_tab, sizes, rng, index)
     n = n_select or flattening_size(sizes, curve)
-    return MCSResult(anneal(info, table, min(n, n0), line, rng, index=index), n, sizes, curve)
+    if n >= n0:
+        everything = Selection(
+            np.arange(n0), indices(singular_values(info.sum(0), n_tab), n0)[index], np.array([])
+        )
+        return MCSResult(everything, n0, sizes, curve)
+    return MCSResult(anneal(info, n_tab, n, line, rng, index=index), n, sizes, curve)

@@ -20,14 +20,14 @@ def problem(one_line):
 def test_schur_singular_values_match_projected_svd(problem, rng):
     model, jac, table = problem
     n0 = len(model.samples)
-    info = configuration_information(jac, model.rows, n0)
+    info = configuration_information(jac, model.rows, n0, table)
     subset = rng.choice(n0, 60, replace=False)
     keep = np.isin(model.rows, subset)
     scaled = jac[keep] / np.linalg.norm(jac, axis=0)
     t, s = scaled[:, table], scaled[:, ~table]
     projected = t - s @ np.linalg.lstsq(s, t, rcond=None)[0]
     expected = np.linalg.svd(projected, compute_uv=False)
-    np.testing.assert_allclose(singular_values(info[subset].sum(0), table), expected, rtol=1e-6)
+    np.testing.assert_allclose(singular_values(info[subset].sum(0), int(table.sum())), expected, rtol=1e-6)
 
 
 def test_indices_definitions():
@@ -41,11 +41,11 @@ def test_indices_definitions():
 def test_annealing_beats_random_subsets_and_keeps_every_line(problem, rng):
     model, jac, table = problem
     n0 = len(model.samples)
-    info = configuration_information(jac, model.rows, n0)
+    info = configuration_information(jac, model.rows, n0, table)
     groups = np.arange(n0) % 3  # pretend three lines to exercise the per-line minimum
-    sel = anneal(info, table, 40, groups, np.random.default_rng(1), iterations=1500)
+    sel = anneal(info, int(table.sum()), 40, groups, np.random.default_rng(1), iterations=1500)
     random_best = max(
-        indices(singular_values(info[rng.choice(n0, 40, replace=False)].sum(0), table), 40)["O1"]
+        indices(singular_values(info[rng.choice(n0, 40, replace=False)].sum(0), int(table.sum())), 40)["O1"]
         for _ in range(50)
     )
     assert sel.value > random_best
