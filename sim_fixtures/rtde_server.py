@@ -251,6 +251,11 @@ class RtdeServerProcess:
         self._stop = None
 
     @property
+    def pid(self) -> int | None:
+        """The child's process id while it runs (tests freeze it with SIGSTOP)."""
+        return self._process.pid if self.running else None
+
+    @property
     def running(self) -> bool:
         """Whether the child process is alive."""
         return self._process is not None and self._process.is_alive()
