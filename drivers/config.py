@@ -1,8 +1,9 @@
 """The station's device configuration (``configs/station.toml``): pydantic models and a loader.
 
 Each device section says how to reach the instrument (``kind`` picks the transport) and builds
-its driver with ``build()``; connections are made by the driver's ``open()``, never here. Unknown
-keys are refused, so a misspelt key is an error rather than a silent default.
+its driver with ``build()`` (robot drivers: ``drivers.robot``); connections are made by the
+driver's ``open()``, never here. Unknown keys are refused, so a misspelt key is an error rather
+than a silent default.
 :func:`load_station_config` turns every problem into one ``InputError`` line naming the file,
 the key and what is wrong.
 """
@@ -20,6 +21,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from drivers.base import Backoff, Driver
 from drivers.dial import DIAL_DIALECTS, DialIndicator
 from drivers.drawstring import ENCODINGS, AsciiDrawstring, ModbusDrawstring, RegisterMap
+from drivers.robot import JOINT_ENCODINGS, JointRegisterMap, ModbusJointSource, RtdeJointSource
 from station.errors import InputError
 
 if sys.version_info >= (3, 11):
@@ -118,29 +120,29 @@ class RobotRtde(_Section):
     frequency_hz: float = Field(500.0, gt=0, le=500)
 
     def build(self) -> Driver:
-        from drivers.robot import RtdeJointSource
-
         return RtdeJointSource(self.host, self.frequency_hz)
 
 
 class RobotModbusTcp(_Section):
-    """A controller publishing its six joints in Modbus registers (e.g. the HSR JR680)."""
+    """A controller publishing its six joints in Modbus registers (e.g. the HSR JR680): from
+    ``address`` on, joint 1 first, ``encoding`` with ``word_order``, times ``scale``."""
 
     kind: Literal["modbus_tcp"]
     host: str = "127.0.0.1"
     port: int = Field(502, gt=0, le=65535)
     device_id: int = Field(1, ge=0, le=255)
     address: int = Field(0, ge=0, le=65535)
-    scale: float = 0.001  # degrees per register count
+    encoding: Literal[tuple(JOINT_ENCODINGS)] = "int32_mdeg"  # type: ignore[valid-type]
+    word_order: Literal["big", "little"] = "big"
+    scale: float = 1.0
+    table: Literal["holding", "input"] = "holding"
     timeout_s: float = Field(0.3, gt=0)
 
     def build(self) -> Driver:
-        from drivers.robot import ModbusJointSource
-
-        return ModbusJointSource(
-            self.host, self.port, self.device_id, self.address, scale=self.scale,
-            timeout_s=self.timeout_s,
-        )
+        client = ModbusTcpClient(self.host, port=self.port, timeout=self.timeout_s, retries=0)
+        layout = self.model_dump(include={"device_id", "address", "encoding", "word_order",
+                                          "scale", "table"})
+        return ModbusJointSource(client, JointRegisterMap(**layout))
 
 
 Robot = Annotated[RobotRtde | RobotModbusTcp, Field(discriminator="kind")]

@@ -15,7 +15,8 @@ The streamed values come from a robot source, anything picklable whose ``state(t
 ``robot.state(timestamp)`` is exactly what the package carries (a restarted server keeps the
 program's clock, as if only the network had gone). Fields the simulation does not model are
 zeros. Like the real controller, a server that falls behind skips the packages it missed and
-sends the most recent state (their timestamps show the gap).
+sends the most recent state (their timestamps show the gap); :attr:`RtdeServerProcess.skipped`
+counts them, to tell server lateness from client misses.
 
 ur_rtde's ``RTDEReceiveInterface`` constructor holds the GIL while it waits for the first data
 package, and its port is fixed at 30004: the server must run in another process
@@ -168,6 +169,9 @@ class _Session:
         """Send the current state; if late by whole periods, skip them as the controller does."""
         recipe, now = self.recipe, time.monotonic()
         late = int((now - self.next_send) // recipe.period_s)
+        if late:
+            with self.server.skipped.get_lock():
+                self.server.skipped.value += late
         scheduled = self.next_send + late * recipe.period_s
         outputs = self.server.outputs(scheduled)
         values = wire.values_for(recipe.names, recipe.types, outputs)
@@ -184,8 +188,9 @@ class RtdeServer:
 
     def __init__(self, robot: RobotSource, host: str, port: int = RTDE_PORT, *,
                  start_monotonic: float | None = None,
-                 version: ControllerVersion = ControllerVersion()):
+                 version: ControllerVersion = ControllerVersion(), skipped=None):
         self.robot = robot
+        self.skipped = multiprocessing.Value("q", 0) if skipped is None else skipped
         self.version = version
         self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
         self.stopping = threading.Event()
@@ -218,10 +223,11 @@ class RtdeServer:
             t.join(timeout=1.0)
 
 
-def _serve_in_child(robot, host, port, start_monotonic, version, ready, stop) -> None:
+def _serve_in_child(robot, host, port, start_monotonic, version, skipped, ready, stop) -> None:
     """Child-process entry: bind, report the address (or the bind error), serve until stopped."""
     try:
-        server = RtdeServer(robot, host, port, start_monotonic=start_monotonic, version=version)
+        server = RtdeServer(robot, host, port, start_monotonic=start_monotonic, version=version,
+                            skipped=skipped)
     except OSError as exc:
         ready.send(("error", f"cannot bind RTDE server to {host}:{port}: {exc}"))
         return
@@ -247,6 +253,7 @@ class RtdeServerProcess:
         self.version = version
         self.timeout_s = timeout_s
         self._ctx = multiprocessing.get_context("spawn")
+        self._skipped = self._ctx.Value("q", 0)
         self._process = None
         self._stop = None
 
@@ -254,6 +261,11 @@ class RtdeServerProcess:
     def pid(self) -> int | None:
         """The child's process id while it runs (tests freeze it with SIGSTOP)."""
         return self._process.pid if self.running else None
+
+    @property
+    def skipped(self) -> int:
+        """Data packages skipped because the server was late (all connections, all starts)."""
+        return self._skipped.value
 
     @property
     def running(self) -> bool:
@@ -268,8 +280,8 @@ class RtdeServerProcess:
         self._stop = self._ctx.Event()
         self._process = self._ctx.Process(
             target=_serve_in_child, daemon=True, name=f"rtde-sim-{self.host}",
-            args=(self.robot, self.host, self.port, self.start_monotonic, self.version, sender,
-                  self._stop))
+            args=(self.robot, self.host, self.port, self.start_monotonic, self.version,
+                  self._skipped, sender, self._stop))
         self._process.start()
         sender.close()
         if not receiver.poll(self.timeout_s):

@@ -79,13 +79,15 @@ class PtyPort:
         link_to(self.link, self.path)
 
     def unplug(self) -> None:
+        """Remove the link, then close the pty: the driver sees the line drop only once the
+        port reads as unplugged, so a replug that follows it always starts afresh."""
         if self.master < 0:
             return
+        fds, self.master, self._slave = (self.master, self._slave), -1, -1
         if self.link.is_symlink() and os.readlink(self.link) == self.path:
             self.link.unlink()
-        os.close(self.master)
-        os.close(self._slave)
-        self.master = self._slave = -1
+        for fd in fds:
+            os.close(fd)
 
     @property
     def plugged(self) -> bool:

@@ -75,3 +75,13 @@ def test_unreadable_or_broken_file(tmp_path):
     (tmp_path / "bad.toml").write_text("[robot\n")
     with pytest.raises(InputError, match="bad.toml: not valid TOML"):
         load_station_config(tmp_path / "bad.toml")
+
+
+def test_modbus_joint_robot_section_builds_its_driver(tmp_path):
+    path = tmp_path / "station.toml"
+    path.write_text(MINIMAL.replace('kind = "rtde"', 'kind = "modbus_tcp"\nhost = "10.0.0.5"\n'
+                                    'address = 200\nencoding = "float32_deg"\ndevice_id = 2'))
+    robot = load_station_config(path).robot.build()
+    assert robot.name == "robot" and robot.client.comm_params.host == "10.0.0.5"
+    assert (robot.registers.address, robot.registers.encoding, robot.registers.device_id) == (
+        200, "float32_deg", 2)

@@ -216,8 +216,8 @@ def test_ur_rtde_reads_the_moving_robot_as_simulated(server):
     robot = make_robot()
     rtde = rtde_receive.RTDEReceiveInterface(server.host, 500.0, VARIABLES)
     try:
-        checked, seen, deadline = 0, set(), time.monotonic() + 5.0
-        while checked < 30 and time.monotonic() < deadline:
+        checked, seen, deadline = 0, set(), time.monotonic() + 6.0
+        while (checked < 30 or seen != {True, False}) and time.monotonic() < deadline:
             t = rtde.getTimestamp()
             q, qd = rtde.getActualQ(), rtde.getActualQd()
             if rtde.getTimestamp() != t:
@@ -228,7 +228,7 @@ def test_ur_rtde_reads_the_moving_robot_as_simulated(server):
             seen.add(state.dwelling)
             checked += 1
             time.sleep(0.03)
-        assert checked == 30 and seen == {True, False}  # it dwelt and it moved
+        assert checked >= 30 and seen == {True, False}  # it dwelt and it moved
     finally:
         rtde.disconnect()
 
