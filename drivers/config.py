@@ -168,6 +168,7 @@ class Sim(_Section):
     speed_deg_s: float = Field(30.0, gt=0)
     accel_deg_s2: float = Field(60.0, gt=0)
     dwell_s: float = Field(3.0, ge=0)
+    targets_per_line: int = Field(70, ge=2)  # the cell's plan: targets along each gauge line
 
 
 class Session(_Section):

@@ -8,8 +8,8 @@ shared ``time_scale``):
    a jump), the dial inside ``dial_range_mm`` (the indicator touches the gauge edge) -- a failed
    gate suspends the session rather than recording garbage;
 3. ``readings`` (K) rounds, each reading the robot, the drawstring and the dial once, all inside
-   ``window_s``; rejected if the joints spread more than ``still_deg`` or a joint moved faster
-   than the settle speed (the robot moved), or the drawstring spread more than ``jump_mm`` or
+   ``window_s``, and a closing robot reading; rejected if the joints spread more than
+   ``still_deg`` or a joint moved faster than the settle speed (the robot moved), or the drawstring spread more than ``jump_mm`` or
    the dial more than ``dial_stable_mm`` (a sensor jumped);
 4. the sample is the mean of the K rounds, with the standard deviation of each quantity and the
    timestamp of every reading.
@@ -169,13 +169,16 @@ def capture(devices: Devices, rules: Rules) -> Capture:
     rounds = []
     for _ in range(rules.readings):
         rounds.append([devices.read(n) for n in ("robot", "drawstring", "dial") if n != "dial" or has_dial])
+    closing = devices.read("robot")  # brackets the last sensor readings: did the robot leave?
     t_mono = [r.t_monotonic for rnd in rounds for r in rnd]
     window = max(t_mono) - min(t_mono)
     q = np.array([rnd[0].values["q_deg"] for rnd in rounds])
-    qd = max(float(np.max(np.abs(rnd[0].values["qd_deg_s"]))) for rnd in rounds)
+    robots = [rnd[0] for rnd in rounds] + [closing]
+    qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
+    q_all = np.array([r.values["q_deg"] for r in robots])
     length = np.array([rnd[1].values["length_mm"] for rnd in rounds])
     dial = np.array([rnd[2].values["dial_mm"] for rnd in rounds]) if has_dial else np.full(len(rounds), np.nan)
-    _check(rules, window, q, qd, length, dial)
+    _check(rules, window, q_all, qd, length, dial)
     return Capture(
         q_deg=q.mean(axis=0),
         length_mm=float(length.mean()),

@@ -82,10 +82,10 @@ def load_plan(path) -> Plan:
     return Plan(target, values[:, 1].astype(int), values[:, 2:])
 
 
-def simulated_plan(seed: int) -> Plan:
-    """The simulated cell's plan for ``[sim] seed`` (what ``station sim serve`` walks)."""
+def simulated_plan(seed: int, targets_per_line: int) -> Plan:
+    """The simulated cell plan of ``[sim]`` (what ``station sim serve`` walks)."""
     from sim_fixtures.station_sim import make_cell
 
-    cell = make_cell(seed)
+    cell = make_cell(seed, targets_per_line)
     q = np.asarray(cell.plan_deg, float)
     return Plan(np.arange(len(q)), np.asarray(cell.plan_lines, int), q)

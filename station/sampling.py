@@ -54,7 +54,7 @@ def new_session(out: Path, config_path: Path, plan_path: Path | None) -> Prepare
     setup = load_setup(resolve(cfg.session.setup, config_path))
     if setup.drawstring is None:
         raise InputError(f"{resolve(cfg.session.setup, config_path)}: missing table [drawstring]")
-    plan = load_plan(plan_path) if plan_path else simulated_plan(cfg.sim.seed)
+    plan = load_plan(plan_path) if plan_path else simulated_plan(cfg.sim.seed, cfg.sim.targets_per_line)
     header = {
         "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "start_wall_s": time.time(),
