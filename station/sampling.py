@@ -12,7 +12,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import configs
-from drivers.base import DriverError, call_with_reconnect
+from drivers.base import DeviceReplyError, DriverError, call_with_reconnect
 from drivers.config import StationConfig, load_station_config
 from station.capture import Devices, Rules
 from station.errors import DeviceError, InputError
@@ -92,7 +92,10 @@ def open_devices(cfg: StationConfig) -> Devices:
                 driver.open()
             except DriverError:
                 pass  # the read below retries with a reconnect
-            call_with_reconnect(driver, driver.read, backoff)
+            try:
+                call_with_reconnect(driver, driver.read, backoff)
+            except DeviceReplyError:
+                pass  # it answers (e.g. a dial off the edge, out of range): reachable
     except DriverError as exc:
         devices.close()
         raise DeviceError(f"{exc} (is `station sim serve` or the station's wiring up?)") from exc
