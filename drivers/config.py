@@ -185,7 +185,7 @@ class Session(_Section):
     still_deg: float = Field(0.005, gt=0)  # joint span during a capture: else "robot moved"
     jump_mm: float = Field(0.15, gt=0)  # drawstring span during a capture: else "sensor jumped"
     dial_range_mm: tuple[float, float] = (-2.0, 2.0)  # dial gate (in range to capture)
-    dial_stable_mm: float = Field(0.01, gt=0)  # dial span during a capture
+    dial_stable_mm: float = Field(0.02, gt=0)  # dial span during a capture (noise 0.002 mm)
     length_range_mm: tuple[float, float] = (50.0, 5000.0)  # drawstring outside: slack or jump
     match_deg: float = Field(2.0, gt=0)  # a settle this far (max |dq|) from every target is ignored
     target_timeout_s: float = Field(120.0, gt=0)  # no capture for this long: the session ends
