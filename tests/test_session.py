@@ -225,3 +225,38 @@ def test_read_only_output_folder_fails_before_any_device_is_touched(tmp_path, ca
     assert code == 2
     assert f"{target}: cannot write the session folder" in err
     assert "Traceback" not in err
+
+
+def test_ctrl_c_stops_after_the_sample_in_flight_with_exit_130(tmp_path):
+    config = write_config(tmp_path)
+    folder = tmp_path / "sess"
+    with simulated(config):
+        cmd = [sys.executable, "-m", "station.cli", "sample", "--config", str(config), "--out", str(folder)]
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline and len(_lines(folder)) < 3:
+                time.sleep(0.01)
+            proc.send_signal(signal.SIGINT)
+            out, _ = proc.communicate(timeout=20)
+        finally:
+            proc.kill()
+    assert proc.returncode == 130, out
+    assert "stopped: stopped on request" in out
+    rows = rows_of(folder)
+    assert 2 <= len(rows) < N_TARGETS
+    assert len({r["target"] for r in rows}) == len(rows)
+    assert _lines(folder)[-1] == (folder / "samples.csv").read_text().rstrip("\n").split("\n")[-1]
+
+
+def test_progress_is_a_bar_on_a_terminal():
+    from station.progress import Progress
+
+    written: list[str] = []
+    tty = _Sink(written)
+    tty.isatty = lambda: True
+    bar = Progress(total=4, stream=tty, width=8)
+    bar.sample({"sample": 0, "target": 0, "line": 0, "length_mm": 1.0}, error_mm=0.25)
+    bar.message("suspended: dial not answering")
+    assert written[0].startswith("\r[##......] 1/4") and "last error +0.250 mm" in written[0]
+    assert written[1].startswith("\r\033[Ksuspended: dial not answering\n[##......] 1/4")
