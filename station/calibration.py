@@ -9,14 +9,17 @@ from datetime import datetime, timezone
 
 import numpy as np
 
+from calib.accuracy import predicted_workspace_rmse, table_covariance
 from calib.calibrate import Calibration, CalibrationOptions, calibrate
 from calib.metrics import error_metrics
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
-from calib.params import DH_NAMES, display_factor, dh_from_degrees, dh_to_degrees
+from calib.params import DH_NAMES, dh_from_degrees, dh_to_degrees, display_factor
+from calib.position import PositionModel, PositionSamples
 from station.errors import InputError
 from station.files import RobotFile, Samples, SetupFile
 
 METHODS = ("lmlc",)
+WORKSPACE_POSES = 1000
 
 
 @dataclass
@@ -45,14 +48,15 @@ def drawstring_setup(setup: SetupFile, where: str) -> DrawstringSetup:
 
 
 def build_model(samples: Samples, robot: RobotFile, setup: SetupFile | None, setup_where: str):
-    """The measurement model for a training set."""
+    """The measurement model for a training set: a position set (tracker) starts its probe offset at
+    the robot file's ``tool_mm``; a drawstring set needs the setup file."""
     dh0 = dh_from_degrees(robot.table_deg())
-    if samples.kind != "drawstring":
-        raise InputError(f"{samples.path}: position sets are not supported yet")
+    if samples.kind == "position":
+        return PositionModel(_model_samples(samples), dh0, np.array(robot.tool_mm))
     if setup is None:
         raise InputError(f"{samples.path}: a drawstring set needs --setup")
     ds_setup = drawstring_setup(setup, setup_where)
-    data = _drawstring_samples(samples)
+    data = _model_samples(samples)
     frame = DrawstringFrame.from_nominal(data, ds_setup, dh0, robot.tool_mm)
     return DrawstringLineModel(data, ds_setup, frame, dh0, robot.tool_mm)
 
@@ -72,7 +76,7 @@ def run(
     _check_enough(samples, model)
     cal = calibrate(model, CalibrationOptions())
     elapsed = time.perf_counter() - t0
-    hold_model = model.with_samples(_drawstring_samples(holdout)) if holdout is not None else None
+    hold_model = model.with_samples(_model_samples(holdout)) if holdout is not None else None
     report = {
         "kind": samples.kind,
         "method": method,
@@ -83,11 +87,48 @@ def run(
         "held": [{"param": p, "reason": r} for p, r in cal.held.items()],
         "parameters": _parameters(cal),
         "downweighted": [int(r) for r in cal.downweighted],
+        "workspace": {
+            "predicted_rmse_mm": predicted_workspace(robot, cal),
+            "configurations": WORKSPACE_POSES,
+        },
         "warnings": [],
         "iterations": int(cal.after.nit),
         "time_s": round(elapsed, 4),
     }
+    report["warnings"] = warnings(report, model)
     return Outcome(report, corrected_table(robot, cal, samples, method), cal)
+
+
+def predicted_workspace(robot: RobotFile, cal: Calibration) -> float:
+    """Predicted RMS TCP error [mm] over random configurations within the joint limits."""
+    limits = np.radians(robot.limits_deg())
+    q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    cov = table_covariance(cal.covariance, cal.identified, cal.weak)
+    return predicted_workspace_rmse(cal.x[:N_DH].reshape(6, 4), np.asarray(robot.tool_mm), q, cov)
+
+
+def warnings(report: dict, model) -> list[str]:
+    """Say when the samples fit well but cannot deliver that accuracy over the workspace."""
+    fit = report["after"]["train"]["rmse_mm"]
+    predicted = report["workspace"]["predicted_rmse_mm"]
+    if predicted <= max(10 * fit, 0.5):
+        return []
+    directions = np.array([ln["direction"] for ln in report["lines"]])
+    suggestion = _new_direction(directions)
+    where = "its own line" if len(directions) == 1 else f"its own {len(directions)} lines"
+    return [
+        f"fits {where} to {fit:.3f} mm; predicted workspace error {predicted:.2f} mm; add a line placement "
+        f"along [{suggestion[0]:.2f}, {suggestion[1]:.2f}, {suggestion[2]:.2f}] (base frame), "
+        "elsewhere in the workspace and with varied tool orientations"
+    ]
+
+
+def _new_direction(directions: np.ndarray) -> np.ndarray:
+    """A unit direction least aligned with every present line direction (perpendicular to all of
+    them while there are fewer than three)."""
+    if directions.size == 0:
+        return np.array([1.0, 0.0, 0.0])
+    return np.linalg.svd(directions)[2][-1]
 
 
 def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:
@@ -116,8 +157,17 @@ def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method
     }
 
 
-def _drawstring_samples(s: Samples) -> DrawstringSamples:
+def _model_samples(s: Samples) -> DrawstringSamples | PositionSamples:
+    if s.kind == "position":
+        return PositionSamples(np.radians(s.q_deg), s.measured)
     return DrawstringSamples(np.radians(s.q_deg), s.measured, s.dial_mm, s.line)
+
+
+def _row_errors(model, x) -> np.ndarray:
+    """The contract's per-row error [mm]: drawstring ``Y - Y_model``, position ``|m - p_model|``."""
+    if isinstance(model, PositionModel):
+        return model.position_error_mm(x)
+    return model.length_error_mm(x)
 
 
 def _check_enough(samples: Samples, model) -> None:
@@ -130,13 +180,19 @@ def _check_enough(samples: Samples, model) -> None:
 
 
 def _metrics(model, hold_model, x) -> dict:
-    out = {"train": error_metrics(model.length_error_mm(x))}
+    out = {"train": error_metrics(_row_errors(model, x))}
     if hold_model is not None:
-        out["holdout"] = error_metrics(hold_model.length_error_mm(x))
+        out["holdout"] = error_metrics(_row_errors(hold_model, x))
     return out
 
 
-def _setup_unknowns(model: DrawstringLineModel, x) -> dict:
+def _setup_unknowns(model, x) -> dict:
+    if isinstance(model, PositionModel):
+        rot, t = model.tracker_from_base(x)
+        return {
+            "tracker_from_base": {"rotation": rot.tolist(), "translation_mm": t.tolist()},
+            "probe_mm": model.probe(x).tolist(),
+        }
     lines = []
     for lid in model.line_ids:
         point, direction = model.line(x, lid)
