@@ -9,8 +9,9 @@ shared ``time_scale``):
    gate suspends the session rather than recording garbage;
 3. ``readings`` (K) rounds, each reading the robot, the drawstring and the dial once, all inside
    ``window_s``, and a closing robot reading; rejected if the joints spread more than
-   ``still_deg`` or a joint moved faster than the settle speed (the robot moved), or the drawstring spread more than ``jump_mm`` or
-   the dial more than ``dial_stable_mm`` (a sensor jumped);
+   ``still_deg`` or a joint moved faster than the settle speed (the robot moved), or the
+   drawstring spread more than ``jump_mm`` or the dial more than ``dial_stable_mm`` (a sensor
+   jumped);
 4. the sample is the mean of the K rounds, with the standard deviation of each quantity and the
    timestamp of every reading.
 """
@@ -114,8 +115,11 @@ class Settle:
         q = np.asarray(robot.values["q_deg"], float)
         speed = float(np.max(np.abs(robot.values["qd_deg_s"])))
         drift = 0.0 if self.q0 is None else float(np.max(np.abs(q - self.q0)))
-        if (speed >= self.rules.settle_speed_deg_s or robot.values["robot_mode"] != RUNNING
-                or drift > self.rules.still_deg):
+        if (
+            speed >= self.rules.settle_speed_deg_s
+            or robot.values["robot_mode"] != RUNNING
+            or drift > self.rules.still_deg
+        ):
             self.reset()
             return False
         if self.since is None:
@@ -177,7 +181,9 @@ def capture(devices: Devices, rules: Rules) -> Capture:
     qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
     q_all = np.array([r.values["q_deg"] for r in robots])
     length = np.array([rnd[1].values["length_mm"] for rnd in rounds])
-    dial = np.array([rnd[2].values["dial_mm"] for rnd in rounds]) if has_dial else np.full(len(rounds), np.nan)
+    dial = (
+        np.array([rnd[2].values["dial_mm"] for rnd in rounds]) if has_dial else np.full(len(rounds), np.nan)
+    )
     _check(rules, window, q_all, qd, length, dial)
     return Capture(
         q_deg=q.mean(axis=0),

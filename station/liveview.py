@@ -88,16 +88,23 @@ class LiveView:
     def cell(self, anchor_mm, lines: dict[int, np.ndarray]) -> None:
         """Static scene: the anchor and each gauge line as a segment (2, 3) in mm."""
         self._anchor = np.asarray(anchor_mm, float)
-        self.rec.log("cell/anchor", rr.Points3D([self._anchor], radii=8.0, colors=[GREY],
-                                                labels=["drawstring anchor"]), static=True)
+        self.rec.log(
+            "cell/anchor",
+            rr.Points3D([self._anchor], radii=8.0, colors=[GREY], labels=["drawstring anchor"]),
+            static=True,
+        )
         for lid, seg in lines.items():
-            self.rec.log(f"cell/lines/{lid}", rr.LineStrips3D([seg], radii=2.0, labels=[f"line {lid}"]),
-                         static=True)
-        self.rec.log("live/length/reading", rr.SeriesLines(names="reading", colors=[[60, 120, 230]]),
-                     static=True)
+            self.rec.log(
+                f"cell/lines/{lid}", rr.LineStrips3D([seg], radii=2.0, labels=[f"line {lid}"]), static=True
+            )
+        self.rec.log(
+            "live/length/reading", rr.SeriesLines(names="reading", colors=[[60, 120, 230]]), static=True
+        )
         self.rec.log("live/length/model", rr.SeriesLines(names="model", colors=[GREY]), static=True)
 
-    def sample(self, index: int, t_s: float, tcp_mm, length_mm: float, model_mm: float, dial_mm: float) -> None:
+    def sample(
+        self, index: int, t_s: float, tcp_mm, length_mm: float, model_mm: float, dial_mm: float
+    ) -> None:
         """One stored sample: where the nominal model puts the TCP and the live error."""
         self.rec.set_time("sample", sequence=index)
         self.rec.set_time("session_time", duration=t_s)
@@ -106,9 +113,13 @@ class LiveView:
         color = GREEN if abs(error) <= self.ok_mm else RED
         self._path.append(tcp)
         self.rec.log("cell/path", rr.LineStrips3D([np.array(self._path)], radii=0.8, colors=[GREY]))
-        self.rec.log("cell/sample", rr.Points3D([tcp], radii=6.0, colors=[color],
-                                                labels=[f"#{index}: {error:+.3f} mm"]))
-        self.rec.log("cell/cable", rr.LineStrips3D([np.array([self._anchor, tcp])], radii=1.0, colors=[color]))
+        self.rec.log(
+            "cell/sample",
+            rr.Points3D([tcp], radii=6.0, colors=[color], labels=[f"#{index}: {error:+.3f} mm"]),
+        )
+        self.rec.log(
+            "cell/cable", rr.LineStrips3D([np.array([self._anchor, tcp])], radii=1.0, colors=[color])
+        )
         self.rec.log("live/length/reading", rr.Scalars(length_mm))
         self.rec.log("live/length/model", rr.Scalars(model_mm))
         self.rec.log("live/error", rr.Scalars(error))
@@ -116,7 +127,11 @@ class LiveView:
             self.rec.log("live/dial", rr.Scalars(dial_mm))
 
     def message(self, text: str) -> None:
-        level = rr.TextLogLevel.WARN if text.startswith(("suspended", "capture", "timed")) else rr.TextLogLevel.INFO
+        level = (
+            rr.TextLogLevel.WARN
+            if text.startswith(("suspended", "capture", "timed"))
+            else rr.TextLogLevel.INFO
+        )
         self.rec.log("log", rr.TextLog(text, level=level))
 
     def calibration(self, method: str, before_mm, after_mm, cost_per_iteration) -> None:
@@ -139,4 +154,6 @@ class LiveView:
 
 
 def _has_display() -> bool:
-    return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return sys.platform in ("darwin", "win32") or bool(
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    )

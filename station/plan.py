@@ -75,7 +75,9 @@ def load_plan(path) -> Plan:
             try:
                 values[i, j] = float(row[col])
             except (TypeError, ValueError):
-                raise InputError(f"{path}: row {i} (line {i + 2}): {col}: {row[col]!r} is not a number") from None
+                raise InputError(
+                    f"{path}: row {i} (line {i + 2}): {col}: {row[col]!r} is not a number"
+                ) from None
     target = values[:, 0].astype(int)
     if len(set(target)) != len(target):
         raise InputError(f"{path}: target ids must be unique")

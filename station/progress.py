@@ -25,8 +25,10 @@ class Progress:
         self.done += 1
         if self.tty:
             filled = int(self.width * self.done / max(self.total, 1))
-            self.last = (f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total}  "
-                         f"{self.rate:.1f} samples/s  last error {error_mm:+.3f} mm")
+            self.last = (
+                f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total}  "
+                f"{self.rate:.1f} samples/s  last error {error_mm:+.3f} mm"
+            )
             self.stream.write("\r" + self.last)
         else:
             self.stream.write(

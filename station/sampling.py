@@ -103,9 +103,26 @@ def open_devices(cfg: StationConfig) -> Devices:
 
 
 def run(prep: Prepared, *, viewer: bool = False, web: bool = False, stream=None) -> tuple[State, LiveView]:
-    """Run the session to its end; the live view stays open for a calibration to log into."""
+    """Run the session to its end; the live view stays open for a calibration to log into (the
+    caller closes it). Devices are opened first: an unreachable one fails before anything else."""
+    devices = open_devices(prep.cfg)
+    view = None
+    try:
+        view = LiveView(prep.folder.rrd, viewer=viewer, web=web)
+        state = _run_session(prep, devices, view, stream)
+    except BaseException:
+        if view is not None:
+            view.close()
+        raise
+    finally:
+        devices.close()
+    prep.folder.update_header(last_state=state.value, samples=len(prep.folder.rows))
+    return state, view
+
+
+def _run_session(prep: Prepared, devices: Devices, view: LiveView, stream) -> State:
+    """The session with its live fit, live view and progress wired to it; Ctrl-C stops it."""
     fit = LiveFit(prep.robot, prep.setup)
-    view = LiveView(prep.folder.rrd, viewer=viewer, web=web)
     view.cell(prep.setup.drawstring.anchor_mm, line_segments(fit.tcp_mm(prep.plan.q_deg), prep.plan.line))
     _replay(prep.folder, fit, view)
     progress = Progress(len(prep.plan), len(prep.folder.rows), stream=stream)
@@ -121,20 +138,16 @@ def run(prep: Prepared, *, viewer: bool = False, web: bool = False, stream=None)
         progress.message(text)
         view.message(text)
 
-    devices = open_devices(prep.cfg)
     rules = Rules.from_config(prep.cfg.session, prep.cfg.time_scale)
     session = Session(prep.folder, prep.plan, devices, rules, Listener(on_sample, on_message))
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, lambda *_: session.request_stop()) if in_main else None
     try:
-        state = session.run()
+        return session.run()
     finally:
         if in_main:
             signal.signal(signal.SIGINT, previous)
-        devices.close()
         progress.close()
-    prep.folder.update_header(last_state=state.value, samples=len(prep.folder.rows))
-    return state, view
 
 
 def _replay(folder: SessionFolder, fit: LiveFit, view: LiveView) -> None:
@@ -145,4 +158,3 @@ def _replay(folder: SessionFolder, fit: LiveFit, view: LiveView) -> None:
         tcp, model = fit.add(q, length)
         dial = float(row["dial_mm"]) if row["dial_mm"] else float("nan")
         view.sample(int(row["sample"]), float(row["t_s"]), tcp, length, model, dial)
-

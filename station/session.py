@@ -20,7 +20,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.capture import Capture, Devices, Rejected, Rules, Settle, Suspend, capture, check_gates, check_running
+from station.capture import (
+    Capture,
+    Devices,
+    Rejected,
+    Rules,
+    Settle,
+    Suspend,
+    capture,
+    check_gates,
+    check_running,
+)
 from station.errors import DeviceError
 from station.plan import Plan
 from station.session_files import SessionFolder
@@ -47,8 +57,14 @@ class Listener:
 class Session:
     """Run ``plan`` against ``devices`` into ``folder`` under the capture ``rules``."""
 
-    def __init__(self, folder: SessionFolder, plan: Plan, devices: Devices, rules: Rules,
-                 listener: Listener | None = None):
+    def __init__(
+        self,
+        folder: SessionFolder,
+        plan: Plan,
+        devices: Devices,
+        rules: Rules,
+        listener: Listener | None = None,
+    ):
         self.folder, self.plan, self.devices, self.rules = folder, plan, devices, rules
         self.listener = listener or Listener()
         self.state = State.WAITING
@@ -148,8 +164,10 @@ class Session:
                 why = still
                 silent_since = silent_since if still.device else time.monotonic()
                 if time.monotonic() - silent_since > self.rules.unreachable_s:
-                    raise DeviceError(f"{still} (silent for over {self.rules.unreachable_s:g} s; "
-                                      f"{len(self.folder.rows)} samples kept)") from still
+                    raise DeviceError(
+                        f"{still} (silent for over {self.rules.unreachable_s:g} s; "
+                        f"{len(self.folder.rows)} samples kept)"
+                    ) from still
         self.state = State.WAITING
         if not self._stop:
             self.listener.message("resumed")
@@ -168,9 +186,11 @@ class Session:
         scale = self.folder.header["station"].get("time_scale", 1.0)
         waited = self.rules.target_timeout_s * scale
         if not self.settle.ever:
-            why = (f"the robot never settled (still means joint speeds below "
-                   f"{self.rules.settle_speed_deg_s:g} deg/s and joints within {self.rules.still_deg:g} deg "
-                   f"for {self.rules.settle_s * scale:g} s)")
+            why = (
+                f"the robot never settled (still means joint speeds below "
+                f"{self.rules.settle_speed_deg_s:g} deg/s and joints within {self.rules.still_deg:g} deg "
+                f"for {self.rules.settle_s * scale:g} s)"
+            )
         else:
             why = "the robot settled only at finished targets or away from the plan"
         return f"no capture for {waited:g} s: {why}"

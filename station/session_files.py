@@ -118,7 +118,10 @@ class SessionFolder:
             raw = list(csv.DictReader(fh))
         keep = [r for r in raw if int(r["sample"]) < self.next_sample]
         if len(keep) != len(raw):
-            atomic_write(self.raw_csv, "".join([",".join(RAW_COLUMNS) + "\n"] + [_csv_line(RAW_COLUMNS, r) for r in keep]))
+            atomic_write(
+                self.raw_csv,
+                "".join([",".join(RAW_COLUMNS) + "\n"] + [_csv_line(RAW_COLUMNS, r) for r in keep]),
+            )
 
     def append(self, row: dict, raw: list[dict]) -> None:
         """Store one capture: its raw readings, then its sample row (each fsynced)."""

@@ -30,6 +30,10 @@ def test_demo_writes_session_report_and_a_better_table(tmp_path, capsys):
     rms = [float(v) for v in truth[0].split(":")[1].replace("mm RMS", "").split("->")]
     assert rms[1] < rms[0] / 5
     entities = {c.entity_path for c in RrdReader(out / "session" / "session.rrd").stream().to_chunks()}
-    assert {"/calibration/residual/lmlc/before", "/calibration/residual/lmlc/after",
-            "/calibration/cost/lmlc", "/live/error"} <= entities
+    assert {
+        "/calibration/residual/lmlc/before",
+        "/calibration/residual/lmlc/after",
+        "/calibration/cost/lmlc",
+        "/live/error",
+    } <= entities
     assert np.isfinite(report["time_s"])

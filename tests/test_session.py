@@ -138,8 +138,19 @@ def test_rrd_holds_the_live_view_entities(finished):
     folder, _ = finished
     chunks = RrdReader(folder / "session.rrd").stream().to_chunks()
     entities = {c.entity_path for c in chunks}
-    for path in ("/cell/anchor", "/cell/lines/0", "/cell/lines/2", "/cell/path", "/cell/sample", "/cell/cable",
-                 "/live/length/reading", "/live/length/model", "/live/error", "/live/dial", "/log"):
+    for path in (
+        "/cell/anchor",
+        "/cell/lines/0",
+        "/cell/lines/2",
+        "/cell/path",
+        "/cell/sample",
+        "/cell/cable",
+        "/live/length/reading",
+        "/live/length/model",
+        "/live/error",
+        "/live/dial",
+        "/log",
+    ):
         assert path in entities
     rows = sum(c.num_rows for c in chunks if c.entity_path == "/live/error")
     assert rows == N_TARGETS
@@ -184,7 +195,9 @@ def test_unplugged_dial_suspends_the_session_which_continues_after_replug(tmp_pa
     with simulated(config) as sim:
         prep = sampling.new_session(tmp_path / "sess", config, None)
         result = {}
-        worker = threading.Thread(target=lambda: result.update(out=sampling.run(prep, stream=_Sink(messages))))
+        worker = threading.Thread(
+            target=lambda: result.update(out=sampling.run(prep, stream=_Sink(messages)))
+        )
         worker.start()
         deadline = time.monotonic() + 30
         while len(prep.folder.rows) < 2 and time.monotonic() < deadline:

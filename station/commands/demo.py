@@ -36,8 +36,12 @@ CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial":
 def register(sub) -> None:
     p = sub.add_parser("demo", help="the whole job on simulated devices: session -> calibration -> report")
     p.add_argument("--out", type=Path, default=Path("demo-out"), help="output folder (default ./demo-out)")
-    p.add_argument("--viewer", action=argparse.BooleanOptionalAction, default=False,
-                   help="open the Rerun viewer (needs a display; the .rrd is saved either way)")
+    p.add_argument(
+        "--viewer",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="open the Rerun viewer (needs a display; the .rrd is saved either way)",
+    )
     p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--targets-per-line", type=int, default=70, help=argparse.SUPPRESS)
     p.set_defaults(func=main)
@@ -61,8 +65,10 @@ def main(args) -> int:
         raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
     try:
         prep = sampling.new_session(out / "session", config_path, None)
-        print(f"session of {len(prep.plan)} targets on 3 gauge lines -> {prep.folder.path} "
-              f"(simulated time x{TIME_SCALE:g})")
+        print(
+            f"session of {len(prep.plan)} targets on 3 gauge lines -> {prep.folder.path} "
+            f"(simulated time x{TIME_SCALE:g})"
+        )
         state, view = sampling.run(prep, viewer=args.viewer)
     finally:
         sim.stop()
@@ -79,12 +85,16 @@ def demo_config(out: Path, seed: int, targets_per_line: int) -> tuple[dict, list
     notes = []
     rtde_host = CONTRACT["rtde"][0]
     if not _free(*CONTRACT["rtde"]):
-        rtde_host = next(h for h in (f"127.0.0.{random.randint(2, 250)}" for _ in range(50)) if _free(h, 30004))
+        rtde_host = next(
+            h for h in (f"127.0.0.{random.randint(2, 250)}" for _ in range(50)) if _free(h, 30004)
+        )
         notes.append(f"RTDE 127.0.0.1:30004 is taken: the simulated controller serves {rtde_host}:30004")
     modbus_port = CONTRACT["modbus"][1]
     if not _free(*CONTRACT["modbus"]):
         modbus_port = _free_port()
-        notes.append(f"Modbus 127.0.0.1:5020 is taken: the simulated drawstring serves 127.0.0.1:{modbus_port}")
+        notes.append(
+            f"Modbus 127.0.0.1:5020 is taken: the simulated drawstring serves 127.0.0.1:{modbus_port}"
+        )
     dial = Path(CONTRACT["dial"])
     if dial.exists() or dial.is_symlink():
         dial = (out / "dial-pty").resolve()
@@ -95,8 +105,13 @@ def demo_config(out: Path, seed: int, targets_per_line: int) -> tuple[dict, list
         "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": modbus_port},
         "dial": {"port": str(dial)},
         "session": {"target_timeout_s": 1200.0},  # over one robot cycle: a missed target comes round
-        "sim": {"seed": seed, "speed_deg_s": 120.0, "accel_deg_s2": 480.0, "dwell_s": 2.5,
-                "targets_per_line": targets_per_line},
+        "sim": {
+            "seed": seed,
+            "speed_deg_s": 120.0,
+            "accel_deg_s2": 480.0,
+            "dwell_s": 2.5,
+            "targets_per_line": targets_per_line,
+        },
     }
     return raw, notes
 
@@ -125,13 +140,18 @@ def _calibrate(out: Path, prep, view, seed: int, targets_per_line: int) -> int:
     methods = [m for m in ("lmlc", "mcs-lmlc") if m in calibration.METHODS]
     outcomes = {}
     for method in methods:
-        outcome = calibration.run(samples, prep.robot, prep.setup, setup_where=where, holdout=holdout,
-                                  method=method)
+        outcome = calibration.run(
+            samples, prep.robot, prep.setup, setup_where=where, holdout=holdout, method=method
+        )
         outcomes[method] = outcome
         model = calibration.build_model(samples, prep.robot, prep.setup, where)
         cal = outcome.calibration
-        view.calibration(method, model.length_error_mm(cal.before.x), model.length_error_mm(cal.x),
-                         [it.cost for it in cal.after.history])
+        view.calibration(
+            method,
+            model.length_error_mm(cal.before.x),
+            model.length_error_mm(cal.x),
+            [it.cost for it in cal.after.history],
+        )
         print(summary(outcome.report))
         print(truth_line(world, outcome))
     main_outcome = outcomes["lmlc"]

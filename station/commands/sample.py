@@ -20,7 +20,9 @@ EXIT = {State.DONE: 0, State.STOPPED: 130, State.TIMED_OUT: 1}
 def register(subparsers) -> None:
     p = subparsers.add_parser("sample", help="a sampling session on the gauge-block lines")
     p.add_argument("--config", type=Path, help="station config (default: the shipped one, simulated devices)")
-    p.add_argument("--plan", type=Path, help="plan CSV target,line,q1_deg..q6_deg (default: the simulated cell's)")
+    p.add_argument(
+        "--plan", type=Path, help="plan CSV target,line,q1_deg..q6_deg (default: the simulated cell's)"
+    )
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--out", type=Path, help="new session folder")
     where.add_argument("--resume", type=Path, metavar="DIR", help="continue the session in DIR")
@@ -39,6 +41,8 @@ def main(args) -> int:
         prep = sampling.new_session(args.out, args.config or configs.path("station.toml"), args.plan)
     state, view = sampling.run(prep, viewer=args.viewer, web=args.web)
     view.close()
-    print(f"{state.value}: {len(prep.folder.rows)}/{len(prep.plan)} samples in {prep.folder.samples_csv}; "
-          f"recording {prep.folder.rrd}")
+    print(
+        f"{state.value}: {len(prep.folder.rows)}/{len(prep.plan)} samples in {prep.folder.samples_csv}; "
+        f"recording {prep.folder.rrd}"
+    )
     return EXIT[state]
