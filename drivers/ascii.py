@@ -14,6 +14,11 @@ from dataclasses import dataclass
 
 import serial
 
+try:  # a pty torn away mid-call raises termios.error (not an OSError) from tcflush
+    from termios import error as TermiosError
+except ImportError:  # pragma: no cover - not POSIX
+    TermiosError = OSError
+
 from drivers.base import (
     DeviceReplyError,
     DeviceTimeout,
@@ -130,7 +135,7 @@ class AsciiSerialDriver(Driver):
             self.port.reset_input_buffer()
             self.port.write(self.dialect.request)
             raw = self.port.read_until(term)
-        except (serial.SerialException, OSError) as exc:
+        except (serial.SerialException, OSError, TermiosError) as exc:
             self.port.close()
             raise DeviceUnreachable(self.name, f"link lost on {self.port.port}: {exc}") from exc
         if not raw.endswith(term):

@@ -168,12 +168,35 @@ class Sim(_Section):
     speed_deg_s: float = Field(30.0, gt=0)
     accel_deg_s2: float = Field(60.0, gt=0)
     dwell_s: float = Field(3.0, ge=0)
+    targets_per_line: int = Field(70, ge=2)  # the cell's plan: targets along each gauge line
+
+
+class Session(_Section):
+    """``station sample``: what is calibrated (robot model and setup files, relative to this config
+    or to the shipped ``configs/``) and the capture rule. Times are simulated seconds (divided by
+    ``time_scale`` at the station), speeds as the controller reports them."""
+
+    robot_model: str = "robots/hsr_jr680.toml"
+    setup: str = "setups/sim.toml"
+    settle_speed_deg_s: float = Field(0.05, gt=0)  # every |qd| below this ...
+    settle_s: float = Field(0.5, gt=0)  # ... for this long, robot mode RUNNING: settled
+    readings: int = Field(5, ge=2)  # K readings of every device per capture
+    window_s: float = Field(1.5, gt=0)  # all K rounds inside this synchronisation window
+    still_deg: float = Field(0.005, gt=0)  # joint span during a capture: else "robot moved"
+    jump_mm: float = Field(0.15, gt=0)  # drawstring span during a capture: else "sensor jumped"
+    dial_range_mm: tuple[float, float] = (-2.0, 2.0)  # dial gate (in range to capture)
+    dial_stable_mm: float = Field(0.02, gt=0)  # dial span during a capture (noise 0.002 mm)
+    length_range_mm: tuple[float, float] = (50.0, 5000.0)  # drawstring outside: slack or jump
+    match_deg: float = Field(2.0, gt=0)  # a settle this far (max |dq|) from every target is ignored
+    target_timeout_s: float = Field(120.0, gt=0)  # no capture for this long: the session ends
+    unreachable_s: float = Field(30.0, gt=0)  # real s a device may stay silent while suspended
 
 
 class StationConfig(_Section):
     """``configs/station.toml``: one section per device, plus the shared ``time_scale``."""
 
     time_scale: float = Field(1.0, gt=0)
+    session: Session = Session()
     robot: Robot
     drawstring: Drawstring
     dial: Dial | None = None

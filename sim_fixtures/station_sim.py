@@ -13,12 +13,13 @@ the simulated true robot's pose implies at the instant they are asked:
 
 from __future__ import annotations
 
-import sys
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-import configs
 from drivers.ascii import DIALECTS
 from drivers.config import (
     DrawstringAscii,
@@ -27,16 +28,12 @@ from drivers.config import (
     StationConfig,
 )
 from sim_fixtures.modbus_device import ModbusDevice
-from sim_fixtures.robot_program import SimRobot
+from sim_fixtures.robot_program import RobotFault, SimRobot
 from sim_fixtures.rtde_server import RtdeServerProcess
 from sim_fixtures.serial_device import SerialAsciiDevice
-from sim_fixtures.sources import CellSource, Instrument, SimClock, StandInCell
+from sim_fixtures.sources import CellSource, Instrument, SimClock
+from sim_fixtures.world import World
 from station.errors import InputError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 DRAWSTRING_SIGMA_MM = 0.02
 DIAL_SIGMA_MM = 0.002
@@ -44,13 +41,29 @@ RESOLUTION_MM = 0.001
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
 
 
-def make_cell(seed: int) -> StandInCell:
-    """The simulated cell. A stand-in built on the nominal JR680 until ``sim_fixtures.world``
-    is merged; then this is the one place to return ``World.create(seed)`` with its plan."""
-    _ = seed  # the stand-in has no random parts
-    robot = tomllib.loads(configs.path("robots/hsr_jr680.toml").read_text())
-    keys = ("alpha_deg", "a_mm", "d_mm", "theta_deg")
-    return StandInCell(np.array([[joint[k] for k in keys] for joint in robot["joints"]]))
+@dataclass(frozen=True)
+class WorldCell:
+    """The simulated world (true robot, anchor, gauge lines) with its plan: ``plan_deg`` (M, 6)
+    true configurations whose TCPs touch the lines, ``plan_lines`` (M,) their line ids."""
+
+    world: World
+    plan_deg: np.ndarray
+    plan_lines: np.ndarray
+
+    def true_length_mm(self, q_deg) -> np.ndarray:
+        return self.world.true_length_mm(q_deg)
+
+    def true_dial_mm(self, q_deg, line_ids) -> np.ndarray:
+        return self.world.true_dial_mm(q_deg, line_ids)
+
+
+@functools.lru_cache(maxsize=4)
+def make_cell(seed: int, targets_per_line: int = 70) -> WorldCell:
+    """The simulated cell of ``[sim] seed``: ``World.create(seed)`` and its plan along each line
+    (the plan's IK is seeded by ``seed`` too, so every caller gets the same targets)."""
+    world = World.create(seed)
+    q, lines = world.line_configurations(targets_per_line, np.random.default_rng([seed, 2]))
+    return WorldCell(world, q, lines)
 
 
 def _pty_link(port: str, section: str) -> Path:
@@ -66,16 +79,17 @@ class SimStation:
     """The simulated devices of ``cfg``; ``start()`` returns one address dict per device and
     ``stop()`` ends them all (safe after a partial start)."""
 
-    def __init__(self, cfg: StationConfig, hold: bool = False):
+    def __init__(self, cfg: StationConfig, hold: bool = False, faults: Sequence[RobotFault] = ()):
         if not isinstance(cfg.robot, RobotRtde):
             raise InputError(f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE "
                              "controller only (kind = \"rtde\")")
         self.cfg = cfg
         self.clock = SimClock()
-        cell = make_cell(cfg.sim.seed)
+        cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
         self.robot = SimRobot(
             cell.plan_deg, speed_deg_s=cfg.sim.speed_deg_s, accel_deg_s2=cfg.sim.accel_deg_s2,
-            dwell_s=cfg.sim.dwell_s, hold=hold, time_scale=cfg.time_scale,
+            dwell_s=cfg.sim.dwell_s, hold=hold, time_scale=cfg.time_scale, faults=faults,
+            rng=np.random.default_rng([cfg.sim.seed, 3]),
         )
         self.source = CellSource(self.robot, cell)
         rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in range(2)]

@@ -129,7 +129,8 @@ def test_sim_serve_prints_addresses_and_read_gets_every_device(served):
     target = cell.plan_deg[0]  # --hold: the robot stays at its first target
     assert np.allclose(reading["q_deg"], target, atol=0.01)
     assert reading["length_mm"] == pytest.approx(cell.true_length_mm(target)[0], abs=0.1)
-    assert reading["dial_mm"] == pytest.approx(0.0, abs=0.01)
+    true_dial = cell.true_dial_mm(target[None], cell.plan_lines[:1])[0]  # the placement offset
+    assert reading["dial_mm"] == pytest.approx(true_dial, abs=0.01)
     assert set(reading["devices"]) == {"robot", "drawstring", "dial"}
     for device in reading["devices"].values():
         assert before - 1 < device["t_wall"] < time.time() + 1
