@@ -19,7 +19,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 from scipy.optimize import least_squares
 
 from calib.calibrate import CalibrationOptions, prepare, robust_fit
@@ -77,8 +76,21 @@ def main() -> None:
     print(f"| whole pipeline in-process (robust, uncertainty, workspace) | {t_run * 1e3:.0f} ms | |")
     print(f"| MCS: 72 of 200 | {t_mcs * 1e3:.0f} ms | |")
     for method in ("lmlc", "mcs-lmlc"):
-        cmd = [sys.executable, "-m", "station.cli", "calibrate", str(sc.samples), "--robot", str(sc.robot),
-               "--setup", str(sc.setup), "--out", str(folder / "c.toml"), "--method", method]
+        cmd = [
+            sys.executable,
+            "-m",
+            "station.cli",
+            "calibrate",
+            str(sc.samples),
+            "--robot",
+            str(sc.robot),
+            "--setup",
+            str(sc.setup),
+            "--out",
+            str(folder / "c.toml"),
+            "--method",
+            method,
+        ]
         t = median_time(lambda cmd=cmd: subprocess.run(cmd, check=True, capture_output=True), 3)
         print(f"| whole `station calibrate --method {method}` process | {t:.2f} s | |")
 

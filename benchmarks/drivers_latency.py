@@ -36,8 +36,7 @@ TIMEOUT_S = 0.5
 
 
 def serial_port(link: Path, baudrate: int) -> serial.Serial:
-    return serial.serial_for_url(str(link), do_not_open=True, baudrate=baudrate,
-                                 timeout=TIMEOUT_S)
+    return serial.serial_for_url(str(link), do_not_open=True, baudrate=baudrate, timeout=TIMEOUT_S)
 
 
 def wire_ms(frame_bytes: int, baudrate: int) -> float:
@@ -55,16 +54,20 @@ def setups(tmp: Path, stack: ExitStack):
         link = tmp / f"dial-{dialect}"
         stack.enter_context(SerialAsciiDevice(link, DIALECTS[dialect], lambda: dial.measure(0.1)))
         frame = len(DIALECTS[dialect].request) + len(DIALECTS[dialect].reply(0.1))
-        yield (f"dial ({dialect}, serial 9600 Bd)",
-               DialIndicator(serial_port(link, 9600), dialect), wire_ms(frame, 9600))
+        yield (
+            f"dial ({dialect}, serial 9600 Bd)",
+            DialIndicator(serial_port(link, 9600), dialect),
+            wire_ms(frame, 9600),
+        )
     link = tmp / "drawstring-ascii"
-    stack.enter_context(
-        SerialAsciiDevice(link, DIALECTS["drawstring"], lambda: length.measure(900.0)))
+    stack.enter_context(SerialAsciiDevice(link, DIALECTS["drawstring"], lambda: length.measure(900.0)))
     frame = len(DIALECTS["drawstring"].request) + len(DIALECTS["drawstring"].reply(900.0))
-    yield ("drawstring (ASCII, serial 115200 Bd)", AsciiDrawstring(serial_port(link, 115200)),
-           wire_ms(frame, 115200))
-    tcp = stack.enter_context(ModbusDevice(regs, lambda: length.measure(900.0),
-                                           tcp=("127.0.0.1", 0)))
+    yield (
+        "drawstring (ASCII, serial 115200 Bd)",
+        AsciiDrawstring(serial_port(link, 115200)),
+        wire_ms(frame, 115200),
+    )
+    tcp = stack.enter_context(ModbusDevice(regs, lambda: length.measure(900.0), tcp=("127.0.0.1", 0)))
     client = ModbusTcpClient("127.0.0.1", port=tcp.address["port"], timeout=TIMEOUT_S, retries=0)
     yield "drawstring (Modbus TCP)", ModbusDrawstring(client, regs), 0.0
     link = tmp / "drawstring-rtu"
@@ -97,11 +100,21 @@ def main() -> None:
         for name, driver, wire in setups(Path(tmp), stack):
             ms = latencies_ms(driver, args.reads)
             p50, p99 = np.percentile(ms, [50, 99])
-            results.append({"driver": name, "reads": args.reads, "p50_ms": round(p50, 3),
-                            "p99_ms": round(p99, 3), "reads_per_s": round(1e3 / ms.mean()),
-                            "wire_ms": round(wire, 3)})
-            print(f"{name:38s} p50 {p50:6.3f} ms  p99 {p99:6.3f} ms  "
-                  f"{results[-1]['reads_per_s']:5d} reads/s  + wire {wire:5.2f} ms", flush=True)
+            results.append(
+                {
+                    "driver": name,
+                    "reads": args.reads,
+                    "p50_ms": round(p50, 3),
+                    "p99_ms": round(p99, 3),
+                    "reads_per_s": round(1e3 / ms.mean()),
+                    "wire_ms": round(wire, 3),
+                }
+            )
+            print(
+                f"{name:38s} p50 {p50:6.3f} ms  p99 {p99:6.3f} ms  "
+                f"{results[-1]['reads_per_s']:5d} reads/s  + wire {wire:5.2f} ms",
+                flush=True,
+            )
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
 

@@ -31,7 +31,11 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seeds", type=int, default=5)
     args = parser.parse_args()
-    variants = {"lmlc (all)": ("lmlc", None), "mcs-lmlc N=72": ("mcs-lmlc", 72), "mcs-lmlc N=auto": ("mcs-lmlc", None)}
+    variants = {
+        "lmlc (all)": ("lmlc", None),
+        "mcs-lmlc N=72": ("mcs-lmlc", 72),
+        "mcs-lmlc N=auto": ("mcs-lmlc", None),
+    }
     for n_lines, per_line in ((1, 200), (3, 70)):
         results = {name: [] for name in variants}
         for seed in range(args.seeds):
@@ -42,7 +46,9 @@ def main() -> None:
                 results[name].append(
                     (out.report["after"]["holdout"]["rmse_mm"], workspace_rms(sc.world, out.calibration.x))
                 )
-        print(f"\n{n_lines} line(s), {n_lines * per_line} samples, {args.seeds} seeds: mean +- standard error")
+        print(
+            f"\n{n_lines} line(s), {n_lines * per_line} samples, {args.seeds} seeds: mean +- standard error"
+        )
         print("| method | hold-out RMSE [mm] | true workspace RMSE [mm] |\n|---|---|---|")
         for name, rows in results.items():
             a = np.array(rows)

@@ -67,10 +67,10 @@ def polled_instruments(tmp: Path, rng: np.random.Generator):
     drawstring_noise = Instrument(0.02, 0.001, rng)
     dial_noise = Instrument(0.002, 0.001, rng)
     regs = RegisterMap()
-    with ModbusDevice(regs, lambda: drawstring_noise.measure(1234.5),
-                      tcp=("127.0.0.1", 0)) as ds_dev, \
-            SerialAsciiDevice(tmp / "dial", DIALECTS["sylvac"],
-                              lambda: dial_noise.measure(0.25)):
+    with (
+        ModbusDevice(regs, lambda: drawstring_noise.measure(1234.5), tcp=("127.0.0.1", 0)) as ds_dev,
+        SerialAsciiDevice(tmp / "dial", DIALECTS["sylvac"], lambda: dial_noise.measure(0.25)),
+    ):
         client = ModbusTcpClient("127.0.0.1", port=ds_dev.address["port"], timeout=0.3, retries=0)
         port = serial.serial_for_url(str(tmp / "dial"), do_not_open=True, timeout=0.2)
         with ModbusDrawstring(client, regs) as drawstring, DialIndicator(port, "sylvac") as dial:
@@ -120,14 +120,18 @@ def main(argv=None) -> int:
     robot = SimRobot(PLAN_DEG, speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0)
     start = time.monotonic()
     stop = threading.Event()
-    with tempfile.TemporaryDirectory() as tmp, \
-            start_on_free_loopback(robot, start_monotonic=start) as server, \
-            RtdeJointSource(server.host, args.frequency) as source, \
-            polled_instruments(Path(tmp), np.random.default_rng(4)) as others:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        start_on_free_loopback(robot, start_monotonic=start) as server,
+        RtdeJointSource(server.host, args.frequency) as source,
+        polled_instruments(Path(tmp), np.random.default_rng(4)) as others,
+    ):
         lat = {d.name: [] for d in others}
         errs = {d.name: [] for d in others}
-        threads = [threading.Thread(target=poll, args=(d, args.poll_hz, stop, lat[d.name],
-                                                       errs[d.name])) for d in others]
+        threads = [
+            threading.Thread(target=poll, args=(d, args.poll_hz, stop, lat[d.name], errs[d.name]))
+            for d in others
+        ]
         for t in threads:
             t.start()
         try:
@@ -140,17 +144,20 @@ def main(argv=None) -> int:
     stamps = robot_stats["stamps"]
     drops, worst = dropped(stamps, args.frequency)
     expected = int(round((stamps[-1] - stamps[0]) * args.frequency)) + 1 if stamps else 0
-    print(f"RTDE {server.host}:30004 at {args.frequency:g} Hz for {args.seconds:g} s "
-          f"(drawstring + dial polled at {args.poll_hz:g} Hz each)")
-    print(f"  packages seen {len(stamps)} of {expected}; dropped {drops} "
-          f"(server late: {server.skipped}, client missed: {drops - server.skipped}); "
-          f"largest gap {worst} period(s)")
+    print(
+        f"RTDE {server.host}:30004 at {args.frequency:g} Hz for {args.seconds:g} s "
+        f"(drawstring + dial polled at {args.poll_hz:g} Hz each)"
+    )
+    print(
+        f"  packages seen {len(stamps)} of {expected}; dropped {drops} "
+        f"(server late: {server.skipped}, client missed: {drops - server.skipped}); "
+        f"largest gap {worst} period(s)"
+    )
     print(f"  RTDE read()      {percentiles_ms(robot_stats['calls'])}")
     print(f"  RTDE age         {percentiles_ms(robot_stats['ages'])}")
     for name, samples in lat.items():
         rate = len(samples) / args.seconds
-        print(f"  {name:10s} read() {percentiles_ms(samples)}   {rate:5.1f} Hz, "
-              f"{len(errs[name])} errors")
+        print(f"  {name:10s} read() {percentiles_ms(samples)}   {rate:5.1f} Hz, {len(errs[name])} errors")
     return 0 if drops == 0 else 1
 
 

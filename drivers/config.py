@@ -59,7 +59,10 @@ class SerialLine(_Section):
     def serial_port(self) -> serial.Serial:
         """The unopened pyserial port (the driver opens it)."""
         return serial.serial_for_url(
-            self.port, do_not_open=True, baudrate=self.baudrate, timeout=self.timeout_s,
+            self.port,
+            do_not_open=True,
+            baudrate=self.baudrate,
+            timeout=self.timeout_s,
             exclusive=True,
         )
 
@@ -85,9 +88,7 @@ class DrawstringModbusRtu(SerialLine):
     registers: Registers = Registers()
 
     def build(self) -> Driver:
-        client = ModbusSerialClient(
-            self.port, baudrate=self.baudrate, timeout=self.timeout_s, retries=0
-        )
+        client = ModbusSerialClient(self.port, baudrate=self.baudrate, timeout=self.timeout_s, retries=0)
         return ModbusDrawstring(client, self.registers.register_map(self.device_id))
 
 
@@ -140,8 +141,7 @@ class RobotModbusTcp(_Section):
 
     def build(self) -> Driver:
         client = ModbusTcpClient(self.host, port=self.port, timeout=self.timeout_s, retries=0)
-        layout = self.model_dump(include={"device_id", "address", "encoding", "word_order",
-                                          "scale", "table"})
+        layout = self.model_dump(include={"device_id", "address", "encoding", "word_order", "scale", "table"})
         return ModbusJointSource(client, JointRegisterMap(**layout))
 
 

@@ -156,7 +156,6 @@ class ModbusDrawstring(Driver):
         timeout = self.client.comm_params.timeout_connect
         return DeviceTimeout(self.name, f"no reply from {self._where()} within {timeout} s")
 
-
     def _is_bad_crc_reply(self, rx: bytes) -> bool:
         """Whether ``rx`` is a reply frame from our device (id, function) whose CRC is wrong."""
         regs = self.registers

@@ -65,8 +65,15 @@ class RtdeJointSource(Driver):
 
     fields = RTDE_FIELDS
 
-    def __init__(self, host: str, frequency_hz: float = 500.0, *, name: str = "robot",
-                 stale_s: float = 0.5, probe_timeout_s: float = 1.0):
+    def __init__(
+        self,
+        host: str,
+        frequency_hz: float = 500.0,
+        *,
+        name: str = "robot",
+        stale_s: float = 0.5,
+        probe_timeout_s: float = 1.0,
+    ):
         if not 0 < frequency_hz <= 500:
             raise ValueError(f"frequency_hz must be in (0, 500], got {frequency_hz}")
         self.name = name
@@ -87,12 +94,12 @@ class RtdeJointSource(Driver):
         """Probe the controller, then start ur_rtde's receive interface."""
         self._probe()
         try:
-            self._rtde = rtde_receive.RTDEReceiveInterface(
-                self.host, self.frequency_hz, list(RTDE_VARIABLES))
+            self._rtde = rtde_receive.RTDEReceiveInterface(self.host, self.frequency_hz, list(RTDE_VARIABLES))
         except RuntimeError as exc:
             if "not found by the controller" in str(exc):
-                raise DeviceReplyError(self.name, f"{self._where} lacks a variable: {exc}",
-                                       code="NOT_FOUND") from exc
+                raise DeviceReplyError(
+                    self.name, f"{self._where} lacks a variable: {exc}", code="NOT_FOUND"
+                ) from exc
             raise DeviceUnreachable(self.name, f"{self._where}: {exc}") from exc
         self._last_stamp, self._last_change = math.nan, time.monotonic()
 
@@ -104,13 +111,18 @@ class RtdeJointSource(Driver):
                 s.sendall(_PROBE_REQUEST)
                 reply = _recv_exactly(s, len(_PROBE_REPLY))
         except TimeoutError as exc:
-            raise DeviceTimeout(self.name, f"{self._where} did not answer the protocol request "
-                                f"within {self.probe_timeout_s} s") from exc
+            raise DeviceTimeout(
+                self.name,
+                f"{self._where} did not answer the protocol request within {self.probe_timeout_s} s",
+            ) from exc
         except OSError as exc:
             raise DeviceUnreachable(self.name, f"cannot connect to {self._where}: {exc}") from exc
         if reply != _PROBE_REPLY:
-            raise GarbledReply(self.name, f"{self._where} answered the protocol request with "
-                               f"{reply.hex(' ')}, expected {_PROBE_REPLY.hex(' ')}")
+            raise GarbledReply(
+                self.name,
+                f"{self._where} answered the protocol request with "
+                f"{reply.hex(' ')}, expected {_PROBE_REPLY.hex(' ')}",
+            )
 
     def close(self) -> None:
         """Drop the interface; its destructor pauses the stream (if the link is up) and
@@ -134,8 +146,9 @@ class RtdeJointSource(Driver):
             self._last_stamp, self._last_change = stamp, now
         elif now - self._last_change > self.stale_s:
             self._silent = True
-            raise DeviceTimeout(self.name, f"no new data package from {self._where} "
-                                f"for {now - self._last_change:.2f} s")
+            raise DeviceTimeout(
+                self.name, f"no new data package from {self._where} for {now - self._last_change:.2f} s"
+            )
         values = {
             "q_deg": tuple(math.degrees(v) for v in q),
             "qd_deg_s": tuple(math.degrees(v) for v in qd),
@@ -200,8 +213,7 @@ class JointRegisterMap:
 
     def __post_init__(self):
         if self.encoding not in JOINT_ENCODINGS:
-            raise ValueError(
-                f"encoding must be one of {sorted(JOINT_ENCODINGS)}, got {self.encoding!r}")
+            raise ValueError(f"encoding must be one of {sorted(JOINT_ENCODINGS)}, got {self.encoding!r}")
 
     @property
     def count(self) -> int:
@@ -234,14 +246,18 @@ class ModbusJointSource(ModbusDrawstring):
 
     fields = MODBUS_FIELDS
 
-    def __init__(self, client: ModbusTcpClient, registers: JointRegisterMap = JointRegisterMap(),
-                 name: str = "robot"):
+    def __init__(
+        self, client: ModbusTcpClient, registers: JointRegisterMap = JointRegisterMap(), name: str = "robot"
+    ):
         super().__init__(client, registers, name)
 
     def read(self) -> Reading:
         regs = self.registers
-        reader = (self.client.read_holding_registers if regs.table == "holding"
-                  else self.client.read_input_registers)
+        reader = (
+            self.client.read_holding_registers
+            if regs.table == "holding"
+            else self.client.read_input_registers
+        )
         try:
             reply = reader(regs.address, count=regs.count, device_id=regs.device_id)
         except (ModbusException, OSError) as exc:
@@ -251,7 +267,8 @@ class ModbusJointSource(ModbusDrawstring):
                 self.name,
                 f"Modbus exception code {reply.exception_code} reading joint registers "
                 f"{regs.address}..{regs.address + regs.count - 1}",
-                code=str(reply.exception_code))
+                code=str(reply.exception_code),
+            )
         if len(reply.registers) != regs.count:
             raise GarbledReply(self.name, f"{len(reply.registers)} registers, {regs.count} asked")
         return Reading.now(self.name, {"q_deg": regs.decode_deg(reply.registers)}, MODBUS_FIELDS)

@@ -58,15 +58,12 @@ class ModbusDevice:
         self._tcp = tcp
         self._baudrate = baudrate
         self.cable = (
-            LinkedPtyPair(rtu_link.with_name(f".{rtu_link.name}-device"), rtu_link)
-            if rtu_link
-            else None
+            LinkedPtyPair(rtu_link.with_name(f".{rtu_link.name}-device"), rtu_link) if rtu_link else None
         )
         self._fault: str | None = None
         self._server: ModbusTcpServer | ModbusSerialServer | None = None
         self._loop = asyncio.new_event_loop()
-        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True,
-                                        name="sim-modbus")
+        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True, name="sim-modbus")
         self.address: dict = {}
 
     def _simdevice(self) -> SimDevice:
@@ -114,8 +111,11 @@ class ModbusDevice:
             self._server = ModbusSerialServer(
                 self._simdevice(), port=self.cable.a.path, baudrate=self._baudrate, **common
             )
-            self.address = {"protocol": "modbus-rtu", "port": str(self.cable.b.link),
-                            "baudrate": self._baudrate}
+            self.address = {
+                "protocol": "modbus-rtu",
+                "port": str(self.cable.b.link),
+                "baudrate": self._baudrate,
+            }
         else:
             self._server = ModbusTcpServer(self._simdevice(), address=self._tcp, **common)
         await self._server.serve_forever(background=True)

@@ -29,8 +29,14 @@ class ModbusJointServer(ModbusDevice):
     """Serves ``measure()`` (six joints, deg) at ``registers`` on ``tcp=(host, port)`` (port 0
     picks a free one; see :attr:`address`). ``faults`` as for the drawstring server."""
 
-    def __init__(self, registers: JointRegisterMap, measure: Callable[[], list[float]], *,
-                 tcp: tuple[str, int], faults: FaultPlan | None = None):
+    def __init__(
+        self,
+        registers: JointRegisterMap,
+        measure: Callable[[], list[float]],
+        *,
+        tcp: tuple[str, int],
+        faults: FaultPlan | None = None,
+    ):
         super().__init__(registers, measure, tcp=tcp, faults=faults)
 
     async def _on_read(self, function_code, start_address, address, count, registers, values):

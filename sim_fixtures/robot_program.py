@@ -140,8 +140,11 @@ class SimRobot:
         targets = np.asarray(targets_deg, dtype=float)
         if targets.ndim != 2 or targets.shape[1] != 6 or len(targets) == 0:
             raise ValueError(f"targets_deg must have shape (M, 6) with M >= 1, got {targets.shape}")
-        for name, value in (("speed_deg_s", speed_deg_s), ("accel_deg_s2", accel_deg_s2),
-                            ("time_scale", time_scale)):
+        for name, value in (
+            ("speed_deg_s", speed_deg_s),
+            ("accel_deg_s2", accel_deg_s2),
+            ("time_scale", time_scale),
+        ):
             if not value > 0:
                 raise ValueError(f"{name} must be > 0, got {value}")
         if dwell_s < 0:
@@ -176,9 +179,7 @@ class SimRobot:
 
     def program_time(self, sim_s: float) -> float:
         """Simulated seconds the program has run by ``sim_s``: pausing fault windows excluded."""
-        paused = sum(
-            max(0.0, min(sim_s, f.end_s) - f.start_s) for f in self.faults if f.pauses()
-        )
+        paused = sum(max(0.0, min(sim_s, f.end_s) - f.start_s) for f in self.faults if f.pauses())
         return sim_s - paused
 
     def state(self, t_s: float) -> RobotState:

@@ -144,8 +144,9 @@ class _Session:
             self.conn.sendall(self._setup_outputs(package.payload))
         elif kind == wire.SETUP_INPUTS:
             names = [n for n in package.payload.decode("ascii").split(",") if n]
-            self.conn.sendall(wire.pack(kind, b"\x00" + ",".join(
-                [wire.NOT_FOUND] * len(names)).encode("ascii")))
+            self.conn.sendall(
+                wire.pack(kind, b"\x00" + ",".join([wire.NOT_FOUND] * len(names)).encode("ascii"))
+            )
         elif kind == wire.START:
             self.streaming = self.recipe is not None
             self.next_send = time.monotonic()
@@ -186,9 +187,16 @@ class RtdeServer:
     when the robot program started; simulated devices that share it agree on the robot's pose.
     """
 
-    def __init__(self, robot: RobotSource, host: str, port: int = RTDE_PORT, *,
-                 start_monotonic: float | None = None,
-                 version: ControllerVersion = ControllerVersion(), skipped=None):
+    def __init__(
+        self,
+        robot: RobotSource,
+        host: str,
+        port: int = RTDE_PORT,
+        *,
+        start_monotonic: float | None = None,
+        version: ControllerVersion = ControllerVersion(),
+        skipped=None,
+    ):
         self.robot = robot
         self.skipped = multiprocessing.Value("q", 0) if skipped is None else skipped
         self.version = version
@@ -226,8 +234,9 @@ class RtdeServer:
 def _serve_in_child(robot, host, port, start_monotonic, version, skipped, ready, stop) -> None:
     """Child-process entry: bind, report the address (or the bind error), serve until stopped."""
     try:
-        server = RtdeServer(robot, host, port, start_monotonic=start_monotonic, version=version,
-                            skipped=skipped)
+        server = RtdeServer(
+            robot, host, port, start_monotonic=start_monotonic, version=version, skipped=skipped
+        )
     except OSError as exc:
         ready.send(("error", f"cannot bind RTDE server to {host}:{port}: {exc}"))
         return
@@ -244,9 +253,16 @@ class RtdeServerProcess:
     again on the same address: the controller coming back.
     """
 
-    def __init__(self, robot: RobotSource, host: str = "127.0.0.1", port: int = RTDE_PORT, *,
-                 start_monotonic: float | None = None,
-                 version: ControllerVersion = ControllerVersion(), timeout_s: float = 10.0):
+    def __init__(
+        self,
+        robot: RobotSource,
+        host: str = "127.0.0.1",
+        port: int = RTDE_PORT,
+        *,
+        start_monotonic: float | None = None,
+        version: ControllerVersion = ControllerVersion(),
+        timeout_s: float = 10.0,
+    ):
         self.robot = robot
         self.host, self.port = host, port
         self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
@@ -279,15 +295,25 @@ class RtdeServerProcess:
         receiver, sender = self._ctx.Pipe(duplex=False)
         self._stop = self._ctx.Event()
         self._process = self._ctx.Process(
-            target=_serve_in_child, daemon=True, name=f"rtde-sim-{self.host}",
-            args=(self.robot, self.host, self.port, self.start_monotonic, self.version,
-                  self._skipped, sender, self._stop))
+            target=_serve_in_child,
+            daemon=True,
+            name=f"rtde-sim-{self.host}",
+            args=(
+                self.robot,
+                self.host,
+                self.port,
+                self.start_monotonic,
+                self.version,
+                self._skipped,
+                sender,
+                self._stop,
+            ),
+        )
         self._process.start()
         sender.close()
         if not receiver.poll(self.timeout_s):
             self.stop()
-            raise OSError(f"RTDE server on {self.host}:{self.port} did not start within "
-                          f"{self.timeout_s} s")
+            raise OSError(f"RTDE server on {self.host}:{self.port} did not start within {self.timeout_s} s")
         status, detail = receiver.recv()
         receiver.close()
         if status != "ok":
@@ -316,8 +342,7 @@ class RtdeServerProcess:
         self.stop()
 
 
-def start_on_free_loopback(robot: RobotSource, *, attempts: int = 20,
-                           **kwargs) -> RtdeServerProcess:
+def start_on_free_loopback(robot: RobotSource, *, attempts: int = 20, **kwargs) -> RtdeServerProcess:
     """Start a server on a random free address 127.0.0.2 .. 127.0.0.250 (port 30004 is fixed by
     ur_rtde, so parallel tests and benchmarks each take their own address)."""
     pick = random.SystemRandom()

@@ -211,8 +211,7 @@ def flatten(types: Sequence[str], values: Sequence[object]) -> list:
     return flat
 
 
-def data_package(recipe_id: int, fmt: struct.Struct, types: Sequence[str],
-                 values: Sequence[object]) -> bytes:
+def data_package(recipe_id: int, fmt: struct.Struct, types: Sequence[str], values: Sequence[object]) -> bytes:
     """A ``U`` package of one recipe (``fmt`` from :func:`data_format` on ``types``)."""
     return pack(DATA_PACKAGE, fmt.pack(recipe_id, *flatten(types, values)))
 
@@ -242,7 +241,6 @@ def zero_value(rtde_type: str) -> object:
     return (0,) * item_count(rtde_type) if rtde_type.startswith("VECTOR") else 0
 
 
-def values_for(names: Sequence[str], types: Sequence[str],
-               modelled: Mapping[str, object]) -> list:
+def values_for(names: Sequence[str], types: Sequence[str], modelled: Mapping[str, object]) -> list:
     """Values of a recipe: modelled ones by name, zeros for the rest."""
     return [modelled.get(n, zero_value(t)) for n, t in zip(names, types, strict=True)]

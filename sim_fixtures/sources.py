@@ -95,12 +95,15 @@ def dh_tcp_mm(table: np.ndarray, q_deg) -> np.ndarray:
         ct, st = np.cos(th), np.sin(th)
         ca, sa = np.full_like(th, np.cos(al)), np.full_like(th, np.sin(al))
         zero, one = np.zeros_like(th), np.ones_like(th)
-        link = np.stack([
-            np.stack([ct, -st * ca, st * sa, a * ct], axis=-1),
-            np.stack([st, ct * ca, -ct * sa, a * st], axis=-1),
-            np.stack([zero, sa, ca, d * one], axis=-1),
-            np.stack([zero, zero, zero, one], axis=-1),
-        ], axis=1)
+        link = np.stack(
+            [
+                np.stack([ct, -st * ca, st * sa, a * ct], axis=-1),
+                np.stack([st, ct * ca, -ct * sa, a * st], axis=-1),
+                np.stack([zero, sa, ca, d * one], axis=-1),
+                np.stack([zero, zero, zero, one], axis=-1),
+            ],
+            axis=1,
+        )
         pose = pose @ link
     return pose[:, :3, 3]
 
@@ -115,8 +118,11 @@ class StandInCell:
     table: np.ndarray
     anchor_mm: np.ndarray = field(default_factory=lambda: np.array([-800.0, 600.0, -600.0]))
     length_offset_mm: float = 200.0
-    plan_deg: np.ndarray = field(default_factory=lambda: np.array(
-        [[q1, -50.0, -20.0, 0.0, -90.0, 0.0] for q1 in (-10.0, -5.0, 0.0, 5.0, 10.0)]))
+    plan_deg: np.ndarray = field(
+        default_factory=lambda: np.array(
+            [[q1, -50.0, -20.0, 0.0, -90.0, 0.0] for q1 in (-10.0, -5.0, 0.0, 5.0, 10.0)]
+        )
+    )
 
     @property
     def plan_lines(self) -> np.ndarray:

@@ -70,8 +70,10 @@ def _pty_link(port: str, section: str) -> Path:
     """A pty link path from the config; refuses to replace anything that is not a symlink."""
     path = Path(port)
     if path.exists() and not path.is_symlink():
-        raise InputError(f"[{section}] port = {port!r}: exists and is not a link; "
-                         "sim serve only creates pty links (e.g. /tmp/station-sim/<name>)")
+        raise InputError(
+            f"[{section}] port = {port!r}: exists and is not a link; "
+            "sim serve only creates pty links (e.g. /tmp/station-sim/<name>)"
+        )
     return path
 
 
@@ -81,14 +83,21 @@ class SimStation:
 
     def __init__(self, cfg: StationConfig, hold: bool = False, faults: Sequence[RobotFault] = ()):
         if not isinstance(cfg.robot, RobotRtde):
-            raise InputError(f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE "
-                             "controller only (kind = \"rtde\")")
+            raise InputError(
+                f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE "
+                'controller only (kind = "rtde")'
+            )
         self.cfg = cfg
         self.clock = SimClock()
         cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
         self.robot = SimRobot(
-            cell.plan_deg, speed_deg_s=cfg.sim.speed_deg_s, accel_deg_s2=cfg.sim.accel_deg_s2,
-            dwell_s=cfg.sim.dwell_s, hold=hold, time_scale=cfg.time_scale, faults=faults,
+            cell.plan_deg,
+            speed_deg_s=cfg.sim.speed_deg_s,
+            accel_deg_s2=cfg.sim.accel_deg_s2,
+            dwell_s=cfg.sim.dwell_s,
+            hold=hold,
+            time_scale=cfg.time_scale,
+            faults=faults,
             rng=np.random.default_rng([cfg.sim.seed, 3]),
         )
         self.source = CellSource(self.robot, cell)
@@ -137,13 +146,22 @@ class SimStation:
         """Where device ``name`` is served, as printed by ``sim serve``."""
         dev = self.devices[name]
         if isinstance(dev, RtdeServerProcess):
-            return {"device": name, "protocol": "rtde", "host": dev.host, "port": dev.port,
-                    "frequency_hz": self.cfg.robot.frequency_hz}
+            return {
+                "device": name,
+                "protocol": "rtde",
+                "host": dev.host,
+                "port": dev.port,
+                "frequency_hz": self.cfg.robot.frequency_hz,
+            }
         if isinstance(dev, ModbusDevice):
             return {"device": name, **dev.address}
-        return {"device": name, "protocol": "serial-ascii", "port": str(dev.port.link),
-                "pty": dev.port.path, "dialect": next(
-                    k for k, v in DIALECTS.items() if v is dev.dialect)}
+        return {
+            "device": name,
+            "protocol": "serial-ascii",
+            "port": str(dev.port.link),
+            "pty": dev.port.path,
+            "dialect": next(k for k, v in DIALECTS.items() if v is dev.dialect),
+        }
 
     def stop(self) -> None:
         for dev in reversed(list(self.devices.values())):
