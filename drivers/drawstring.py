@@ -124,6 +124,13 @@ class ModbusDrawstring(Driver):
 
     def read(self) -> Reading:
         regs = self.registers
+        return Reading.now(
+            self.name, {"length_mm": regs.decode_mm(self._registers("length register"))}, FIELDS
+        )
+
+    def _registers(self, what: str) -> list[int]:
+        """The mapped registers, raw; every pymodbus failure becomes a driver error naming ``what``."""
+        regs = self.registers
         reader = (
             self.client.read_holding_registers
             if regs.table == "holding"
@@ -136,12 +143,13 @@ class ModbusDrawstring(Driver):
         if reply.isError():
             raise DeviceReplyError(
                 self.name,
-                f"Modbus exception code {reply.exception_code} reading register {regs.address}",
+                f"Modbus exception code {reply.exception_code} reading {what} "
+                f"{regs.address}..{regs.address + regs.count - 1}",
                 code=str(reply.exception_code),
             )
         if len(reply.registers) != regs.count:
             raise GarbledReply(self.name, f"{len(reply.registers)} registers, {regs.count} asked")
-        return Reading.now(self.name, {"length_mm": regs.decode_mm(reply.registers)}, FIELDS)
+        return reply.registers
 
     def _classify(self, exc: Exception) -> Exception:
         """The driver error behind a pymodbus failure: lost link, CRC, garbage or silence."""

@@ -27,7 +27,6 @@ from typing import Literal
 
 import rtde_receive
 from pymodbus.client import ModbusTcpClient
-from pymodbus.exceptions import ModbusException
 
 from drivers.base import (
     DeviceReplyError,
@@ -252,23 +251,5 @@ class ModbusJointSource(ModbusDrawstring):
         super().__init__(client, registers, name)
 
     def read(self) -> Reading:
-        regs = self.registers
-        reader = (
-            self.client.read_holding_registers
-            if regs.table == "holding"
-            else self.client.read_input_registers
-        )
-        try:
-            reply = reader(regs.address, count=regs.count, device_id=regs.device_id)
-        except (ModbusException, OSError) as exc:
-            raise self._classify(exc) from exc
-        if reply.isError():
-            raise DeviceReplyError(
-                self.name,
-                f"Modbus exception code {reply.exception_code} reading joint registers "
-                f"{regs.address}..{regs.address + regs.count - 1}",
-                code=str(reply.exception_code),
-            )
-        if len(reply.registers) != regs.count:
-            raise GarbledReply(self.name, f"{len(reply.registers)} registers, {regs.count} asked")
-        return Reading.now(self.name, {"q_deg": regs.decode_deg(reply.registers)}, MODBUS_FIELDS)
+        q_deg = self.registers.decode_deg(self._registers("joint registers"))
+        return Reading.now(self.name, {"q_deg": q_deg}, MODBUS_FIELDS)
