@@ -87,3 +87,18 @@ def test_outliers_are_downweighted_and_do_not_drag_the_table(outliers, three):
     assert set(outliers.train.outliers) <= set(out.report["downweighted"])
     assert len(out.report["downweighted"]) <= len(outliers.train.outliers) + 0.02 * len(outliers.train)
     assert _workspace_rms(outliers, out.calibration.x) < 1.5 * _workspace_rms(sc_clean, clean.calibration.x)
+
+
+def test_predicted_workspace_error_matches_the_truth_within_2x(three):
+    sc, out = three
+    predicted, true = out.report["workspace"]["predicted_rmse_mm"], _workspace_rms(sc, out.calibration.x)
+    assert true / 2 < predicted < 2 * true
+    assert not out.report["warnings"]
+
+
+def test_one_line_is_not_reported_as_perfect(one_line):
+    # One line fits itself to the noise but cannot deliver the workspace: the report must say so.
+    # (Its prediction runs low: 1.2 mm against a true 2.4 mm on this seed; see issue 3's note.)
+    out = _run(one_line)
+    assert out.report["workspace"]["predicted_rmse_mm"] > 20 * out.report["after"]["train"]["rmse_mm"]
+    assert any("predicted workspace error" in w for w in out.report["warnings"])
