@@ -14,9 +14,34 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calib.identifiability import redundancy_partners, select_columns
+from calib.identifiability import redundancy_partners, select_columns, tolerance, weakly_determined
 from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
-from calib.models import N_DH, MeasurementModel
+from calib.models import GROUP_PRIOR, N_DH, MeasurementModel
+
+
+class WithPrior:
+    """A model plus Gaussian prior residuals ``(x_k - x_ref_k) / sigma_k`` for every unknown with a
+    finite prior sigma (the manufacturing tolerance of the table, the rough setup values): a
+    direction the data cannot see stays where the robot was built instead of wandering.
+    Prior rows carry group ``GROUP_PRIOR`` and row -1."""
+
+    def __init__(self, model: MeasurementModel, x_ref: np.ndarray):
+        self.model, self.x_ref = model, np.asarray(x_ref, float)
+        sigma = model.prior_sigma()
+        self._k = np.flatnonzero(np.isfinite(sigma))
+        self._inv = 1.0 / sigma[self._k]
+        self.names, self.x0, self.setup_mask = model.names, model.x0, model.setup_mask
+        self.groups = np.concatenate([model.groups, np.full(self._k.size, GROUP_PRIOR)])
+        self.rows = np.concatenate([model.rows, np.full(self._k.size, -1)])
+
+    def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
+        r, jac = self.model.residuals_and_jacobian(x, jacobian)
+        r = np.concatenate([r, (x[self._k] - self.x_ref[self._k]) * self._inv])
+        if jacobian:
+            prior = np.zeros((self._k.size, x.size))
+            prior[np.arange(self._k.size), self._k] = self._inv
+            jac = np.vstack([jac, prior])
+        return r, jac
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -34,14 +59,16 @@ class CalibrationOptions:
 @dataclass
 class Calibration:
     """Result: the ``before`` (setup-only) and ``after`` fits, the ``identified`` table/setup mask
-    (free in the final fit), ``held`` parameters with reasons, parameter ``sigma`` (internal units,
-    NaN where held), the residual ``scale`` per group and the ``downweighted`` sample rows."""
+    (free in the final fit), ``held`` parameters with reasons, the prior sigma of those ``weak``ly
+    determined (by index), parameter ``sigma`` (internal units, NaN where held), the residual
+    ``scale`` per group and the ``downweighted`` sample rows."""
 
     names: tuple[str, ...]
     before: LMResult
     after: LMResult
     identified: np.ndarray
     held: dict[str, str]
+    weak: dict[int, float]
     sigma: np.ndarray
     covariance: np.ndarray
     scale: np.ndarray
@@ -61,7 +88,7 @@ def robust_fit(
     lm = options.lm
     kw = dict(free=free, groups=model.groups, callback=callback)
     result = levenberg_marquardt(fun, x0, options=_with(lm, loss="linear"), **kw)
-    scale = robust_scale(result.residuals, model.groups)
+    scale = _scale(result, model)
     if options.loss == "linear":
         return result, scale
     history = list(result.history)
@@ -71,7 +98,7 @@ def robust_fit(
             fun, result.x, options=_with(lm, loss=options.loss, loss_scale=loss_scale), **kw
         )
         history += result.history
-        scale = robust_scale(result.residuals, model.groups)
+        scale = _scale(result, model)
     result.history = history
     return result, scale
 
@@ -90,36 +117,73 @@ def identify(
         if not kept[k]:
             partners = ", ".join(redundancy_partners(jac, k, kept, names))
             held[names[k]] = f"the data cannot tell it apart from {partners}"
+    kept_table = [k for k in candidates if kept[k]]
+    tol = np.zeros(len(names))
+    tol[:N_DH] = tolerance(names[:N_DH])
+    weak = weakly_determined(jac, np.flatnonzero(free_setup | kept), set(kept_table), tol)
+    for k, sigma in weak.items():
+        unit = "deg" if names[k].endswith("_deg") else "mm"
+        shown = np.degrees(sigma) if unit == "deg" else sigma
+        held[names[k]] = (
+            f"the data determines it only to +-{shown:.3g} {unit}, no better than its "
+            f"manufacturing tolerance (+-{np.degrees(tol[k]) if unit == 'deg' else tol[k]:.3g} {unit})"
+        )
     table = np.zeros(len(names), bool)
-    table[candidates] = kept[candidates]
-    return table, held
+    table[[k for k in kept_table if k not in weak]] = True
+    return table, held, {k: float(tol[k]) for k in weak}
+
+
+@dataclass
+class Prepared:
+    """The setup-only fit (``before``), the prior-augmented model it used, the identified mask
+    (``free``), the ``held`` reasons and the ``weak`` priors: all a table fit starts from."""
+
+    prior: WithPrior
+    before: LMResult
+    free: np.ndarray
+    held: dict[str, str]
+    weak: dict[int, float]
+
+
+def prepare(model: MeasurementModel, options: CalibrationOptions = CalibrationOptions()) -> Prepared:
+    """Steps 1-2 of the pipeline: fit the setup unknowns with the nominal table, then identify."""
+    gauges = model.gauges()
+    free_setup = model.setup_mask & ~np.isin(model.names, list(gauges))
+    prior = WithPrior(model, model.x0)
+    before, _ = robust_fit(prior, model.x0, free_setup, options)
+    table, held, weak = identify(model, before.x, free_setup, gauges, options.rank_rtol)
+    return Prepared(prior, before, free_setup | table, held, weak)
 
 
 def calibrate(
     model: MeasurementModel, options: CalibrationOptions = CalibrationOptions(), callback=None
 ) -> Calibration:
     """Run the whole pipeline on ``model`` (see the module docstring)."""
-    names = model.names
-    gauges = model.gauges()
-    free_setup = model.setup_mask & ~np.isin(names, list(gauges))
-    before, _ = robust_fit(model, model.x0, free_setup, options)
-    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol)
-    free = free_setup | table
-    after, scale = robust_fit(model, before.x, free, options, callback)
+    prep = prepare(model, options)
+    after, scale = robust_fit(prep.prior, prep.before.x, prep.free, options, callback)
     sigma, cov = _uncertainty(after)
-    full_sigma = np.full(len(names), np.nan)
-    full_sigma[free] = sigma
+    full_sigma = np.full(len(model.names), np.nan)
+    full_sigma[prep.free] = sigma
     return Calibration(
-        names=names,
-        before=before,
+        names=model.names,
+        before=prep.before,
         after=after,
-        identified=free,
-        held=held,
+        identified=prep.free,
+        held=prep.held,
+        weak=prep.weak,
         sigma=full_sigma,
         covariance=cov,
         scale=scale,
-        downweighted=_downweighted_rows(model, after, scale, options),
+        downweighted=_downweighted_rows(prep.prior, after, scale, options),
     )
+
+
+def _scale(result: LMResult, model) -> np.ndarray:
+    """Robust noise scale per residual group; prior rows are never down-weighted."""
+    scale = robust_scale(result.residuals, model.groups)
+    if scale.size > GROUP_PRIOR:
+        scale[GROUP_PRIOR] = 1e6
+    return scale
 
 
 def _uncertainty(result: LMResult) -> tuple[np.ndarray, np.ndarray]:
@@ -132,11 +196,13 @@ def _uncertainty(result: LMResult) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _downweighted_rows(model, result: LMResult, scale, options: CalibrationOptions) -> np.ndarray:
-    """Sample rows with a residual whose robust weight fell below one half."""
+    """Sample rows with a residual the robust loss cut to below a quarter of its weight (for the
+    Cauchy loss at 3 sigma: beyond 5.2 noise scales): the gross readings."""
     if options.loss == "linear":
         return np.array([], int)
     _, w = loss_terms(result.residuals, options.loss_threshold * scale[model.groups], options.loss)
-    return np.unique(model.rows[w**2 < 0.5])
+    rows = model.rows[w**2 < 0.25]
+    return np.unique(rows[rows >= 0])
 
 
 def _with(lm: LMOptions, **changes) -> LMOptions:

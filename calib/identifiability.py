@@ -6,7 +6,9 @@ Two views that must agree:
   any residual (or move it exactly like another parameter does);
 - ``select_columns``: a rank-revealing, Gram-Schmidt QR of the column-scaled Jacobian in a
   priority order: a column is kept when the part of it that the kept columns cannot produce is
-  larger than ``rtol`` of its norm.
+  larger than ``rtol`` of its norm;
+- ``weakly_determined``: of the columns left, those the data pins down no better than the
+  robot is made to (``TOLERANCE``: 0.2 deg, 1 mm), from the covariance under the stated noise.
 """
 
 from __future__ import annotations
@@ -14,6 +16,15 @@ from __future__ import annotations
 import numpy as np
 
 from calib.kinematics import parallel_axis_pairs
+
+TOLERANCE_DEG, TOLERANCE_MM = 0.2, 1.0
+"""Manufacturing tolerance of a link parameter (1 sigma): what is known before measuring."""
+
+
+def tolerance(names) -> np.ndarray:
+    """Manufacturing tolerance of each table parameter in internal units (rad, mm)."""
+    return np.array([np.radians(TOLERANCE_DEG) if n.endswith("_deg") else TOLERANCE_MM for n in names])
+
 
 BASE_GAUGE = {
     "J1.theta_deg": "base gauge: a rotation about joint 1's axis is absorbed by the {frame}",
@@ -45,14 +56,15 @@ def select_columns(jac: np.ndarray, order: np.ndarray, rtol: float = 1e-6) -> np
     """Columns of ``jac`` (m, n) that are linearly independent, taken greedily in ``order``.
 
     A column enters when its component orthogonal to the span of the columns already kept is more
-    than ``rtol`` of its norm (zero columns never enter). Returns a boolean mask over the n columns.
+    than ``rtol`` of its norm. Columns below 1e-9 of the largest norm are zero up to round-off and
+    never enter. Returns a boolean mask over the n columns.
     """
     keep = np.zeros(jac.shape[1], bool)
     basis = np.empty((jac.shape[0], 0))
+    norms = np.linalg.norm(jac, axis=0)
     for k in order:
-        col = jac[:, k]
-        norm = np.linalg.norm(col)
-        if norm == 0.0:
+        col, norm = jac[:, k], norms[k]
+        if norm <= 1e-9 * norms.max():
             continue
         rest = col / norm
         for _ in range(2):  # re-orthogonalise once: classical Gram-Schmidt loses orthogonality
@@ -67,6 +79,28 @@ def redundancy_partners(jac: np.ndarray, k: int, kept: np.ndarray, names, top: i
     """Names of the kept parameters that best reproduce column ``k`` (largest scaled coefficients)."""
     cols = np.flatnonzero(kept)
     scaled = jac[:, cols] / np.maximum(np.linalg.norm(jac[:, cols], axis=0), 1e-300)
-    coef = np.linalg.lstsq(scaled, jac[:, k], rcond=None)[0]
+    coef = np.linalg.solve(scaled.T @ scaled, scaled.T @ jac[:, k])
     best = np.argsort(-np.abs(coef))[:top]
     return [names[cols[i]] for i in best if abs(coef[i]) > 1e-3 * np.abs(coef).max()]
+
+
+def weakly_determined(jac: np.ndarray, cols: np.ndarray, candidates, tol: np.ndarray) -> dict[int, float]:
+    """Candidates whose standard deviation exceeds ``tol`` (their prior knowledge), found one at a
+    time (worst ratio first) since holding one sharpens the others.
+
+    ``jac`` (m, n) whitened; ``cols``: every column in the fit; ``candidates``: those that may be
+    held; ``tol`` (n,) tolerances (only candidates' entries are read). Returns {column: sigma}.
+    """
+    cols, held = list(cols), {}
+    while True:
+        j = jac[:, cols]
+        cov = np.linalg.pinv(j.T @ j)
+        sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        ratios = {c: sigma[i] / tol[c] for i, c in enumerate(cols) if c in candidates}
+        if not ratios:
+            return held
+        worst = max(ratios, key=ratios.get)
+        if ratios[worst] <= 1.0:
+            return held
+        held[worst] = float(sigma[cols.index(worst)])
+        cols.remove(worst)

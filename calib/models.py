@@ -19,13 +19,13 @@ from typing import Protocol
 
 import numpy as np
 
-from calib.identifiability import structural_holds
+from calib.identifiability import structural_holds, tolerance
 from calib.kinematics import tcp_jacobian, tcp_position
 from calib.lines import N_LINE_PARAMS, LineReference, fit_line, line_residual
 from calib.params import DH_NAMES
 
 N_DH = 24
-GROUP_LENGTH, GROUP_LINE = 0, 1
+GROUP_LENGTH, GROUP_LINE, GROUP_PRIOR = 0, 1, 2
 
 
 class MeasurementModel(Protocol):
@@ -41,6 +41,10 @@ class MeasurementModel(Protocol):
 
     def gauges(self) -> dict[str, str]:
         """Parameters that no data of this kind can determine, with the reason."""
+        ...
+
+    def prior_sigma(self) -> np.ndarray:
+        """What is known of each unknown before measuring (1 sigma, internal units; inf: nothing)."""
         ...
 
 
@@ -66,7 +70,8 @@ class DrawstringSetup:
     """Station geometry and noise: rough ``anchor`` [mm] and ``length_offset`` [mm], reading noise
     ``sigma_length`` [mm], line-contact noise ``sigma_line`` [mm], per line id the ``dial_axis``
     (unit, base frame), else ``default_dial_axis`` (neither: the dial only gates captures), and
-    ``rho`` (line-term weight)."""
+    ``rho`` (line-term weight). ``anchor_tolerance``/``offset_tolerance`` [mm]: how far the rough
+    values may be off (taken as 2 sigma)."""
 
     anchor: np.ndarray
     length_offset: float
@@ -75,6 +80,8 @@ class DrawstringSetup:
     dial_axis: dict[int, np.ndarray] = field(default_factory=dict)
     default_dial_axis: np.ndarray | None = None
     rho: float = 1.0
+    anchor_tolerance: float = 50.0
+    offset_tolerance: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -146,6 +153,13 @@ class DrawstringLineModel:
                 "a single line: turning the anchor about it keeps every distance to the line"
             )
         return held
+
+    def prior_sigma(self) -> np.ndarray:
+        sigma = np.full(len(self.names), np.inf)
+        sigma[:N_DH] = tolerance(self.names[:N_DH])
+        sigma[N_DH : N_DH + 3] = self.setup_values.anchor_tolerance / 2
+        sigma[N_DH + 3] = self.setup_values.offset_tolerance / 2
+        return sigma
 
     def with_samples(self, samples: DrawstringSamples) -> DrawstringLineModel:
         """The same model (frame, setup) on other rows, e.g. a hold-out set."""

@@ -279,11 +279,13 @@ class World:
         nz = self.noise
         n = q_true_deg.shape[0]
         length = self.true_length_mm(q_true_deg) + rng.normal(0, nz.length_mm, n)
+        dial = self.true_dial_mm(q_true_deg, line_ids) + rng.normal(0, nz.dial_mm, n)
+        q_read = q_true_deg + rng.normal(0, nz.q_deg, q_true_deg.shape)
+        # Gross readings drawn last, so a set with them shares every other draw with one without.
         outliers = np.sort(rng.choice(n, size=int(round(outlier_fraction * n)), replace=False))
         length[outliers] += rng.choice([-1.0, 1.0], outliers.size) * rng.uniform(2.0, 5.0, outliers.size)
-        dial = self.true_dial_mm(q_true_deg, line_ids) + rng.normal(0, nz.dial_mm, n)
         return SampleSet(
-            q_deg=q_true_deg + rng.normal(0, nz.q_deg, q_true_deg.shape),
+            q_deg=q_read,
             length_mm=_quantise(length, nz.length_resolution_mm),
             dial_mm=_quantise(dial, nz.dial_resolution_mm),
             line=np.asarray(line_ids),

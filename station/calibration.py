@@ -3,20 +3,25 @@ and turns its arrays into the contract's report and corrected table (display uni
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 
 import numpy as np
 
-from calib.calibrate import Calibration, CalibrationOptions, calibrate
+from calib.accuracy import predicted_workspace_rmse, table_covariance
+from calib.calibrate import Calibration, CalibrationOptions, calibrate, prepare
 from calib.metrics import error_metrics
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.observability import MCSResult, select_configurations
 from calib.params import DH_NAMES, dh_from_degrees, dh_to_degrees, display_factor
+from calib.position import PositionModel, PositionSamples
 from station.errors import InputError
 from station.files import RobotFile, Samples, SetupFile
 
-METHODS = ("lmlc",)
+METHODS = ("lmlc", "mcs-lmlc")
+WORKSPACE_POSES = 1000
 
 
 @dataclass
@@ -45,14 +50,15 @@ def drawstring_setup(setup: SetupFile, where: str) -> DrawstringSetup:
 
 
 def build_model(samples: Samples, robot: RobotFile, setup: SetupFile | None, setup_where: str):
-    """The measurement model for a training set."""
+    """The measurement model for a training set: a position set (tracker) starts its probe offset at
+    the robot file's ``tool_mm``; a drawstring set needs the setup file."""
     dh0 = dh_from_degrees(robot.table_deg())
-    if samples.kind != "drawstring":
-        raise InputError(f"{samples.path}: position sets are not supported yet")
+    if samples.kind == "position":
+        return PositionModel(_model_samples(samples), dh0, np.array(robot.tool_mm))
     if setup is None:
         raise InputError(f"{samples.path}: a drawstring set needs --setup")
     ds_setup = drawstring_setup(setup, setup_where)
-    data = _drawstring_samples(samples)
+    data = _model_samples(samples)
     frame = DrawstringFrame.from_nominal(data, ds_setup, dh0, robot.tool_mm)
     return DrawstringLineModel(data, ds_setup, frame, dh0, robot.tool_mm)
 
@@ -65,12 +71,26 @@ def run(
     setup_where: str = "setup",
     holdout: Samples | None = None,
     method: str = "lmlc",
+    select: int | None = None,
 ) -> Outcome:
-    """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows."""
+    """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows.
+    ``mcs-lmlc`` first selects ``select`` configurations (default: where O1 flattens)."""
     t0 = time.perf_counter()
     model = build_model(samples, robot, setup, setup_where)
     check_enough(samples, model)
-    cal = calibrate(model, CalibrationOptions())
+    mcs = None
+    if select is not None and method != "mcs-lmlc":
+        raise InputError(f"--select {select}: selecting configurations needs --method mcs-lmlc")
+    if select is not None and not len(model.names) - len(model.gauges()) <= select <= len(samples):
+        unknowns = len(model.names) - len(model.gauges())
+        raise InputError(
+            f"--select {select}: must lie between the {unknowns} unknowns and the {len(samples)} samples"
+        )
+    if method == "mcs-lmlc":
+        mcs = select_measurements(model, select)
+        cal = calibrate(model.with_samples(_subset(samples, mcs.selection.rows)), CalibrationOptions())
+    else:
+        cal = calibrate(model, CalibrationOptions())
     elapsed = time.perf_counter() - t0
     hold_model = holdout_model(model, holdout)
     report = {
@@ -83,11 +103,78 @@ def run(
         "held": [{"param": p, "reason": r} for p, r in cal.held.items()],
         "parameters": _parameters(cal),
         "downweighted": [int(r) for r in cal.downweighted],
+        "workspace": {
+            "predicted_rmse_mm": predicted_workspace(robot, cal),
+            "configurations": WORKSPACE_POSES,
+        },
         "warnings": [],
         "iterations": int(cal.after.nit),
         "time_s": round(elapsed, 4),
     }
+    if mcs is not None:
+        report["selection"] = {
+            "rows": mcs.selection.rows.tolist(),
+            "n": int(mcs.n_select),
+            "index": "O1",
+            "value": mcs.selection.value,
+        }
+        report["downweighted"] = [int(mcs.selection.rows[r]) for r in cal.downweighted]
+    report["warnings"] = warnings(report, model)
     return Outcome(report, corrected_table(robot, cal, samples, method), cal)
+
+
+def select_measurements(model, n_select: int | None) -> MCSResult:
+    """MCS at the setup fit: the identified table's observability, setup unknowns projected out."""
+    prep = prepare(model)
+    _, jac = model.residuals_and_jacobian(prep.before.x)
+    line = getattr(model.samples, "line", np.zeros(len(model.samples), int))
+    return select_configurations(
+        jac, model.rows, prep.free, line, np.random.default_rng(0), n_select=n_select
+    )
+
+
+def _subset(samples: Samples, rows: np.ndarray):
+    return _model_samples(
+        dataclasses.replace(
+            samples,
+            q_deg=samples.q_deg[rows],
+            measured=samples.measured[rows],
+            dial_mm=samples.dial_mm[rows],
+            line=samples.line[rows],
+        )
+    )
+
+
+def predicted_workspace(robot: RobotFile, cal: Calibration) -> float:
+    """Predicted RMS TCP error [mm] over random configurations within the joint limits."""
+    limits = np.radians(robot.limits_deg())
+    q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    cov = table_covariance(cal.covariance, cal.identified, cal.weak)
+    return predicted_workspace_rmse(cal.x[:N_DH].reshape(6, 4), np.asarray(robot.tool_mm), q, cov)
+
+
+def warnings(report: dict, model) -> list[str]:
+    """Say when the samples fit well but cannot deliver that accuracy over the workspace."""
+    fit = report["after"]["train"]["rmse_mm"]
+    predicted = report["workspace"]["predicted_rmse_mm"]
+    if predicted <= max(10 * fit, 0.5):
+        return []
+    directions = np.array([ln["direction"] for ln in report["lines"]])
+    suggestion = _new_direction(directions)
+    where = "its own line" if len(directions) == 1 else f"its own {len(directions)} lines"
+    return [
+        f"fits {where} to {fit:.3f} mm; predicted workspace error {predicted:.2f} mm; add a line placement "
+        f"along [{suggestion[0]:.2f}, {suggestion[1]:.2f}, {suggestion[2]:.2f}] (base frame), "
+        "elsewhere in the workspace and with varied tool orientations"
+    ]
+
+
+def _new_direction(directions: np.ndarray) -> np.ndarray:
+    """A unit direction least aligned with every present line direction (perpendicular to all of
+    them while there are fewer than three)."""
+    if directions.size == 0:
+        return np.array([1.0, 0.0, 0.0])
+    return np.linalg.svd(directions)[2][-1]
 
 
 def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:
@@ -116,8 +203,17 @@ def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method
     }
 
 
-def _drawstring_samples(s: Samples) -> DrawstringSamples:
+def _model_samples(s: Samples) -> DrawstringSamples | PositionSamples:
+    if s.kind == "position":
+        return PositionSamples(np.radians(s.q_deg), s.measured)
     return DrawstringSamples(np.radians(s.q_deg), s.measured, s.dial_mm, s.line)
+
+
+def _row_errors(model, x) -> np.ndarray:
+    """The contract's per-row error [mm]: drawstring ``Y - Y_model``, position ``|m - p_model|``."""
+    if isinstance(model, PositionModel):
+        return model.position_error_mm(x)
+    return model.length_error_mm(x)
 
 
 def check_enough(samples: Samples, model) -> None:
@@ -132,18 +228,24 @@ def check_enough(samples: Samples, model) -> None:
 
 def holdout_model(model, holdout: Samples | None):
     """The training ``model`` (its frame and setup) on the hold-out rows; None without them."""
-    return model.with_samples(_drawstring_samples(holdout)) if holdout is not None else None
+    return model.with_samples(_model_samples(holdout)) if holdout is not None else None
 
 
 def metrics(model, hold_model, x) -> dict:
     """The contract's ``{"train": M, "holdout": M}`` of parameters ``x`` (holdout only with rows)."""
-    out = {"train": error_metrics(model.length_error_mm(x))}
+    out = {"train": error_metrics(_row_errors(model, x))}
     if hold_model is not None:
-        out["holdout"] = error_metrics(hold_model.length_error_mm(x))
+        out["holdout"] = error_metrics(_row_errors(hold_model, x))
     return out
 
 
-def _setup_unknowns(model: DrawstringLineModel, x) -> dict:
+def _setup_unknowns(model, x) -> dict:
+    if isinstance(model, PositionModel):
+        rot, t = model.tracker_from_base(x)
+        return {
+            "tracker_from_base": {"rotation": rot.tolist(), "translation_mm": t.tolist()},
+            "probe_mm": model.probe(x).tolist(),
+        }
     lines = []
     for lid in model.line_ids:
         point, direction = model.line(x, lid)

@@ -9,14 +9,14 @@ import sys
 from station.errors import DeviceError, InputError
 
 # One module per command; each exposes ``register(subparsers)`` which sets ``func`` on its parser.
-COMMANDS = ("demo", "calibrate", "compare")
+COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare")
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="station", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
-        importlib.import_module(f"station.commands.{name}").register(sub)
+        importlib.import_module(f"station.commands.{name.replace('-', '_')}").register(sub)
     return parser
 
 

@@ -142,13 +142,13 @@ def test_compare_command_end_to_end(cell, tmp_path, capsys):
         "--plot",
         str(plot),
         "--methods",
-        "gn,ekf,lmlc",
+        "gn,ekf,lmlc,mcs-lmlc",
     ]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "M8 LMLC" in out and "holdout RMSE" in out
+    assert "M8 LMLC" in out and "M9 MCS-LMLC" in out and "holdout RMSE" in out
     data = json.loads(report.read_text())
-    assert [m["name"] for m in data["methods"]] == ["gn", "ekf", "lmlc"]
+    assert [m["name"] for m in data["methods"]] == ["gn", "ekf", "lmlc", "mcs-lmlc"]
     for m in data["methods"]:
         assert {"name", "train", "holdout", "time_s", "iterations"} <= m.keys()
         assert set(m["holdout"]) == {"rmse_mm", "mean_mm", "max_mm"}

@@ -30,6 +30,12 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help="corrected table TOML to write")
     p.add_argument("--holdout", type=Path, help="samples CSV evaluated with the training setup fit")
     p.add_argument("--method", default="lmlc", choices=calibration.METHODS)
+    p.add_argument(
+        "--select",
+        type=int,
+        metavar="N",
+        help="mcs-lmlc: configurations to select (default: where O1 flattens)",
+    )
     p.add_argument("--report", type=Path, help="report JSON to write")
     p.set_defaults(func=main)
 
@@ -57,6 +63,7 @@ def calibrate_from_paths(args) -> calibration.Outcome:
         setup_where=inputs.setup_where,
         holdout=inputs.holdout,
         method=args.method,
+        select=args.select,
     )
 
 

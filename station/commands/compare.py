@@ -7,9 +7,10 @@ import json
 import tempfile
 from pathlib import Path
 
-from calib.baselines import METHODS, BaselineOptions
+from calib.baselines import BaselineOptions
 from station import comparison
 from station.commands.calibrate import load_inputs
+from station.comparison import COMPARED as METHODS
 from station.files import atomic_write, check_writable
 
 

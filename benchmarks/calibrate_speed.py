@@ -1,0 +1,99 @@
+"""Speed of the calibration on the simulated HSR-JR680 (issue 2/3 targets), medians of one run.
+
+    python benchmarks/calibrate_speed.py [--repeats 7]
+
+- LMLC table solve in-process (setup fit and identification done once beforehand), and the same
+  residuals and Jacobian solved by scipy.optimize.least_squares (trf, linear loss): median and ratio;
+- the whole in-process pipeline (setup fit, identification, robust LMLC, uncertainty, workspace);
+- MCS choosing 72 of 200 configurations;
+- the whole ``station calibrate`` process (lmlc and mcs-lmlc), interpreter start included.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from scipy.optimize import least_squares
+
+from calib.calibrate import CalibrationOptions, prepare, robust_fit
+from sim_fixtures.scenario import write_scenario
+from station import calibration
+from station.files import load_robot, load_samples, load_setup
+
+
+def median_time(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args()
+    folder = Path(tempfile.mkdtemp())
+    sc = write_scenario(folder, seed=0, n_lines=1, n_per_line=200)
+    files = load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup)
+    model = calibration.build_model(*files, str(sc.setup))
+    prep = prepare(model)
+    options = CalibrationOptions(loss="linear")
+
+    def ours():
+        return robust_fit(prep.prior, prep.before.x, prep.free, options)[0]
+
+    def scipy_lsq():
+        free = prep.free
+
+        def fun(z):
+            x = prep.before.x.copy()
+            x[free] = z
+            return prep.prior.residuals_and_jacobian(x, False)[0]
+
+        def jac(z):
+            x = prep.before.x.copy()
+            x[free] = z
+            return prep.prior.residuals_and_jacobian(x)[1][:, free]
+
+        return least_squares(fun, prep.before.x[free], jac=jac, method="trf", x_scale="jac")
+
+    t_ours, t_scipy = median_time(ours, args.repeats), median_time(scipy_lsq, args.repeats)
+    cost_ours, cost_scipy = ours().cost, scipy_lsq().cost
+    t_run = median_time(lambda: calibration.run(*files), args.repeats)
+    t_mcs = median_time(lambda: calibration.select_measurements(model, 72), args.repeats)
+    print("200 samples on one gauge line (simulated HSR-JR680), 2-core machine, medians")
+    print(f"| LMLC table solve, in-process | {t_ours * 1e3:.1f} ms | cost {cost_ours:.3f} |")
+    print(f"| scipy least_squares (trf), same residuals | {t_scipy * 1e3:.1f} ms | cost {cost_scipy:.3f} |")
+    print(f"| ratio scipy / LMLC | {t_scipy / t_ours:.1f}x | |")
+    print(f"| whole pipeline in-process (robust, uncertainty, workspace) | {t_run * 1e3:.0f} ms | |")
+    print(f"| MCS: 72 of 200 | {t_mcs * 1e3:.0f} ms | |")
+    for method in ("lmlc", "mcs-lmlc"):
+        cmd = [
+            sys.executable,
+            "-m",
+            "station.cli",
+            "calibrate",
+            str(sc.samples),
+            "--robot",
+            str(sc.robot),
+            "--setup",
+            str(sc.setup),
+            "--out",
+            str(folder / "c.toml"),
+            "--method",
+            method,
+        ]
+        t = median_time(lambda cmd=cmd: subprocess.run(cmd, check=True, capture_output=True), 3)
+        print(f"| whole `station calibrate --method {method}` process | {t:.2f} s | |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,255 @@
+"""Robot joint angles: a UR controller over RTDE (``ur_rtde``), or joint registers over Modbus TCP.
+
+Both sources read joints in degrees (the controller sends radians over RTDE; Modbus controllers
+publish scaled integers or floats, declared once in :data:`JOINT_ENCODINGS`).
+
+RTDE notes (ur_rtde 1.6):
+
+- ``RTDEReceiveInterface(host, frequency, variables)`` connects to port 30004 (fixed), holds the
+  GIL and blocks until the first data package arrives. A controller that accepts the TCP
+  connection but never answers would hang it, so :meth:`RtdeJointSource.open` first makes a short
+  protocol probe of its own (a ``V`` request, answered within ``probe_timeout_s``).
+- After the link drops, ``isConnected()`` turns false (EOF at once; a silent controller after
+  ur_rtde's 2.5 s read deadline) and ``read()`` raises :class:`DeviceUnreachable`. The reconnect
+  path is :func:`drivers.base.call_with_reconnect` (close, back off, open). It builds a fresh
+  interface rather than calling ur_rtde's ``reconnect()``, which resets the frequency from the
+  controller version and waits for the first package without checking the link.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import struct
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import rtde_receive
+from pymodbus.client import ModbusTcpClient
+
+from drivers.base import (
+    DeviceReplyError,
+    DeviceTimeout,
+    DeviceUnreachable,
+    Driver,
+    Field,
+    GarbledReply,
+    Reading,
+)
+from drivers.drawstring import ModbusDrawstring
+
+RTDE_PORT = 30004
+RTDE_VARIABLES = ("timestamp", "actual_q", "actual_qd", "robot_mode")
+JOINTS = 6
+
+RTDE_FIELDS = {
+    "q_deg": Field("deg", (JOINTS,), "actual joint positions"),
+    "qd_deg_s": Field("deg/s", (JOINTS,), "actual joint velocities"),
+    "robot_mode": Field("", (), "UR robot mode (7 = RUNNING)"),
+    "controller_time_s": Field("s", (), "controller timestamp of the data package"),
+}
+
+# RTDE protocol-version request and its reply (UR RTDE guide): header uint16 size + uint8 'V'.
+_PROBE_REQUEST = struct.pack(">HBH", 5, ord("V"), 2)
+_PROBE_REPLY = struct.pack(">HBB", 4, ord("V"), 1)
+
+
+class RtdeJointSource(Driver):
+    """Joints of a UR controller at ``host`` over RTDE, read at ``frequency_hz`` (<= 500).
+
+    ``read()`` gives the latest data package; a package older than ``stale_s`` (the controller
+    stopped streaming) raises :class:`DeviceTimeout`.
+    """
+
+    fields = RTDE_FIELDS
+
+    def __init__(
+        self,
+        host: str,
+        frequency_hz: float = 500.0,
+        *,
+        name: str = "robot",
+        stale_s: float = 0.5,
+        probe_timeout_s: float = 1.0,
+    ):
+        if not 0 < frequency_hz <= 500:
+            raise ValueError(f"frequency_hz must be in (0, 500], got {frequency_hz}")
+        self.name = name
+        self.host = host
+        self.frequency_hz = float(frequency_hz)
+        self.stale_s = stale_s
+        self.probe_timeout_s = probe_timeout_s
+        self._rtde = None
+        self._last_stamp = math.nan
+        self._last_change = 0.0
+        self._silent = False  # the last read found no new package for stale_s
+
+    @property
+    def _where(self) -> str:
+        return f"RTDE {self.host}:{RTDE_PORT}"
+
+    def open(self) -> None:
+        """Probe the controller, then start ur_rtde's receive interface."""
+        self._probe()
+        try:
+            self._rtde = rtde_receive.RTDEReceiveInterface(self.host, self.frequency_hz, list(RTDE_VARIABLES))
+        except RuntimeError as exc:
+            if "not found by the controller" in str(exc):
+                raise DeviceReplyError(
+                    self.name, f"{self._where} lacks a variable: {exc}", code="NOT_FOUND"
+                ) from exc
+            raise DeviceUnreachable(self.name, f"{self._where}: {exc}") from exc
+        self._last_stamp, self._last_change = math.nan, time.monotonic()
+
+    def _probe(self) -> None:
+        """Connect and ask for protocol version 2, every step within ``probe_timeout_s``."""
+        try:
+            with socket.create_connection((self.host, RTDE_PORT), self.probe_timeout_s) as s:
+                s.settimeout(self.probe_timeout_s)
+                s.sendall(_PROBE_REQUEST)
+                reply = _recv_exactly(s, len(_PROBE_REPLY))
+        except TimeoutError as exc:
+            raise DeviceTimeout(
+                self.name,
+                f"{self._where} did not answer the protocol request within {self.probe_timeout_s} s",
+            ) from exc
+        except OSError as exc:
+            raise DeviceUnreachable(self.name, f"cannot connect to {self._where}: {exc}") from exc
+        if reply != _PROBE_REPLY:
+            raise GarbledReply(
+                self.name,
+                f"{self._where} answered the protocol request with "
+                f"{reply.hex(' ')}, expected {_PROBE_REPLY.hex(' ')}",
+            )
+
+    def close(self) -> None:
+        """Drop the interface; its destructor pauses the stream (if the link is up) and
+        disconnects. After a silent controller, first let ur_rtde's read deadline (2.5 s) mark
+        the link down: its pause request would otherwise wait for a reply that never comes."""
+        rtde, self._rtde = self._rtde, None
+        if rtde is not None and self._silent:
+            deadline = time.monotonic() + 3.0
+            while rtde.isConnected() and time.monotonic() < deadline:
+                time.sleep(0.01)
+        self._silent = False
+
+    def read(self) -> Reading:
+        if self._rtde is None:  # never opened, or the last reopen failed: retryable
+            raise DeviceUnreachable(self.name, f"{self._where} not connected (open() first)")
+        if not self._rtde.isConnected():
+            raise DeviceUnreachable(self.name, f"{self._where} connection lost")
+        stamp, q, qd, mode = self._consistent_sample()
+        now = time.monotonic()
+        if stamp != self._last_stamp:
+            self._last_stamp, self._last_change = stamp, now
+        elif now - self._last_change > self.stale_s:
+            self._silent = True
+            raise DeviceTimeout(
+                self.name, f"no new data package from {self._where} for {now - self._last_change:.2f} s"
+            )
+        values = {
+            "q_deg": tuple(math.degrees(v) for v in q),
+            "qd_deg_s": tuple(math.degrees(v) for v in qd),
+            "robot_mode": int(mode),
+            "controller_time_s": stamp,
+        }
+        return Reading.now(self.name, values, RTDE_FIELDS)
+
+    def _consistent_sample(self) -> tuple[float, list, list, int]:
+        """Timestamp, q, qd and mode of one package: ur_rtde's getters lock per call, so read
+        again if a newer package landed in between (at most three tries)."""
+        rtde = self._rtde
+        for _ in range(3):
+            stamp = rtde.getTimestamp()
+            sample = (stamp, rtde.getActualQ(), rtde.getActualQd(), rtde.getRobotMode())
+            if rtde.getTimestamp() == stamp:
+                break
+        return sample
+
+
+def _recv_exactly(sock: socket.socket, n: int) -> bytes:
+    """``n`` bytes from ``sock`` (fewer only if the peer closes)."""
+    data = b""
+    while len(data) < n:
+        chunk = sock.recv(n - len(data))
+        if not chunk:
+            break
+        data += chunk
+    return data
+
+
+DataType = ModbusTcpClient.DATATYPE
+
+
+@dataclass(frozen=True)
+class JointEncoding:
+    """How one joint is held in registers: pymodbus data type and degrees per raw count."""
+
+    datatype: DataType
+    deg_per_count: float
+
+
+JOINT_ENCODINGS: dict[str, JointEncoding] = {
+    "int32_mdeg": JointEncoding(DataType.INT32, 0.001),  # signed millidegrees, 2 registers
+    "float32_deg": JointEncoding(DataType.FLOAT32, 1.0),  # IEEE-754 single degrees, 2 registers
+}
+
+
+@dataclass(frozen=True)
+class JointRegisterMap:
+    """Where a controller publishes its six joints: consecutive values from ``address`` (joint 1
+    first), each in ``encoding`` with ``word_order`` (``big``: high word first); the reading is
+    ``q_deg = raw * deg_per_count * scale``. Defaults: holding register 0, device id 1, INT32
+    millidegrees, high word first."""
+
+    address: int = 0
+    encoding: str = "int32_mdeg"
+    word_order: Literal["big", "little"] = "big"
+    scale: float = 1.0
+    device_id: int = 1
+    table: Literal["holding", "input"] = "holding"
+
+    def __post_init__(self):
+        if self.encoding not in JOINT_ENCODINGS:
+            raise ValueError(f"encoding must be one of {sorted(JOINT_ENCODINGS)}, got {self.encoding!r}")
+
+    @property
+    def count(self) -> int:
+        """Registers for all six joints."""
+        return JOINTS * JOINT_ENCODINGS[self.encoding].datatype.value[1]
+
+    def decode_deg(self, registers: list[int]) -> tuple[float, ...]:
+        """Six joint angles (deg) from the raw registers."""
+        enc = JOINT_ENCODINGS[self.encoding]
+        raw = ModbusTcpClient.convert_from_registers(registers, enc.datatype, self.word_order)
+        return tuple(float(r) * enc.deg_per_count * self.scale for r in raw)
+
+    def encode_deg(self, q_deg) -> list[int]:
+        """The registers a controller publishes for ``q_deg`` (inverse of :meth:`decode_deg`;
+        integer encodings round to the nearest count)."""
+        enc = JOINT_ENCODINGS[self.encoding]
+        raw = [q / (enc.deg_per_count * self.scale) for q in q_deg]
+        if enc.datatype is not DataType.FLOAT32:
+            raw = [round(r) for r in raw]
+        return ModbusTcpClient.convert_to_registers(raw, enc.datatype, self.word_order)
+
+
+MODBUS_FIELDS = {"q_deg": Field("deg", (JOINTS,), "joint positions from the controller")}
+
+
+class ModbusJointSource(ModbusDrawstring):
+    """Joints read from a controller's Modbus registers; ``client`` is an unconnected pymodbus
+    ``ModbusTcpClient`` (best with ``retries=0``: :func:`drivers.base.call_with_reconnect` owns
+    retries). Transport, error classification and open/close are the Modbus drawstring's."""
+
+    fields = MODBUS_FIELDS
+
+    def __init__(
+        self, client: ModbusTcpClient, registers: JointRegisterMap = JointRegisterMap(), name: str = "robot"
+    ):
+        super().__init__(client, registers, name)
+
+    def read(self) -> Reading:
+        q_deg = self.registers.decode_deg(self._registers("joint registers"))
+        return Reading.now(self.name, {"q_deg": q_deg}, MODBUS_FIELDS)

@@ -1,0 +1,356 @@
+"""A simulated UR controller's RTDE interface, for the real ``ur_rtde`` client.
+
+The server speaks protocol version 2 (:mod:`sim_fixtures.rtde_wire`): it answers ``V`` (accepts
+version 2 only), ``v`` (an e-Series version, so ur_rtde picks 500 Hz by default), ``O`` (the real
+output types, ``NOT_FOUND`` for names it does not offer), ``I`` (no inputs offered: all
+``NOT_FOUND``), ``S`` and ``P``; after ``S`` it streams ``U`` packages at the recipe's frequency
+until ``P`` or until the client goes away (EOF or reset is a normal end). It never sends a text
+message (``M``): ur_rtde reads exactly one reply per request during the handshake.
+
+The streamed values come from a robot source, anything picklable whose ``state(t_s)`` gives
+``q_deg``, ``qd_deg_s`` and ``robot_mode`` ``t_s`` real seconds after the program started (a
+:class:`~sim_fixtures.robot_program.SimRobot`, or the station simulation's source): ``actual_q`` and
+``target_q`` in radians, ``actual_qd`` / ``target_qd`` in rad/s, ``robot_mode``, and
+``timestamp``, the controller clock: real seconds since the robot program started, so that
+``robot.state(timestamp)`` is exactly what the package carries (a restarted server keeps the
+program's clock, as if only the network had gone). Fields the simulation does not model are
+zeros. Like the real controller, a server that falls behind skips the packages it missed and
+sends the most recent state (their timestamps show the gap); :attr:`RtdeServerProcess.skipped`
+counts them, to tell server lateness from client misses.
+
+ur_rtde's ``RTDEReceiveInterface`` constructor holds the GIL while it waits for the first data
+package, and its port is fixed at 30004: the server must run in another process
+(:class:`RtdeServerProcess`), on its own loopback address (127.0.0.x) when tests run in parallel.
+RTDEReceiveInterface connects to port 30004 only (no dashboard or script port).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import multiprocessing
+import random
+import select
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from sim_fixtures import rtde_wire as wire
+
+RTDE_PORT = 30004
+MAX_FREQUENCY_HZ = 500.0  # e-Series control loop
+SAFETY_NORMAL = 1  # UR safety_mode NORMAL
+RUNTIME_PLAYING = 2  # UR runtime_state PLAYING
+
+
+class RobotSource(Protocol):
+    """The simulated robot: ``state(t_s)`` has ``q_deg``, ``qd_deg_s`` (6 each), ``robot_mode``."""
+
+    def state(self, t_s: float) -> Any: ...
+
+
+@dataclass(frozen=True)
+class ControllerVersion:
+    """What ``v`` reports. Major 5 is e-Series: ur_rtde then defaults (and reconnects) at 500 Hz."""
+
+    major: int = 5
+    minor: int = 12
+    bugfix: int = 0
+    build: int = 0
+
+
+@dataclass
+class _Recipe:
+    """An accepted output recipe: names, types, packing and send period (s)."""
+
+    recipe_id: int
+    names: list[str]
+    types: list[str]
+    fmt: object
+    period_s: float
+
+
+def robot_outputs(robot: RobotSource, t_s: float) -> dict[str, object]:
+    """The modelled output fields ``t_s`` s into the program, in RTDE units (rad, rad/s)."""
+    st = robot.state(t_s)
+    q = tuple(math.radians(v) for v in st.q_deg)
+    qd = tuple(math.radians(v) for v in st.qd_deg_s)
+    return {
+        "timestamp": t_s,
+        "actual_q": q,
+        "target_q": q,
+        "actual_qd": qd,
+        "target_qd": qd,
+        "robot_mode": int(st.robot_mode),
+        "safety_mode": SAFETY_NORMAL,
+        "runtime_state": RUNTIME_PLAYING,
+        "speed_scaling": 1.0,
+        "target_speed_fraction": 1.0,
+    }
+
+
+class _Session:
+    """One client connection: handshake requests, then streaming until pause or EOF."""
+
+    def __init__(self, server: RtdeServer, conn: socket.socket):
+        self.server = server
+        self.conn = conn
+        self.buffer = b""
+        self.recipe: _Recipe | None = None
+        self.next_recipe_id = 1
+        self.streaming = False
+        self.next_send = 0.0
+
+    def run(self) -> None:
+        """Serve until the client leaves or the server stops; socket errors end the session."""
+        with contextlib.suppress(OSError), self.conn:
+            while not self.server.stopping.is_set():
+                if not self._receive(self._wait_s()):
+                    return  # EOF: the client hung up
+                if self.streaming and time.monotonic() >= self.next_send:
+                    self._send_data()
+
+    def _wait_s(self) -> float:
+        """How long to wait for client bytes: until the next data package, at most 0.1 s."""
+        if not self.streaming:
+            return 0.1
+        return min(0.1, max(0.0, self.next_send - time.monotonic()))
+
+    def _receive(self, timeout_s: float) -> bool:
+        """Read and answer whatever requests arrived within ``timeout_s``; False on EOF."""
+        ready, _, _ = select.select([self.conn], [], [], timeout_s)
+        if not ready:
+            return True
+        chunk = self.conn.recv(65536)
+        if not chunk:
+            return False
+        packages, self.buffer = wire.split(self.buffer + chunk)
+        for package in packages:
+            self._answer(package)
+        return True
+
+    def _answer(self, package: wire.Package) -> None:
+        """Reply to one request (data and text packages from the client need no reply)."""
+        kind = package.kind
+        if kind == wire.REQUEST_PROTOCOL_VERSION:
+            version = wire.parse_protocol_request(package.payload)
+            self.conn.sendall(wire.bool_reply(kind, version == wire.PROTOCOL_VERSION))
+        elif kind == wire.GET_URCONTROL_VERSION:
+            v = self.server.version
+            self.conn.sendall(wire.version_reply(v.major, v.minor, v.bugfix, v.build))
+        elif kind == wire.SETUP_OUTPUTS:
+            self.conn.sendall(self._setup_outputs(package.payload))
+        elif kind == wire.SETUP_INPUTS:
+            names = [n for n in package.payload.decode("ascii").split(",") if n]
+            self.conn.sendall(
+                wire.pack(kind, b"\x00" + ",".join([wire.NOT_FOUND] * len(names)).encode("ascii"))
+            )
+        elif kind == wire.START:
+            self.streaming = self.recipe is not None
+            self.next_send = time.monotonic()
+            self.conn.sendall(wire.bool_reply(kind, self.streaming))
+        elif kind == wire.PAUSE:
+            self.streaming = False
+            self.conn.sendall(wire.bool_reply(kind, True))
+
+    def _setup_outputs(self, payload: bytes) -> bytes:
+        """Accept the recipe if every name is known; answer the types either way."""
+        frequency, names = wire.parse_setup_outputs(payload)
+        types = wire.output_types(names)
+        recipe_id = self.next_recipe_id
+        if wire.NOT_FOUND not in types and names:
+            frequency = min(max(frequency, 1.0), MAX_FREQUENCY_HZ)
+            self.recipe = _Recipe(recipe_id, names, types, wire.data_format(types), 1.0 / frequency)
+            self.next_recipe_id += 1
+        return wire.setup_outputs_reply(recipe_id, types)
+
+    def _send_data(self) -> None:
+        """Send the current state; if late by whole periods, skip them as the controller does."""
+        recipe, now = self.recipe, time.monotonic()
+        late = int((now - self.next_send) // recipe.period_s)
+        if late:
+            with self.server.skipped.get_lock():
+                self.server.skipped.value += late
+        scheduled = self.next_send + late * recipe.period_s
+        outputs = self.server.outputs(scheduled)
+        values = wire.values_for(recipe.names, recipe.types, outputs)
+        self.conn.sendall(wire.data_package(recipe.recipe_id, recipe.fmt, recipe.types, values))
+        self.next_send = scheduled + recipe.period_s
+
+
+class RtdeServer:
+    """RTDE on ``(host, port)`` serving ``robot``; one thread per client connection.
+
+    ``start_monotonic`` (``time.monotonic()`` value, shared by every process on the machine) is
+    when the robot program started; simulated devices that share it agree on the robot's pose.
+    """
+
+    def __init__(
+        self,
+        robot: RobotSource,
+        host: str,
+        port: int = RTDE_PORT,
+        *,
+        start_monotonic: float | None = None,
+        version: ControllerVersion = ControllerVersion(),
+        skipped=None,
+    ):
+        self.robot = robot
+        self.skipped = multiprocessing.Value("q", 0) if skipped is None else skipped
+        self.version = version
+        self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
+        self.stopping = threading.Event()
+        self.sessions: list[_Session] = []
+        self.sock = socket.create_server((host, port))  # SO_REUSEADDR: rebinds at once
+        self.address = self.sock.getsockname()[:2]
+
+    def outputs(self, at_monotonic: float) -> dict[str, object]:
+        """Modelled output fields at monotonic time ``at_monotonic``."""
+        return robot_outputs(self.robot, at_monotonic - self.start_monotonic)
+
+    def serve(self, stop) -> None:
+        """Accept clients until ``stop`` (a threading or multiprocessing Event) is set, then close
+        every connection."""
+        threads = []
+        with self.sock:
+            self.sock.settimeout(0.05)
+            while not stop.is_set():
+                try:
+                    conn, _ = self.sock.accept()
+                except TimeoutError:
+                    continue
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                session = _Session(self, conn)
+                self.sessions.append(session)
+                threads.append(threading.Thread(target=session.run, daemon=True))
+                threads[-1].start()
+        self.stopping.set()
+        for t in threads:
+            t.join(timeout=1.0)
+
+
+def _serve_in_child(robot, host, port, start_monotonic, version, skipped, ready, stop) -> None:
+    """Child-process entry: bind, report the address (or the bind error), serve until stopped."""
+    try:
+        server = RtdeServer(
+            robot, host, port, start_monotonic=start_monotonic, version=version, skipped=skipped
+        )
+    except OSError as exc:
+        ready.send(("error", f"cannot bind RTDE server to {host}:{port}: {exc}"))
+        return
+    ready.send(("ok", server.address))
+    server.serve(stop)
+
+
+class RtdeServerProcess:
+    """The RTDE server in a child process (spawned, so no locks or threads are inherited).
+
+    Use as a context manager, or call :meth:`start` / :meth:`stop`. ``start`` returns once the
+    server listens (or raises ``OSError`` naming the address); ``stop`` closes every connection
+    (clients see EOF) and ends the process within ``timeout_s``. A stopped server can be started
+    again on the same address: the controller coming back.
+    """
+
+    def __init__(
+        self,
+        robot: RobotSource,
+        host: str = "127.0.0.1",
+        port: int = RTDE_PORT,
+        *,
+        start_monotonic: float | None = None,
+        version: ControllerVersion = ControllerVersion(),
+        timeout_s: float = 10.0,
+    ):
+        self.robot = robot
+        self.host, self.port = host, port
+        self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
+        self.version = version
+        self.timeout_s = timeout_s
+        self._ctx = multiprocessing.get_context("spawn")
+        self._skipped = self._ctx.Value("q", 0)
+        self._process = None
+        self._stop = None
+
+    @property
+    def pid(self) -> int | None:
+        """The child's process id while it runs (tests freeze it with SIGSTOP)."""
+        return self._process.pid if self.running else None
+
+    @property
+    def skipped(self) -> int:
+        """Data packages skipped because the server was late (all connections, all starts)."""
+        return self._skipped.value
+
+    @property
+    def running(self) -> bool:
+        """Whether the child process is alive."""
+        return self._process is not None and self._process.is_alive()
+
+    def start(self) -> RtdeServerProcess:
+        """Spawn the server and wait until it listens."""
+        if self.running:
+            raise RuntimeError(f"RTDE server on {self.host}:{self.port} is already running")
+        receiver, sender = self._ctx.Pipe(duplex=False)
+        self._stop = self._ctx.Event()
+        self._process = self._ctx.Process(
+            target=_serve_in_child,
+            daemon=True,
+            name=f"rtde-sim-{self.host}",
+            args=(
+                self.robot,
+                self.host,
+                self.port,
+                self.start_monotonic,
+                self.version,
+                self._skipped,
+                sender,
+                self._stop,
+            ),
+        )
+        self._process.start()
+        sender.close()
+        if not receiver.poll(self.timeout_s):
+            self.stop()
+            raise OSError(f"RTDE server on {self.host}:{self.port} did not start within {self.timeout_s} s")
+        status, detail = receiver.recv()
+        receiver.close()
+        if status != "ok":
+            self.stop()
+            raise OSError(detail)
+        return self
+
+    def stop(self) -> None:
+        """Stop serving and end the child (terminate, then kill, if it does not exit)."""
+        if self._process is None:
+            return
+        self._stop.set()
+        self._process.join(self.timeout_s)
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join(1.0)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join(1.0)
+        self._process = None
+
+    def __enter__(self) -> RtdeServerProcess:
+        return self if self.running else self.start()
+
+    def __exit__(self, *exc_info) -> None:
+        self.stop()
+
+
+def start_on_free_loopback(robot: RobotSource, *, attempts: int = 20, **kwargs) -> RtdeServerProcess:
+    """Start a server on a random free address 127.0.0.2 .. 127.0.0.250 (port 30004 is fixed by
+    ur_rtde, so parallel tests and benchmarks each take their own address)."""
+    pick = random.SystemRandom()
+    last = None
+    for _ in range(attempts):
+        server = RtdeServerProcess(robot, f"127.0.0.{pick.randint(2, 250)}", **kwargs)
+        try:
+            return server.start()
+        except OSError as exc:
+            last = exc
+    raise OSError(f"no free loopback address for an RTDE server after {attempts} tries ({last})")

@@ -1,0 +1,169 @@
+"""Every simulated device of a station, composed from one station config (``station sim serve``).
+
+One clock, one cell and one robot program feed all devices, so the drawstring and dial read what
+the simulated true robot's pose implies at the instant they are asked:
+
+- the robot program (:class:`~sim_fixtures.robot_program.SimRobot`) walks the cell's plan at the
+  shared ``time_scale``; its RTDE controller runs in a child process on ``[robot] host``;
+- the drawstring serves over the configured transport (Modbus TCP, Modbus RTU on a linked pty
+  pair, or serial ASCII on a pty) and the dial on a pty at ``[dial] port``;
+- instrument noise: drawstring 0.02 mm, dial 0.002 mm (1 sigma), both with 1 um resolution,
+  each from its own generator seeded by ``[sim] seed``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drivers.ascii import DIALECTS
+from drivers.config import (
+    DrawstringAscii,
+    DrawstringModbusTcp,
+    RobotRtde,
+    StationConfig,
+)
+from sim_fixtures.modbus_device import ModbusDevice
+from sim_fixtures.robot_program import RobotFault, SimRobot
+from sim_fixtures.rtde_server import RtdeServerProcess
+from sim_fixtures.serial_device import SerialAsciiDevice
+from sim_fixtures.sources import CellSource, Instrument, SimClock
+from sim_fixtures.world import World
+from station.errors import InputError
+
+DRAWSTRING_SIGMA_MM = 0.02
+DIAL_SIGMA_MM = 0.002
+RESOLUTION_MM = 0.001
+DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
+
+
+@dataclass(frozen=True)
+class WorldCell:
+    """The simulated world (true robot, anchor, gauge lines) with its plan: ``plan_deg`` (M, 6)
+    true configurations whose TCPs touch the lines, ``plan_lines`` (M,) their line ids."""
+
+    world: World
+    plan_deg: np.ndarray
+    plan_lines: np.ndarray
+
+    def true_length_mm(self, q_deg) -> np.ndarray:
+        return self.world.true_length_mm(q_deg)
+
+    def true_dial_mm(self, q_deg, line_ids) -> np.ndarray:
+        return self.world.true_dial_mm(q_deg, line_ids)
+
+
+@functools.lru_cache(maxsize=4)
+def make_cell(seed: int, targets_per_line: int = 70) -> WorldCell:
+    """The simulated cell of ``[sim] seed``: ``World.create(seed)`` and its plan along each line
+    (the plan's IK is seeded by ``seed`` too, so every caller gets the same targets)."""
+    world = World.create(seed)
+    q, lines = world.line_configurations(targets_per_line, np.random.default_rng([seed, 2]))
+    return WorldCell(world, q, lines)
+
+
+def _pty_link(port: str, section: str) -> Path:
+    """A pty link path from the config; refuses to replace anything that is not a symlink."""
+    path = Path(port)
+    if path.exists() and not path.is_symlink():
+        raise InputError(
+            f"[{section}] port = {port!r}: exists and is not a link; "
+            "sim serve only creates pty links (e.g. /tmp/station-sim/<name>)"
+        )
+    return path
+
+
+class SimStation:
+    """The simulated devices of ``cfg``; ``start()`` returns one address dict per device and
+    ``stop()`` ends them all (safe after a partial start)."""
+
+    def __init__(self, cfg: StationConfig, hold: bool = False, faults: Sequence[RobotFault] = ()):
+        if not isinstance(cfg.robot, RobotRtde):
+            raise InputError(
+                f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE "
+                'controller only (kind = "rtde")'
+            )
+        self.cfg = cfg
+        self.clock = SimClock()
+        cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
+        self.robot = SimRobot(
+            cell.plan_deg,
+            speed_deg_s=cfg.sim.speed_deg_s,
+            accel_deg_s2=cfg.sim.accel_deg_s2,
+            dwell_s=cfg.sim.dwell_s,
+            hold=hold,
+            time_scale=cfg.time_scale,
+            faults=faults,
+            rng=np.random.default_rng([cfg.sim.seed, 3]),
+        )
+        self.source = CellSource(self.robot, cell)
+        rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in range(2)]
+        self._length = Instrument(DRAWSTRING_SIGMA_MM, RESOLUTION_MM, rngs[0])
+        self._dial = Instrument(DIAL_SIGMA_MM, RESOLUTION_MM, rngs[1])
+        self.devices: dict[str, object] = {}
+
+    def measure_length(self) -> float:
+        return self._length.measure(self.source.state(self.clock.now()).length_mm)
+
+    def measure_dial(self) -> float:
+        return self._dial.measure(self.source.state(self.clock.now()).dial_mm)
+
+    def _drawstring(self):
+        ds = self.cfg.drawstring
+        if isinstance(ds, DrawstringAscii):
+            link = _pty_link(ds.port, "drawstring")
+            return SerialAsciiDevice(link, DIALECTS["drawstring"], self.measure_length)
+        regs = ds.registers.register_map(ds.device_id)
+        if isinstance(ds, DrawstringModbusTcp):
+            return ModbusDevice(regs, self.measure_length, tcp=(ds.host, ds.port))
+        link = _pty_link(ds.port, "drawstring")
+        return ModbusDevice(regs, self.measure_length, rtu_link=link, baudrate=ds.baudrate)
+
+    def start(self) -> list[dict]:
+        try:
+            robot = self.cfg.robot
+            self.devices["robot"] = RtdeServerProcess(
+                self.robot, robot.host, start_monotonic=self.clock.start_monotonic
+            ).start()
+            self.devices["drawstring"] = self._drawstring()
+            self.devices["drawstring"].start()
+            if self.cfg.dial:
+                link = _pty_link(self.cfg.dial.port, "dial")
+                self.devices["dial"] = SerialAsciiDevice(
+                    link, DIALECTS[self.cfg.dial.dialect], self.measure_dial, DIAL_RANGE_MM
+                )
+                self.devices["dial"].start()
+        except BaseException:
+            self.stop()
+            raise
+        return [self.address(name) for name in self.devices]
+
+    def address(self, name: str) -> dict:
+        """Where device ``name`` is served, as printed by ``sim serve``."""
+        dev = self.devices[name]
+        if isinstance(dev, RtdeServerProcess):
+            return {
+                "device": name,
+                "protocol": "rtde",
+                "host": dev.host,
+                "port": dev.port,
+                "frequency_hz": self.cfg.robot.frequency_hz,
+            }
+        if isinstance(dev, ModbusDevice):
+            return {"device": name, **dev.address}
+        return {
+            "device": name,
+            "protocol": "serial-ascii",
+            "port": str(dev.port.link),
+            "pty": dev.port.path,
+            "dialect": next(k for k, v in DIALECTS.items() if v is dev.dialect),
+        }
+
+    def stop(self) -> None:
+        for dev in reversed(list(self.devices.values())):
+            dev.stop()
+        self.devices.clear()

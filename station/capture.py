@@ -1,0 +1,220 @@
+"""What a session reads and when: the devices, the settle rule, the capture rule and its gates.
+
+The capture rule (all times in real seconds here: the config's simulated seconds divided by the
+shared ``time_scale``):
+
+1. settled: every joint speed below ``settle_speed_deg_s`` and robot mode RUNNING for ``settle_s``;
+2. gates at the settled pose: the drawstring inside ``length_range_mm`` (outside: cable slack or
+   a jump), the dial inside ``dial_range_mm`` (the indicator touches the gauge edge) -- a failed
+   gate suspends the session rather than recording garbage;
+3. ``readings`` (K) rounds, each reading the robot, the drawstring and the dial once, all inside
+   ``window_s``, and a closing robot reading; rejected if the joints spread more than
+   ``still_deg`` or a joint moved faster than the settle speed (the robot moved), or the
+   drawstring spread more than ``jump_mm`` or the dial more than ``dial_stable_mm`` (a sensor
+   jumped);
+4. the sample is the mean of the K rounds, with the standard deviation of each quantity and the
+   timestamp of every reading.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.base import Backoff, DeviceReplyError, Driver, DriverError, Reading, call_with_reconnect
+from drivers.config import Session as SessionSection
+
+RUNNING = 7  # UR robot_mode RUNNING (RTDE guide)
+
+
+@dataclass(frozen=True)
+class Rules:
+    """The capture rule in real seconds (see the module notes)."""
+
+    settle_speed_deg_s: float
+    settle_s: float
+    readings: int
+    window_s: float
+    still_deg: float
+    jump_mm: float
+    dial_range_mm: tuple[float, float]
+    dial_stable_mm: float
+    length_range_mm: tuple[float, float]
+    match_deg: float
+    target_timeout_s: float
+    unreachable_s: float
+
+    @classmethod
+    def from_config(cls, section: SessionSection, time_scale: float) -> Rules:
+        values = section.model_dump(exclude={"robot_model", "setup"})
+        for key in ("settle_s", "window_s", "target_timeout_s"):
+            values[key] /= time_scale
+        return cls(**values)
+
+    @property
+    def poll_s(self) -> float:
+        """Pause between robot polls while waiting to settle (at least 5 polls per settle time)."""
+        return min(0.01, self.settle_s / 5)
+
+
+class Suspend(Exception):
+    """A condition that pauses the session until it clears; the message says which."""
+
+    def __init__(self, reason: str, device: str | None = None):
+        super().__init__(reason)
+        self.device = device  # set when the device stopped answering
+
+
+class Devices:
+    """The session's opened drivers by name (``robot``, ``drawstring``, optional ``dial``).
+
+    ``read(name)`` retries transient failures with a reconnect; a device that stays silent or
+    answers with an error code raises :class:`Suspend` naming it.
+    """
+
+    def __init__(self, drivers: dict[str, Driver], backoff: Backoff):
+        self.drivers = drivers
+        self.backoff = backoff
+
+    def open(self) -> None:
+        for driver in self.drivers.values():
+            driver.open()
+
+    def close(self) -> None:
+        for driver in self.drivers.values():
+            driver.close()
+
+    def read(self, name: str) -> Reading:
+        driver = self.drivers[name]
+        try:
+            return call_with_reconnect(driver, driver.read, self.backoff)
+        except DeviceReplyError as exc:
+            if name == "dial":
+                raise Suspend(f"dial out of range ({exc.cause})") from exc
+            raise Suspend(str(exc)) from exc
+        except DriverError as exc:
+            raise Suspend(f"{name} not answering: {exc.cause}", device=name) from exc
+
+
+class Settle:
+    """Whether the robot has been still for ``rules.settle_s``: mode RUNNING, every joint speed
+    below ``settle_speed_deg_s`` and every joint within ``still_deg`` of where the still period
+    began. ``ever`` says whether it settled at all since the last :meth:`reset`."""
+
+    def __init__(self, rules: Rules):
+        self.rules = rules
+        self.ever = False
+        self.reset()
+
+    def reset(self) -> None:
+        self.since: float | None = None
+        self.q0: np.ndarray | None = None
+
+    def update(self, robot: Reading) -> bool:
+        q = np.asarray(robot.values["q_deg"], float)
+        speed = float(np.max(np.abs(robot.values["qd_deg_s"])))
+        drift = 0.0 if self.q0 is None else float(np.max(np.abs(q - self.q0)))
+        if (
+            speed >= self.rules.settle_speed_deg_s
+            or robot.values["robot_mode"] != RUNNING
+            or drift > self.rules.still_deg
+        ):
+            self.reset()
+            return False
+        if self.since is None:
+            self.since, self.q0 = robot.t_monotonic, q
+        settled = robot.t_monotonic - self.since >= self.rules.settle_s
+        self.ever |= settled
+        return settled
+
+
+def check_running(robot: Reading) -> None:
+    mode = robot.values["robot_mode"]
+    if mode != RUNNING:
+        raise Suspend(f"robot not running (robot mode {mode}, {RUNNING} = RUNNING)")
+
+
+def check_gates(devices: Devices, rules: Rules) -> None:
+    """The sensor gates at a settled pose; a failed one raises :class:`Suspend`."""
+    length = devices.read("drawstring").values["length_mm"]
+    low, high = rules.length_range_mm
+    if not low <= length <= high:
+        raise Suspend(f"drawstring reads {length:.3f} mm, outside {low:g}..{high:g} mm: cable slack or jump")
+    if "dial" in devices.drivers:
+        dial = devices.read("dial").values["dial_mm"]
+        low, high = rules.dial_range_mm
+        if not low <= dial <= high:
+            raise Suspend(f"dial reads {dial:.3f} mm, outside its gate {low:g}..{high:g} mm")
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One accepted capture: means, standard deviations, window (s) and every raw round."""
+
+    q_deg: np.ndarray
+    length_mm: float
+    dial_mm: float  # NaN without a dial
+    q_spread_deg: float
+    length_spread_mm: float
+    dial_spread_mm: float
+    window_s: float
+    t_wall_s: float
+    raw: list[dict]
+
+
+class Rejected(Exception):
+    """A capture that broke the rule; the message says how."""
+
+
+def capture(devices: Devices, rules: Rules) -> Capture:
+    """K rounds of every device, checked against the rule (:class:`Rejected` if broken)."""
+    has_dial = "dial" in devices.drivers
+    rounds = []
+    for _ in range(rules.readings):
+        rounds.append([devices.read(n) for n in ("robot", "drawstring", "dial") if n != "dial" or has_dial])
+    closing = devices.read("robot")  # brackets the last sensor readings: did the robot leave?
+    t_mono = [r.t_monotonic for rnd in rounds for r in rnd]
+    window = max(t_mono) - min(t_mono)
+    q = np.array([rnd[0].values["q_deg"] for rnd in rounds])
+    robots = [rnd[0] for rnd in rounds] + [closing]
+    qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
+    q_all = np.array([r.values["q_deg"] for r in robots])
+    length = np.array([rnd[1].values["length_mm"] for rnd in rounds])
+    dial = (
+        np.array([rnd[2].values["dial_mm"] for rnd in rounds]) if has_dial else np.full(len(rounds), np.nan)
+    )
+    _check(rules, window, q_all, qd, length, dial)
+    return Capture(
+        q_deg=q.mean(axis=0),
+        length_mm=float(length.mean()),
+        dial_mm=float(dial.mean()),
+        q_spread_deg=float(q.std(axis=0, ddof=1).max()),
+        length_spread_mm=float(length.std(ddof=1)),
+        dial_spread_mm=float(dial.std(ddof=1)) if has_dial else float("nan"),
+        window_s=window,
+        t_wall_s=rounds[0][0].t_wall,
+        raw=[_raw_row(k, rnd) for k, rnd in enumerate(rounds)],
+    )
+
+
+def _check(rules: Rules, window, q, qd, length, dial) -> None:
+    span = lambda a: float(np.ptp(a, axis=0).max())  # noqa: E731
+    if window > rules.window_s:
+        raise Rejected(f"readings took {window * 1e3:.1f} ms, over the {rules.window_s * 1e3:.1f} ms window")
+    if span(q) > rules.still_deg or qd >= rules.settle_speed_deg_s:
+        raise Rejected(f"robot moved (joints spread {span(q):.4f} deg, speed up to {qd:.3f} deg/s)")
+    if span(length) > rules.jump_mm:
+        raise Rejected(f"drawstring jumped ({span(length):.3f} mm within the capture)")
+    if np.all(np.isfinite(dial)) and span(dial) > rules.dial_stable_mm:
+        raise Rejected(f"dial not stable ({span(dial):.4f} mm within the capture)")
+
+
+def _raw_row(k: int, rnd: list[Reading]) -> dict:
+    robot, length = rnd[0], rnd[1]
+    row = {"k": k, "t_robot_s": robot.t_wall, "qd_max_deg_s": float(np.max(np.abs(robot.values["qd_deg_s"])))}
+    row.update({f"q{i + 1}_deg": float(v) for i, v in enumerate(robot.values["q_deg"])})
+    row.update(t_length_s=length.t_wall, length_mm=float(length.values["length_mm"]))
+    if len(rnd) > 2:
+        row.update(t_dial_s=rnd[2].t_wall, dial_mm=float(rnd[2].values["dial_mm"]))
+    return row

@@ -1,0 +1,48 @@
+"""``station sample [--config F] [--plan P.csv] (--out DIR | --resume DIR) [--viewer] [--web]``.
+
+Exit 0 when every target is measured, 130 after Ctrl-C (the sample in flight stored whole),
+1 when a device stays unreachable or no capture happens for the target timeout (the samples
+taken so far are kept: continue with ``--resume DIR``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import configs
+from station import sampling
+from station.errors import InputError
+from station.session import State
+
+EXIT = {State.DONE: 0, State.STOPPED: 130, State.TIMED_OUT: 1}
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("sample", help="a sampling session on the gauge-block lines")
+    p.add_argument("--config", type=Path, help="station config (default: the shipped one, simulated devices)")
+    p.add_argument(
+        "--plan", type=Path, help="plan CSV target,line,q1_deg..q6_deg (default: the simulated cell's)"
+    )
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", type=Path, help="new session folder")
+    where.add_argument("--resume", type=Path, metavar="DIR", help="continue the session in DIR")
+    p.add_argument("--viewer", action="store_true", help="stream to a native Rerun viewer")
+    p.add_argument("--web", action="store_true", help="serve a Rerun web viewer")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    if args.resume:
+        if args.plan:
+            raise InputError("--plan: a resumed session keeps the plan embedded in its session.toml")
+        prep = sampling.resume_session(args.resume, args.config)
+        print(f"resuming {args.resume}: {len(prep.folder.rows)} of {len(prep.plan)} targets measured")
+    else:
+        prep = sampling.new_session(args.out, args.config or configs.path("station.toml"), args.plan)
+    state, view = sampling.run(prep, viewer=args.viewer, web=args.web)
+    view.close()
+    print(
+        f"{state.value}: {len(prep.folder.rows)}/{len(prep.plan)} samples in {prep.folder.samples_csv}; "
+        f"recording {prep.folder.rrd}"
+    )
+    return EXIT[state]

@@ -1,0 +1,56 @@
+"""``station sim serve [--config F] [--hold]``: run the simulated devices until SIGINT/SIGTERM.
+
+Prints one JSON line per device with its address, then serves; on a signal it stops every
+device and removes the pty links.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import threading
+
+import configs
+from drivers.config import load_station_config
+from sim_fixtures.station_sim import SimStation
+from station.errors import DeviceError
+
+
+def register(subparsers) -> None:
+    sim = subparsers.add_parser("sim", help="simulated devices")
+    actions = sim.add_subparsers(dest="action", required=True, metavar="ACTION")
+    serve = actions.add_parser("serve", help="serve the simulated devices until interrupted")
+    serve.add_argument(
+        "--config",
+        default=str(configs.path("station.toml")),
+        help="station config (default: the shipped one, contract addresses)",
+    )
+    serve.add_argument(
+        "--hold", action="store_true", help="keep the simulated robot still at its first target"
+    )
+    serve.set_defaults(func=serve_command)
+
+
+def serve_command(args) -> int:
+    cfg = load_station_config(args.config)
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # faults are reported by drivers
+    stop = threading.Event()
+    station = SimStation(cfg, hold=args.hold)
+    try:
+        # Children start with Ctrl-C ignored (a terminal sends it to the whole process group):
+        # this process alone handles it and stops them.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            addresses = station.start()
+        except (OSError, RuntimeError) as exc:
+            raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda *_: stop.set())
+        for address in addresses:
+            print(json.dumps(address), flush=True)
+        while not stop.wait(0.5):
+            pass
+    finally:
+        station.stop()
+    return 0

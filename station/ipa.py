@@ -1,0 +1,106 @@
+"""Reader for the IPA robot-accuracy dataset (Landgraf et al., CASE 2021; MIT licence).
+
+A series is a ``;``-separated CSV with decimal commas and a header row. Used columns: the joint
+readings ``shoulder_pan_joint`` ... ``wrist_3_joint`` [rad] and the tracker's measurement of the
+T-Mac probe ``measurement_x/y/z`` [mm, tracker frame]; the rest (goal poses in m / rad, rotations in
+degrees, standard deviations, temperature, time stamps) is not needed for positions. Beside it,
+``Trafo_TM_F_init.txt`` holds the initial T-Mac-to-flange transform, a 4x4 matrix [mm], whose
+inverse's translation is the probe point in the flange frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from station.errors import InputError
+
+JOINT_COLUMNS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+POSITION_COLUMNS = ("measurement_x", "measurement_y", "measurement_z")
+PROBE_FILE = "Trafo_TM_F_init.txt"
+
+
+@dataclass(frozen=True)
+class IpaSeries:
+    """One measured series: joint readings ``q_rad`` (N, 6) and probe positions ``position_mm``
+    (N, 3) in the tracker frame, read from ``path``."""
+
+    path: Path
+    q_rad: np.ndarray
+    position_mm: np.ndarray
+
+    def __len__(self) -> int:
+        return self.q_rad.shape[0]
+
+
+def read_series(path) -> IpaSeries:
+    """Read a series CSV. Raises InputError naming the file, row or column on bad input."""
+    path = Path(path)
+    lines = _read_lines(path)
+    if not lines:
+        raise InputError(f"{path}: empty file, expected a ';'-separated header row")
+    header = [h.strip() for h in lines[0].split(";")]
+    missing = [c for c in JOINT_COLUMNS + POSITION_COLUMNS if c not in header]
+    if missing:
+        raise InputError(f"{path}: missing column {missing[0]!r} (not an IPA series file?)")
+    cols = [header.index(c) for c in JOINT_COLUMNS + POSITION_COLUMNS]
+    rows = [_parse_row(path, k, line, len(header), cols) for k, line in enumerate(lines[1:], start=2)]
+    if not rows:
+        raise InputError(f"{path}: no data rows after the header")
+    values = np.array(rows)
+    return IpaSeries(path, values[:, :6], values[:, 6:])
+
+
+def read_probe_mm(path) -> np.ndarray:
+    """Probe point in the flange frame [mm] (3,) from a ``Trafo_TM_F_init*.txt`` 4x4 matrix that
+    gives the flange in the T-Mac frame: the point is ``-R^T t``."""
+    path = Path(path)
+    text = _read_lines(path)
+    try:
+        matrix = np.array([[float(v) for v in line.split()] for line in text if line.strip()])
+    except ValueError as exc:
+        raise InputError(f"{path}: not a matrix of numbers ({exc})") from None
+    if matrix.shape != (4, 4):
+        raise InputError(f"{path}: expected a 4x4 matrix, got shape {matrix.shape}")
+    rot, t = matrix[:3, :3], matrix[:3, 3]
+    if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-4):
+        raise InputError(f"{path}: the upper-left 3x3 block is not a rotation")
+    return -rot.T @ t
+
+
+def probe_file_for(series_path) -> Path:
+    """The initial probe transform beside a series file."""
+    return Path(series_path).parent / PROBE_FILE
+
+
+def _read_lines(path: Path) -> list[str]:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
+    return [line for line in text.splitlines() if line.strip()]
+
+
+def _parse_row(path: Path, lineno: int, line: str, n_fields: int, cols: list[int]) -> list[float]:
+    fields = line.split(";")
+    if len(fields) != n_fields:
+        raise InputError(f"{path}: line {lineno}: {len(fields)} fields, the header has {n_fields}")
+    out = []
+    for c in cols:
+        try:
+            out.append(float(fields[c].strip().replace(",", ".")))
+        except ValueError:
+            name = (JOINT_COLUMNS + POSITION_COLUMNS)[cols.index(c)]
+            raise InputError(f"{path}: line {lineno}, column {name!r}: not a number: {fields[c]!r}") from None
+    if not np.all(np.isfinite(out)):
+        raise InputError(f"{path}: line {lineno}: non-finite value")
+    return out

@@ -1,0 +1,201 @@
+"""A sampling session as a small state machine, in the manner of bluesky's run engine.
+
+States: WAITING (for the robot to settle at an unfinished target) -> CAPTURING -> WAITING ...;
+SUSPENDED while a suspender holds (robot not running, a sensor out of its gate, a device not
+answering), back to WAITING by itself when it clears; and the ends DONE (every target measured),
+STOPPED (stop requested: Ctrl-C), TIMED_OUT (no capture for ``target_timeout_s``).
+
+Checkpoints sit between captures and between polls: a stop request is honoured there, so the
+sample in flight is always stored whole. A capture is assigned to the nearest target of the plan
+(joint space, max |dq| within ``match_deg``); if that target is finished already (the robot
+revisits it) nothing is captured, so a resumed session never duplicates a target.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.capture import (
+    Capture,
+    Devices,
+    Rejected,
+    Rules,
+    Settle,
+    Suspend,
+    capture,
+    check_gates,
+    check_running,
+)
+from station.errors import DeviceError
+from station.plan import Plan
+from station.session_files import SessionFolder
+
+
+class State(enum.Enum):
+    WAITING = "waiting"
+    CAPTURING = "capturing"
+    SUSPENDED = "suspended"
+    DONE = "done"
+    STOPPED = "stopped"
+    TIMED_OUT = "timed out"
+
+
+@dataclass
+class Listener:
+    """What a session reports: ``sample(row, capture)`` after each stored sample and
+    ``message(text)`` on every state change worth telling the operator."""
+
+    sample: Callable[[dict, Capture], None] = lambda row, cap: None
+    message: Callable[[str], None] = lambda text: None
+
+
+class Session:
+    """Run ``plan`` against ``devices`` into ``folder`` under the capture ``rules``."""
+
+    def __init__(
+        self,
+        folder: SessionFolder,
+        plan: Plan,
+        devices: Devices,
+        rules: Rules,
+        listener: Listener | None = None,
+    ):
+        self.folder, self.plan, self.devices, self.rules = folder, plan, devices, rules
+        self.listener = listener or Listener()
+        self.state = State.WAITING
+        self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
+        self.settle = Settle(rules)
+        self.rejected = 0
+        self._stop = False
+        self._t0_wall = float(folder.header["start_wall_s"])
+
+    def request_stop(self) -> None:
+        """Stop at the next checkpoint (safe from a signal handler)."""
+        self._stop = True
+
+    def run(self) -> State:
+        """Until every target is measured, a stop request, or the target timeout."""
+        last_progress = time.monotonic()
+        while self.pending:
+            if self._stop:
+                return self._end(State.STOPPED, "stopped on request")
+            try:
+                if self._step():
+                    last_progress = time.monotonic()
+                    self.settle.ever = False
+            except Suspend as why:
+                self._suspended(why)
+                self.settle.reset()
+                self.settle.ever = False
+                last_progress = time.monotonic()
+                continue
+            if time.monotonic() - last_progress > self.rules.target_timeout_s:
+                return self._end(State.TIMED_OUT, self._timeout_message())
+            time.sleep(self.rules.poll_s)
+        return self._end(State.DONE, f"all {len(self.plan)} targets measured")
+
+    def _step(self) -> bool:
+        """One poll: True when a sample was stored. Raises :class:`Suspend`."""
+        robot = self.devices.read("robot")
+        check_running(robot)
+        if not self.settle.update(robot):
+            return False
+        index = self._match(np.asarray(robot.values["q_deg"]))
+        if index is None:
+            return False
+        check_gates(self.devices, self.rules)
+        self.state = State.CAPTURING
+        try:
+            cap = capture(self.devices, self.rules)
+        except Rejected as why:
+            self.rejected += 1
+            self.listener.message(f"capture at target {int(self.plan.target[index])} rejected: {why}")
+            self.settle.reset()
+            return False
+        finally:
+            self.state = State.WAITING
+        self._store(index, cap)
+        return True
+
+    def _match(self, q_deg: np.ndarray) -> int | None:
+        """Index of the plan target nearest to ``q_deg`` if it is unfinished and within ``match_deg``."""
+        dist = np.max(np.abs(self.plan.q_deg - q_deg), axis=1)
+        nearest = int(np.argmin(dist))
+        if dist[nearest] > self.rules.match_deg or nearest not in self.pending:
+            return None
+        return nearest
+
+    def _store(self, index: int, cap: Capture) -> None:
+        row = {
+            "sample": self.folder.next_sample,
+            "target": int(self.plan.target[index]),
+            "line": int(self.plan.line[index]),
+            **{f"q{i + 1}_deg": float(v) for i, v in enumerate(cap.q_deg)},
+            "length_mm": cap.length_mm,
+            "dial_mm": "" if np.isnan(cap.dial_mm) else cap.dial_mm,
+            "t_s": cap.t_wall_s - self._t0_wall,
+            "q_spread_deg": cap.q_spread_deg,
+            "length_spread_mm": cap.length_spread_mm,
+            "dial_spread_mm": "" if np.isnan(cap.dial_spread_mm) else cap.dial_spread_mm,
+            "window_s": cap.window_s,
+            "t_wall_s": cap.t_wall_s,
+        }
+        self.folder.append(row, [{"sample": row["sample"], **r} for r in cap.raw])
+        self.pending.remove(index)
+        self.listener.sample(row, cap)
+
+    def _suspended(self, first: Suspend) -> None:
+        """Stay SUSPENDED, re-checking every 0.1 s, until the condition clears (or a stop request).
+        A device silent for longer than ``unreachable_s`` ends the session (DeviceError)."""
+        self.state = State.SUSPENDED
+        self.listener.message(f"suspended: {first}")
+        why, silent_since = first, time.monotonic()
+        while not self._stop:
+            time.sleep(0.1)
+            try:
+                self._check_cleared(why)
+                break
+            except Suspend as still:
+                why = still
+                silent_since = silent_since if still.device else time.monotonic()
+                if time.monotonic() - silent_since > self.rules.unreachable_s:
+                    raise DeviceError(
+                        f"{still} (silent for over {self.rules.unreachable_s:g} s; "
+                        f"{len(self.folder.rows)} samples kept)"
+                    ) from still
+        self.state = State.WAITING
+        if not self._stop:
+            self.listener.message("resumed")
+
+    def _check_cleared(self, why: Suspend) -> None:
+        """Raise :class:`Suspend` unless ``why`` has cleared: the silent device answers, the robot
+        runs, and, if the robot is settled, the sensor gates pass (a robot moving on clears them)."""
+        if why.device:
+            self.devices.read(why.device)
+        robot = self.devices.read("robot")
+        check_running(robot)
+        if self.settle.update(robot):
+            check_gates(self.devices, self.rules)
+
+    def _timeout_message(self) -> str:
+        scale = self.folder.header["station"].get("time_scale", 1.0)
+        waited = self.rules.target_timeout_s * scale
+        if not self.settle.ever:
+            why = (
+                f"the robot never settled (still means joint speeds below "
+                f"{self.rules.settle_speed_deg_s:g} deg/s and joints within {self.rules.still_deg:g} deg "
+                f"for {self.rules.settle_s * scale:g} s)"
+            )
+        else:
+            why = "the robot settled only at finished targets or away from the plan"
+        return f"no capture for {waited:g} s: {why}"
+
+    def _end(self, state: State, text: str) -> State:
+        self.state = state
+        self.listener.message(f"{state.value}: {text}; {len(self.folder.rows)} samples in {self.folder.path}")
+        return state

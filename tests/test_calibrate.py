@@ -1,0 +1,104 @@
+"""Recovery of the simulated truth by the whole pipeline (station.calibration on contract files)."""
+
+import numpy as np
+import pytest
+
+from calib.calibrate import identify
+from calib.identifiability import structural_holds
+from calib.kinematics import tcp_position
+from calib.metrics import aligned_errors
+from calib.params import DH_NAMES, dh_from_degrees
+from station import calibration
+from station.files import load_robot, load_samples, load_setup
+
+
+def _run(sc):
+    return calibration.run(
+        load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup), holdout=load_samples(sc.holdout)
+    )
+
+
+def _noise_floor(sc) -> float:
+    """RMS of the hold-out drawstring residuals under the TRUE robot and anchor: what no
+    calibration can beat (reading noise + joint-reading noise seen through the arm)."""
+    w, test = sc.world, sc.test
+    p = w.true_tcp_mm(test.q_deg)
+    model = np.linalg.norm(p - w.anchor_mm, axis=1) - w.length_offset_mm
+    return float(np.sqrt(np.mean((test.length_mm - model) ** 2)))
+
+
+def _workspace_rms(sc, x) -> float:
+    q = sc.world.random_configurations(1000, np.random.default_rng(99))
+    p = tcp_position(x[:24].reshape(6, 4), np.radians(q), np.zeros(3))
+    return float(np.sqrt(np.mean(aligned_errors(p, sc.world.true_tcp_mm(q)) ** 2)))
+
+
+@pytest.fixture(scope="module")
+def three(three_lines):
+    return three_lines, _run(three_lines)
+
+
+def test_three_lines_reach_the_noise_floor_on_holdout(three):
+    sc, out = three
+    floor = _noise_floor(sc)
+    # 150 rows, ~40 unknowns: parameter noise inflates the hold-out RMS by about sqrt(1 + p/n) ~ 1.13
+    assert out.report["after"]["holdout"]["rmse_mm"] < 1.3 * floor
+    assert out.report["before"]["holdout"]["rmse_mm"] > 5 * floor
+
+
+def test_three_lines_correct_the_whole_workspace(three):
+    sc, out = three
+    nominal, after = _workspace_rms(sc, out.calibration.before.x), _workspace_rms(sc, out.calibration.x)
+    assert nominal > 2.0  # the simulated arm is millimetres off
+    assert after < nominal / 10
+
+
+def test_setup_unknowns_recovered(three):
+    sc, out = three
+    assert np.linalg.norm(np.array(out.report["anchor_mm"]) - sc.world.anchor_mm) < 5.0  # from +-30 mm
+    assert abs(out.report["length_offset_mm"] - sc.world.length_offset_mm) < 2.0  # from +-8 mm
+
+
+def test_one_line_reaches_the_noise_floor_on_its_line(one_line):
+    out = _run(one_line)
+    assert out.report["after"]["holdout"]["rmse_mm"] < 1.3 * _noise_floor(one_line)
+    assert "anchor.about_line_mm" in {h["param"] for h in out.report["held"]}
+
+
+def test_structural_holds_agree_with_the_numbers(three):
+    sc, out = three
+    dh = dh_from_degrees(load_robot(sc.robot).table_deg())
+    structural = structural_holds(dh, np.zeros(3), "anchor and the lines")
+    held = {h["param"] for h in out.report["held"]}
+    assert set(structural) <= held
+    assert {"J1.theta_deg", "J1.d_mm", "J3.d_mm", "J6.theta_deg", "J6.alpha_deg"} <= set(structural)
+    # The numbers alone (no structural knowledge offered) must hold every structural case too.
+    model = calibration.build_model(
+        load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup), "setup"
+    )
+    table, numeric_held, _ = identify(model, out.calibration.before.x, model.setup_mask, {}, rtol=1e-6)
+    assert set(structural) <= set(numeric_held)
+    assert not table[[DH_NAMES.index(n) for n in structural]].any()
+
+
+def test_outliers_are_downweighted_and_do_not_drag_the_table(outliers, three):
+    sc_clean, clean = three
+    out = _run(outliers)
+    assert set(outliers.train.outliers) <= set(out.report["downweighted"])
+    assert len(out.report["downweighted"]) <= len(outliers.train.outliers) + 0.02 * len(outliers.train)
+    assert _workspace_rms(outliers, out.calibration.x) < 1.5 * _workspace_rms(sc_clean, clean.calibration.x)
+
+
+def test_predicted_workspace_error_matches_the_truth_within_2x(three):
+    sc, out = three
+    predicted, true = out.report["workspace"]["predicted_rmse_mm"], _workspace_rms(sc, out.calibration.x)
+    assert true / 2 < predicted < 2 * true
+    assert not out.report["warnings"]
+
+
+def test_one_line_is_not_reported_as_perfect(one_line):
+    # One line fits itself to the noise but cannot deliver the workspace: the report must say so.
+    # (Its prediction runs low: 1.2 mm against a true 2.4 mm on this seed; see issue 3's note.)
+    out = _run(one_line)
+    assert out.report["workspace"]["predicted_rmse_mm"] > 20 * out.report["after"]["train"]["rmse_mm"]
+    assert any("predicted workspace error" in w for w in out.report["warnings"])

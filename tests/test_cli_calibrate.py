@@ -1,0 +1,197 @@
+"""`station calibrate` as a user runs it: outputs on success, one-line errors (exit 2) on bad input."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+import tomli_w
+import tomllib
+
+from station.cli import main
+
+
+def _cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_calibrate_writes_table_and_report(three_lines, tmp_path, capsys):
+    sc = three_lines
+    out, rep = tmp_path / "corrected.toml", tmp_path / "report.json"
+    code, text, _ = _cli(
+        capsys,
+        "calibrate",
+        sc.samples,
+        "--robot",
+        sc.robot,
+        "--setup",
+        sc.setup,
+        "--out",
+        out,
+        "--holdout",
+        sc.holdout,
+        "--report",
+        rep,
+    )
+    assert code == 0
+    assert "holdout after" in text
+    report = json.loads(rep.read_text())
+    for key in (
+        "kind",
+        "method",
+        "before",
+        "after",
+        "anchor_mm",
+        "length_offset_mm",
+        "lines",
+        "identified",
+        "held",
+        "parameters",
+        "downweighted",
+        "workspace",
+        "warnings",
+        "iterations",
+        "time_s",
+    ):
+        assert key in report, key
+    # The corrected table reads back as a robot model and calibrates again.
+    code, _, _ = _cli(
+        capsys, "calibrate", sc.samples, "--robot", out, "--setup", sc.setup, "--out", tmp_path / "again.toml"
+    )
+    assert code == 0
+
+
+def test_console_script_runs_without_traceback(three_lines, tmp_path):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "station.cli",
+            "calibrate",
+            str(tmp_path / "nope.csv"),
+            "--robot",
+            str(three_lines.robot),
+            "--out",
+            str(tmp_path / "c.toml"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().count("\n") == 0 and "Traceback" not in proc.stderr
+    assert "nope.csv" in proc.stderr and "no such file" in proc.stderr
+
+
+def _lines(path):
+    return path.read_text().splitlines()
+
+
+CSV_CASES = {
+    "missing column": (lambda h, rows: (h.replace("q3_deg", "q3"), rows), "missing column q3_deg"),
+    "text in a number": (
+        lambda h, rows: (h, [rows[0].replace(rows[0].split(",")[4], "abc", 1)] + rows[1:]),
+        "row 0 (line 2): q3_deg: 'abc' is not a finite number",
+    ),
+    "NaN in a number": (
+        lambda h, rows: (h, rows[:5] + [rows[5].replace(rows[5].split(",")[-2], "nan")] + rows[6:]),
+        "row 5 (line 7): length_mm: 'nan' is not a finite number",
+    ),
+    "empty file": (lambda h, rows: ("", []), "empty file"),
+    "fewer samples than parameters": (lambda h, rows: (h, rows[:10]), "10 samples cannot determine"),
+    "both length and position": (
+        lambda h, rows: (h + ",x_mm,y_mm,z_mm", [r + ",1,2,3" for r in rows]),
+        "has both length_mm and x_mm",
+    ),
+    "neither length nor position": (
+        lambda h, rows: (h.replace("length_mm", "len"), rows),
+        "has neither length_mm",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", CSV_CASES)
+def test_bad_samples_csv(case, three_lines, tmp_path, capsys):
+    edit, message = CSV_CASES[case]
+    header, *rows = _lines(three_lines.samples)
+    header, rows = edit(header, rows)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join([header, *rows]) + ("\n" if header else ""))
+    out = tmp_path / "out.toml"
+    code, _, err = _cli(
+        capsys, "calibrate", bad, "--robot", three_lines.robot, "--setup", three_lines.setup, "--out", out
+    )
+    assert code == 2
+    assert err.count("\n") == 1 and str(bad) in err and message in err
+    assert not out.exists()
+
+
+def test_robot_with_five_joints(three_lines, tmp_path, capsys):
+    text = three_lines.robot.read_text()
+    robot = tmp_path / "robot.toml"
+    robot.write_text(text[: text.rindex("[[joints]]")])
+    code, _, err = _cli(
+        capsys,
+        "calibrate",
+        three_lines.samples,
+        "--robot",
+        robot,
+        "--setup",
+        three_lines.setup,
+        "--out",
+        tmp_path / "o.toml",
+    )
+    assert code == 2 and str(robot) in err and "joints: expected 6 joints, got 5" in err
+    assert not (tmp_path / "o.toml").exists()
+
+
+def test_setup_anchor_with_two_numbers(three_lines, tmp_path, capsys):
+    setup = tmp_path / "setup.toml"
+    data = tomllib.loads(three_lines.setup.read_text())
+    data["drawstring"]["anchor_mm"] = [1.0, 2.0]
+    setup.write_text(tomli_w.dumps(data))
+    code, _, err = _cli(
+        capsys,
+        "calibrate",
+        three_lines.samples,
+        "--robot",
+        three_lines.robot,
+        "--setup",
+        setup,
+        "--out",
+        tmp_path / "o.toml",
+    )
+    assert code == 2 and "drawstring.anchor_mm: expected 3 numbers, got 2" in err and str(setup) in err
+    assert not (tmp_path / "o.toml").exists()
+
+
+def test_path_that_does_not_exist(three_lines, tmp_path, capsys):
+    code, _, err = _cli(
+        capsys,
+        "calibrate",
+        three_lines.samples,
+        "--robot",
+        tmp_path / "no.toml",
+        "--setup",
+        three_lines.setup,
+        "--out",
+        tmp_path / "o.toml",
+    )
+    assert code == 2 and "no.toml: no such file" in err
+
+
+def test_unwritable_output_folder(three_lines, tmp_path, capsys):
+    code, _, err = _cli(
+        capsys,
+        "calibrate",
+        three_lines.samples,
+        "--robot",
+        three_lines.robot,
+        "--setup",
+        three_lines.setup,
+        "--out",
+        tmp_path / "missing" / "o.toml",
+    )
+    assert code == 2 and "does not exist" in err

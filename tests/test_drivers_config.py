@@ -1,0 +1,103 @@
+"""Station config: the shipped file validates and builds drivers; bad files fail with one line
+naming the file, the key and the problem."""
+
+import pytest
+
+import configs
+from drivers.config import load_station_config
+from drivers.dial import DialIndicator
+from drivers.drawstring import AsciiDrawstring, ModbusDrawstring, RegisterMap
+from station.errors import InputError
+
+MINIMAL = """
+[robot]
+kind = "rtde"
+[drawstring]
+kind = "modbus_rtu"
+port = "/dev/ttyUSB1"
+device_id = 7
+[drawstring.registers]
+address = 40
+encoding = "float32_mm"
+word_order = "little"
+"""
+
+
+def test_shipped_config_points_at_the_contract_addresses():
+    cfg = load_station_config(configs.path("station.toml"))
+    assert (cfg.robot.kind, cfg.robot.host, cfg.robot.frequency_hz) == ("rtde", "127.0.0.1", 500)
+    assert (cfg.drawstring.kind, cfg.drawstring.host, cfg.drawstring.port) == (
+        "modbus_tcp",
+        "127.0.0.1",
+        5020,
+    )
+    assert cfg.dial.port == "/tmp/station-sim/dial" and cfg.dial.dialect == "sylvac"
+    assert isinstance(cfg.drawstring.build(), ModbusDrawstring)
+    assert isinstance(cfg.dial.build(), DialIndicator)
+
+
+def test_defaults_and_register_map(tmp_path):
+    path = tmp_path / "station.toml"
+    path.write_text(MINIMAL)
+    cfg = load_station_config(path)
+    assert cfg.dial is None and cfg.time_scale == 1.0 and cfg.reconnect.attempts == 4
+    driver = cfg.drawstring.build()
+    assert driver.registers == RegisterMap(
+        address=40, encoding="float32_mm", word_order="little", device_id=7
+    )
+    assert driver.client.comm_params.baudrate == 115200
+    assert list(cfg.devices()) == ["robot", "drawstring"]
+
+
+def test_ascii_drawstring_and_mitutoyo_dial(tmp_path):
+    path = tmp_path / "station.toml"
+    path.write_text(
+        '[robot]\nkind = "rtde"\n[drawstring]\nkind = "ascii"\nport = "/dev/ttyS0"\n'
+        '[dial]\nport = "/dev/ttyS1"\ndialect = "mitutoyo"\n'
+    )
+    cfg = load_station_config(path)
+    assert isinstance(cfg.drawstring.build(), AsciiDrawstring)
+    assert cfg.dial.build().dialect.request == b"R\r"
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (("address = 40", "address = -1"), r"drawstring\.registers\.address: Input should be greater"),
+        (('encoding = "float32_mm"', 'encoding = "int16"'), r"drawstring\.registers\.encoding: "),
+        (('kind = "rtde"', 'kind = "ros"'), r"robot: Input tag 'ros' found using 'kind' does not"),
+        (("device_id = 7", "device_id = 7\nbaud = 9600"), r"drawstring\.baud: Extra inputs"),
+        (('[robot]\nkind = "rtde"', ""), r": robot: Field required"),
+    ],
+)
+def test_bad_key_names_file_and_key(tmp_path, edit, message):
+    path = tmp_path / "station.toml"
+    path.write_text(MINIMAL.replace(*edit))
+    with pytest.raises(InputError, match=message) as info:
+        load_station_config(path)
+    assert str(info.value).startswith(f"{path}: ") and "\n" not in str(info.value)
+
+
+def test_unreadable_or_broken_file(tmp_path):
+    with pytest.raises(InputError, match="missing.toml: cannot read"):
+        load_station_config(tmp_path / "missing.toml")
+    (tmp_path / "bad.toml").write_text("[robot\n")
+    with pytest.raises(InputError, match="bad.toml: not valid TOML"):
+        load_station_config(tmp_path / "bad.toml")
+
+
+def test_modbus_joint_robot_section_builds_its_driver(tmp_path):
+    path = tmp_path / "station.toml"
+    path.write_text(
+        MINIMAL.replace(
+            'kind = "rtde"',
+            'kind = "modbus_tcp"\nhost = "10.0.0.5"\naddress = 200\nencoding = "float32_deg"\ndevice_id = 2',
+        )
+    )
+    robot = load_station_config(path).robot.build()
+    assert robot.name == "robot" and robot.client.comm_params.host == "10.0.0.5"
+    assert (robot.registers.address, robot.registers.encoding, robot.registers.device_id) == (
+        200,
+        "float32_deg",
+        2,
+    )

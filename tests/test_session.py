@@ -1,0 +1,275 @@
+"""``station sample`` against the simulated devices (real drivers, real protocols): the capture rule
+against the simulated truth, the session folder, the .rrd, and the faults of issue 5.
+
+Each test starts its own simulated station on non-contract addresses (RTDE on a random
+127.0.0.x, Modbus on a free port, the dial's pty link in tmp_path), with 3 targets per line and
+simulated time 30x, so a whole session takes a second or two.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomli_w
+from rerun.chunk import RrdReader
+
+from drivers.config import StationConfig
+from sim_fixtures.robot_program import RobotFault
+from sim_fixtures.station_sim import DIAL_SIGMA_MM, DRAWSTRING_SIGMA_MM, SimStation, make_cell
+from station import cli, sampling
+from station.files import load_samples, load_session
+from station.session import State
+
+ROOT = Path(__file__).resolve().parents[1]
+PER_LINE = 3
+N_TARGETS = 3 * PER_LINE
+K = 5  # readings per capture (default rule)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def write_config(folder: Path, **session) -> Path:
+    raw = {
+        "time_scale": 30.0,
+        "robot": {"kind": "rtde", "host": f"127.0.0.{random.randint(2, 250)}"},
+        "drawstring": {"kind": "modbus_tcp", "port": _free_port()},
+        "dial": {"port": str(folder / "dial")},
+        "reconnect": {"attempts": 2, "initial_s": 0.05},
+        "session": session,
+        "sim": {"speed_deg_s": 120.0, "accel_deg_s2": 480.0, "dwell_s": 2.0, "targets_per_line": PER_LINE},
+    }
+    path = folder / "station.toml"
+    path.write_text(tomli_w.dumps(raw))
+    return path
+
+
+@contextlib.contextmanager
+def simulated(config: Path, faults=()):
+    raw = __import__("tomllib").loads(config.read_text())
+    sim = SimStation(StationConfig.model_validate(raw), faults=faults)
+    sim.start()
+    try:
+        yield sim
+    finally:
+        sim.stop()
+
+
+def rows_of(folder: Path) -> list[dict]:
+    with (folder / "samples.csv").open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """One whole session, run in-process: (session folder, messages)."""
+    tmp = tmp_path_factory.mktemp("session")
+    config = write_config(tmp)
+    messages = []
+    with simulated(config):
+        prep = sampling.new_session(tmp / "sess", config, None)
+        state, view = sampling.run(prep, stream=_Sink(messages))
+        view.close()
+    assert state is State.DONE
+    return tmp / "sess", messages
+
+
+class _Sink:
+    """A non-terminal output stream that keeps what was written."""
+
+    def __init__(self, into: list):
+        self.into = into
+
+    def isatty(self) -> bool:
+        return False
+
+    def write(self, text: str) -> None:
+        self.into.append(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def test_every_target_once_and_readings_match_the_simulated_truth(finished):
+    folder, _ = finished
+    rows = rows_of(folder)
+    assert sorted(int(r["target"]) for r in rows) == list(range(N_TARGETS))
+    assert [int(r["sample"]) for r in rows] == list(range(N_TARGETS))
+    world = make_cell(0, PER_LINE).world
+    q = np.array([[float(r[f"q{i}_deg"]) for i in range(1, 7)] for r in rows])
+    lines = np.array([int(r["line"]) for r in rows])
+    # Means of K readings: 5 standard errors of the mean, plus half the 1 um resolution.
+    length_err = np.array([float(r["length_mm"]) for r in rows]) - world.true_length_mm(q)
+    dial_err = np.array([float(r["dial_mm"]) for r in rows]) - world.true_dial_mm(q, lines)
+    assert np.max(np.abs(length_err)) < 5 * DRAWSTRING_SIGMA_MM / np.sqrt(K) + 0.0005
+    assert np.max(np.abs(dial_err)) < 5 * DIAL_SIGMA_MM / np.sqrt(K) + 0.0005
+    spreads = np.array([float(r["length_spread_mm"]) for r in rows])
+    assert 0 < np.median(spreads) < 3 * DRAWSTRING_SIGMA_MM
+
+
+def test_session_folder_loads_for_calibration_with_every_reading(finished):
+    folder, _ = finished
+    robot, setup, samples_path = load_session(folder)
+    assert robot.name == "HSR-JR680" and setup.drawstring is not None
+    assert len(load_samples(samples_path)) == N_TARGETS
+    with (folder / "raw.csv").open(newline="") as fh:
+        raw = list(csv.DictReader(fh))
+    assert len(raw) == K * N_TARGETS
+    stamps = np.array([[float(r["t_robot_s"]), float(r["t_length_s"]), float(r["t_dial_s"])] for r in raw])
+    assert np.all(np.diff(stamps.ravel()) >= 0)  # robot, drawstring, dial, in turn, round after round
+
+
+def test_rrd_holds_the_live_view_entities(finished):
+    folder, _ = finished
+    chunks = RrdReader(folder / "session.rrd").stream().to_chunks()
+    entities = {c.entity_path for c in chunks}
+    for path in (
+        "/cell/anchor",
+        "/cell/lines/0",
+        "/cell/lines/2",
+        "/cell/path",
+        "/cell/sample",
+        "/cell/cable",
+        "/live/length/reading",
+        "/live/length/model",
+        "/live/error",
+        "/live/dial",
+        "/log",
+    ):
+        assert path in entities
+    rows = sum(c.num_rows for c in chunks if c.entity_path == "/live/error")
+    assert rows == N_TARGETS
+
+
+def test_sigkill_mid_session_then_resume_without_torn_or_duplicate_rows(tmp_path):
+    config = write_config(tmp_path)
+    folder = tmp_path / "sess"
+    with simulated(config):
+        cmd = [sys.executable, "-m", "station.cli", "sample", "--config", str(config), "--out", str(folder)]
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline and len(_lines(folder)) < 4:
+                time.sleep(0.01)
+            proc.send_signal(signal.SIGKILL)
+        finally:
+            proc.wait(10)
+        taken = len(rows_of(folder))
+        assert 3 <= taken < N_TARGETS
+        with (folder / "samples.csv").open("a") as fh:
+            fh.write("99,7,2,1.0,2.0")  # a row torn by a power cut mid-write
+        prep = sampling.resume_session(folder, None)
+        assert len(prep.folder.rows) == taken
+        state, view = sampling.run(prep, stream=_Sink([]))
+        view.close()
+    assert state is State.DONE
+    rows = rows_of(folder)
+    assert [int(r["sample"]) for r in rows] == list(range(N_TARGETS))
+    assert sorted(int(r["target"]) for r in rows) == list(range(N_TARGETS))
+    assert all(len(line.split(",")) == len(_lines(folder)[0].split(",")) for line in _lines(folder))
+
+
+def _lines(folder: Path) -> list[str]:
+    path = folder / "samples.csv"
+    return path.read_text().splitlines() if path.exists() else []
+
+
+def test_unplugged_dial_suspends_the_session_which_continues_after_replug(tmp_path):
+    config = write_config(tmp_path)
+    messages: list[str] = []
+    with simulated(config) as sim:
+        prep = sampling.new_session(tmp_path / "sess", config, None)
+        result = {}
+        worker = threading.Thread(
+            target=lambda: result.update(out=sampling.run(prep, stream=_Sink(messages)))
+        )
+        worker.start()
+        deadline = time.monotonic() + 30
+        while len(prep.folder.rows) < 2 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        sim.devices["dial"].port.unplug()
+        while not any("suspended: dial not answering" in m for m in messages) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        unplugged_rows = len(prep.folder.rows)
+        time.sleep(0.3)
+        assert len(prep.folder.rows) == unplugged_rows  # nothing recorded while the dial is gone
+        sim.devices["dial"].replug()
+        worker.join(30)
+    state, view = result["out"]
+    view.close()
+    text = "".join(messages)
+    assert "suspended: dial not answering" in text and "resumed" in text
+    assert state is State.DONE and len(rows_of(tmp_path / "sess")) == N_TARGETS
+
+
+def test_robot_that_never_settles_times_out_with_a_clear_message(tmp_path, capsys):
+    config = write_config(tmp_path, target_timeout_s=30.0)  # simulated s: 1 s at 30x
+    with simulated(config, faults=[RobotFault(0.0, 1e9, jitter_deg=0.05)]):
+        code = cli.main(["sample", "--config", str(config), "--out", str(tmp_path / "sess")])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "no capture for 30 s: the robot never settled" in out
+    assert _lines(tmp_path / "sess") == [_lines(tmp_path / "sess")[0]]  # header kept, nothing torn
+
+
+def test_read_only_output_folder_fails_before_any_device_is_touched(tmp_path, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    target = ro / "sess" if not os.access(ro, os.W_OK) else Path("/sys/station-test-session")  # root: a ro fs
+    config = write_config(tmp_path)  # no simulated devices at all: they must not be needed
+    code = cli.main(["sample", "--config", str(config), "--out", str(target)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert f"{target}: cannot write the session folder" in err
+    assert "Traceback" not in err
+
+
+def test_ctrl_c_stops_after_the_sample_in_flight_with_exit_130(tmp_path):
+    config = write_config(tmp_path)
+    folder = tmp_path / "sess"
+    with simulated(config):
+        cmd = [sys.executable, "-m", "station.cli", "sample", "--config", str(config), "--out", str(folder)]
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline and len(_lines(folder)) < 3:
+                time.sleep(0.01)
+            proc.send_signal(signal.SIGINT)
+            out, _ = proc.communicate(timeout=20)
+        finally:
+            proc.kill()
+    assert proc.returncode == 130, out
+    assert "stopped: stopped on request" in out
+    rows = rows_of(folder)
+    assert 2 <= len(rows) < N_TARGETS
+    assert len({r["target"] for r in rows}) == len(rows)
+    assert _lines(folder)[-1] == (folder / "samples.csv").read_text().rstrip("\n").split("\n")[-1]
+
+
+def test_progress_is_a_bar_on_a_terminal():
+    from station.progress import Progress
+
+    written: list[str] = []
+    tty = _Sink(written)
+    tty.isatty = lambda: True
+    bar = Progress(total=4, stream=tty, width=8)
+    bar.sample({"sample": 0, "target": 0, "line": 0, "length_mm": 1.0}, error_mm=0.25)
+    bar.message("suspended: dial not answering")
+    assert written[0].startswith("\r[##......] 1/4") and "last error +0.250 mm" in written[0]
+    assert written[1].startswith("\r\033[Ksuspended: dial not answering\n[##......] 1/4")

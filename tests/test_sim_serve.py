@@ -1,0 +1,196 @@
+"""End to end: ``station sim serve`` in a subprocess on non-contract addresses, then
+``station read`` against it through the real drivers; signals, unreachable devices, bad config."""
+
+import importlib.util
+import json
+import queue
+import random
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from sim_fixtures.station_sim import make_cell
+
+# The real entry point, limited to the commands present on this branch (siblings such as
+# ``demo`` arrive with other branches).
+CLI = [
+    sys.executable,
+    "-c",
+    (
+        "import importlib.util, sys, station.cli as c; "
+        "c.COMMANDS = tuple(n for n in c.COMMANDS "
+        "if importlib.util.find_spec('station.commands.' + n)); sys.exit(c.main())"
+    ),
+]
+assert importlib.util.find_spec("station.commands.sim")
+
+CONFIG = """
+time_scale = 20.0
+[robot]
+kind = "rtde"
+host = "{host}"
+[drawstring]
+kind = "modbus_tcp"
+host = "127.0.0.1"
+port = {port}
+timeout_s = 0.3
+[dial]
+port = "{dial}"
+dialect = "mitutoyo"
+[reconnect]
+attempts = 2
+initial_s = 0.05
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def lines_of(proc) -> queue.Queue:
+    """Stdout lines of ``proc``, read by a daemon thread (``None`` at EOF)."""
+    out: queue.Queue = queue.Queue()
+
+    def pump():
+        for line in proc.stdout:
+            out.put(line)
+        out.put(None)
+
+    threading.Thread(target=pump, daemon=True).start()
+    return out
+
+
+def run_cli(*args, timeout=60):
+    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def stop(proc) -> int:
+    """End ``sim serve`` as an operator would (SIGTERM), killing it only if that fails."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            return proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    return proc.wait(timeout=15)
+
+
+@pytest.fixture
+def served(tmp_path):
+    """``sim serve --hold`` on a random loopback RTDE address and a free Modbus port."""
+    for _ in range(3):
+        host = f"127.0.0.{random.randint(2, 250)}"
+        config = tmp_path / "station.toml"
+        config.write_text(CONFIG.format(host=host, port=free_port(), dial=tmp_path / "dial"))
+        with open(tmp_path / "serve.err", "w") as err:
+            proc = subprocess.Popen(
+                [*CLI, "sim", "serve", "--config", str(config), "--hold"],
+                stdout=subprocess.PIPE,
+                stderr=err,
+                text=True,
+            )
+        out = lines_of(proc)
+        try:
+            addresses = [json.loads(out.get(timeout=30)) for _ in range(3)]
+        except (TypeError, queue.Empty):  # EOF (address taken) or stuck: stop it, try again
+            stop(proc)
+            continue
+        try:
+            yield proc, config, addresses
+        finally:
+            stop(proc)
+        return
+    pytest.fail(f"sim serve did not start: {(tmp_path / 'serve.err').read_text()}")
+
+
+def test_sim_serve_prints_addresses_and_read_gets_every_device(served):
+    proc, config, addresses = served
+    text = config.read_text()
+    robot, drawstring, dial = addresses
+    assert robot["device"] == "robot" and robot["protocol"] == "rtde" and robot["port"] == 30004
+    assert f'host = "{robot["host"]}"' in text
+    assert drawstring["protocol"] == "modbus-tcp" and f"port = {drawstring['port']}" in text
+    assert dial["protocol"] == "serial-ascii" and dial["pty"].startswith("/dev/pts/")
+    assert dial["port"] == str(config.parent / "dial") and dial["dialect"] == "mitutoyo"
+
+    before = time.time()
+    result = run_cli("read", "--config", str(config))
+    assert result.returncode == 0, result.stderr
+    reading = json.loads(result.stdout)
+    cell = make_cell(0)
+    target = cell.plan_deg[0]  # --hold: the robot stays at its first target
+    assert np.allclose(reading["q_deg"], target, atol=0.01)
+    assert reading["length_mm"] == pytest.approx(cell.true_length_mm(target)[0], abs=0.1)
+    true_dial = cell.true_dial_mm(target[None], cell.plan_lines[:1])[0]  # the placement offset
+    assert reading["dial_mm"] == pytest.approx(true_dial, abs=0.01)
+    assert set(reading["devices"]) == {"robot", "drawstring", "dial"}
+    for device in reading["devices"].values():
+        assert before - 1 < device["t_wall"] < time.time() + 1
+    assert reading["devices"]["drawstring"]["units"] == {"length_mm": "mm"}
+
+
+def test_sim_serve_stops_on_sigterm_and_removes_links(served):
+    proc, config, _ = served
+    assert (config.parent / "dial").is_symlink()
+    assert stop(proc) == 0
+    assert not (config.parent / "dial").exists()
+
+
+def test_read_exits_1_naming_the_unreachable_device(served):
+    _, config, addresses = served
+    dead = config.parent / "dead.toml"
+    dead.write_text(config.read_text().replace(f"port = {addresses[1]['port']}", f"port = {free_port()}"))
+    result = run_cli("read", "--config", str(dead))
+    assert result.returncode == 1
+    assert result.stderr.startswith("station: device error: drawstring: unreachable after 2 attempts")
+    assert result.stdout == ""
+
+
+@pytest.mark.parametrize("command", [["read"], ["sim", "serve"]])
+def test_bad_config_exits_2_with_one_line(tmp_path, command):
+    bad = tmp_path / "station.toml"
+    bad.write_text(CONFIG.format(host="127.0.0.1", port=0, dial=tmp_path / "dial"))
+    result = run_cli(*command, "--config", str(bad), timeout=30)
+    assert result.returncode == 2
+    assert result.stderr == (f"station: error: {bad}: drawstring.port: Input should be greater than 0\n")
+
+
+@pytest.mark.parametrize(
+    "drawstring",
+    [
+        'kind = "modbus_rtu"\nport = "{dir}/ds-rtu"\ndevice_id = 4\n'
+        '[drawstring.registers]\naddress = 30\nencoding = "float32_mm"\nword_order = "little"',
+        'kind = "ascii"\nport = "{dir}/ds-ascii"\nbaudrate = 115200',
+    ],
+)
+def test_serial_drawstrings_are_served_where_the_config_says(tmp_path, drawstring):
+    from drivers.config import load_station_config
+    from sim_fixtures.station_sim import SimStation
+    from station.commands.read import read_once
+
+    config = tmp_path / "station.toml"
+    config.write_text(
+        f'[robot]\nkind = "rtde"\nhost = "127.0.0.{random.randint(2, 250)}"\n'
+        f"[drawstring]\n{drawstring.format(dir=tmp_path)}\n"
+    )
+    cfg = load_station_config(config)
+    station = SimStation(cfg, hold=True)
+    try:
+        address = station.start()[1]
+        reading = read_once(cfg.drawstring.build(), cfg.reconnect.backoff())
+    except OSError as exc:  # the random RTDE address was taken by a parallel test
+        pytest.skip(str(exc))
+    finally:
+        station.stop()
+    assert address["port"] == cfg.drawstring.port
+    expected = make_cell(0).true_length_mm(make_cell(0).plan_deg[0])[0]
+    assert reading.values["length_mm"] == pytest.approx(expected, abs=0.1)
+    assert not (tmp_path / "ds-rtu").exists() and not (tmp_path / "ds-ascii").exists()

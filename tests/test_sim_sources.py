@@ -1,0 +1,42 @@
+"""The simulated devices' source of truth: stand-in cell geometry, instrument model, and the
+robot program feeding the cell."""
+
+import numpy as np
+import pytest
+
+from sim_fixtures.robot_program import SimRobot
+from sim_fixtures.sources import CellSource, Instrument, StandInCell, dh_tcp_mm
+from sim_fixtures.station_sim import make_cell
+from sim_fixtures.world import NOMINAL_JR680
+
+
+def test_stand_in_cell_matches_the_contract_pose():
+    cell = StandInCell(NOMINAL_JR680)
+    tcp = dh_tcp_mm(cell.table, [0, -50, -20, 0, -90, 0])[0]
+    assert tcp == pytest.approx([-1053.0, 0.0, 146.0], abs=1.0)  # contract: "near (-1053, 0, 146)"
+    length = cell.true_length_mm([0, -50, -20, 0, -90, 0])[0]
+    assert length == pytest.approx(np.linalg.norm(tcp - cell.anchor_mm) - 200.0)
+
+
+def test_plan_targets_touch_the_edge_and_the_dial_reads_height():
+    cell = make_cell(0, 5)  # the world: the dial reads the operator's placement offset, <= 0.3 mm
+    dial = cell.true_dial_mm(cell.plan_deg, cell.plan_lines)
+    assert np.all(np.abs(dial) <= cell.world.noise.placement_mm) and np.std(dial) > 0
+    raised = cell.plan_deg[:1] + np.array([0, 0, -1.0, 0, 0, 0])  # elbow: tool moves
+    assert abs(cell.true_dial_mm(raised, [0])[0]) > 1.0
+
+
+def test_instrument_noise_and_resolution():
+    inst = Instrument(0.02, 0.001, np.random.default_rng(1))
+    values = np.array([inst.measure(100.0) for _ in range(2000)])
+    assert abs(values.mean() - 100.0) < 0.002 and 0.018 < values.std() < 0.022
+    assert np.allclose(values * 1000, np.round(values * 1000))
+
+
+def test_cell_source_follows_the_robot_program():
+    cell = make_cell(0, 5)
+    robot = SimRobot(cell.plan_deg, speed_deg_s=30, accel_deg_s2=60, dwell_s=1.0, time_scale=1.0)
+    still, moving = CellSource(robot, cell).state(0.5), CellSource(robot, cell).state(1.3)
+    assert still.q_deg == tuple(cell.plan_deg[0]) and still.qd_deg_s == (0.0,) * 6
+    assert still.length_mm == pytest.approx(cell.true_length_mm(cell.plan_deg[0])[0])
+    assert max(map(abs, moving.qd_deg_s)) > 0 and moving.length_mm != still.length_mm
