@@ -78,9 +78,13 @@ class ModbusDevice:
         if self._fault == "error":
             return ExcCodes.DEVICE_FAILURE
         offset = self.registers.address - start_address
-        words = self.registers.encode_mm(self.measure())
+        words = self._encode(self.measure())
         registers[offset : offset + len(words)] = words
         return None
+
+    def _encode(self, value) -> list[int]:
+        """Registers for one measurement (a length in mm)."""
+        return self.registers.encode_mm(value)
 
     def _on_packet(self, sending: bool, data: bytes) -> bytes:
         """Server packet hook: corrupt, replace or drop the outgoing reply under a fault."""

@@ -11,8 +11,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from pymodbus.constants import ExcCodes
-
 from drivers.robot import JointRegisterMap
 from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.serial_device import FaultPlan
@@ -39,13 +37,6 @@ class ModbusJointServer(ModbusDevice):
     ):
         super().__init__(registers, measure, tcp=tcp, faults=faults)
 
-    async def _on_read(self, function_code, start_address, address, count, registers, values):
-        """SimDevice action: the current joints into the registers, or an injected fault."""
-        self.requests += 1
-        self._fault = self.faults.take()
-        if self._fault == "error":
-            return ExcCodes.DEVICE_FAILURE
-        offset = self.registers.address - start_address
-        words = self.registers.encode_deg(self.measure())
-        registers[offset : offset + len(words)] = words
-        return None
+    def _encode(self, value) -> list[int]:
+        """Registers for the current joints (deg)."""
+        return self.registers.encode_deg(value)
