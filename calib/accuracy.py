@@ -7,13 +7,19 @@ of ``J`` in that 6-dimensional span is removed first::
     J_perp = (I - B B^+) J,        predicted RMS = sqrt(trace(J_perp C J_perp^T) / N)
 
 with ``B`` (3N, 6) the rigid displacement fields at the nominal TCPs and ``C`` (24, 24) the table's
-covariance: the fit's covariance for identified parameters, the manufacturing tolerance squared for
-parameters held because the data could not determine them, zero for structural gauges.
+covariance: the fit's covariance for identified parameters, plus what each held parameter's
+manufacturing tolerance does to the TCP and, through the fit, to the identified ones.
+
+That is an expectation. One calibration's actual error is ``sum_i lambda_i z_i^2`` (squared RMS),
+``lambda_i`` the eigenvalues of ``C^1/2 J_perp^T J_perp C^1/2 / N`` and ``z_i`` standard normal: when
+a few weak directions dominate (one gauge line) it scatters widely about the expectation, so a
+bound is given too (Welch-Satterthwaite: a scaled chi-square with the same mean and variance).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2
 
 from calib.kinematics import tcp_jacobian
 
@@ -29,24 +35,58 @@ def rigid_fields(p: np.ndarray) -> np.ndarray:
     return fields.reshape(-1, 6)
 
 
-def predicted_workspace_rmse(dh: np.ndarray, tool: np.ndarray, q: np.ndarray, cov: np.ndarray) -> float:
-    """Predicted RMS TCP error [mm] over configurations ``q`` (N, 6) [rad] for a table covariance
-    ``cov`` (24, 24) in internal units, after a rigid re-fit of the base."""
+def workspace_error_modes(dh: np.ndarray, tool: np.ndarray, q: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Variances [mm^2] (descending) of the independent modes of the TCP error field over
+    configurations ``q`` (N, 6) [rad], after a rigid re-fit of the base, for a table covariance
+    ``cov`` (24, 24) in internal units. Their sum is the expected squared RMS error."""
     p, jac = tcp_jacobian(dh, q, tool)
     a = jac.reshape(-1, jac.shape[2])
     q_rigid = np.linalg.qr(rigid_fields(p))[0]
     a_perp = a - q_rigid @ (q_rigid.T @ a)
-    return float(np.sqrt(np.einsum("ij,jk,ik->", a_perp, cov, a_perp) / p.shape[0]))
+    s, u = np.linalg.eigh(cov)
+    root = u * np.sqrt(np.clip(s, 0.0, None))
+    field = a_perp @ root
+    return np.clip(np.linalg.eigvalsh(field.T @ field / p.shape[0])[::-1], 0.0, None)
 
 
-def table_covariance(cov_free: np.ndarray, free: np.ndarray, weak_sigma: dict[int, float]) -> np.ndarray:
-    """The (24, 24) table covariance from the fit's covariance over the ``free`` unknowns plus the
-    prior variance of table parameters held as weakly determined (``{index: sigma}``)."""
-    idx = np.flatnonzero(free)
-    table = idx[idx < 24]
-    pos = np.searchsorted(idx, table)
+def predicted_workspace_rmse(modes: np.ndarray) -> float:
+    """Expected RMS TCP error [mm]: the root of the summed mode variances."""
+    return float(np.sqrt(modes.sum()))
+
+
+def workspace_rmse_bound(modes: np.ndarray, probability: float = 0.95) -> float:
+    """RMS TCP error [mm] that one calibration stays below with ``probability``: the quantile of
+    ``sum lambda_i z_i^2`` as a chi-square with ``(sum lambda)^2 / sum lambda^2`` degrees of freedom."""
+    total = modes.sum()
+    if total <= 0.0:
+        return 0.0
+    dof = total**2 / np.sum(modes**2)
+    return float(np.sqrt(total / dof * chi2.ppf(probability, dof)))
+
+
+def table_covariance(
+    cov_free: np.ndarray,
+    jac_free: np.ndarray,
+    jac_held: np.ndarray,
+    free: np.ndarray,
+    held: np.ndarray,
+    held_sigma: np.ndarray,
+) -> np.ndarray:
+    """The (24, 24) table covariance with the held table parameters as "consider" parameters
+    (Schmidt): each held one may be off by its tolerance, which moves the TCP itself and shifts the
+    fitted ones by ``-cov_free J_free^T J_held`` per unit.
+
+    An exact redundancy (joints 2-3's d) cancels in the TCP; a near one does not: on one gauge line
+    a few micrometres of unmodelled effect move the weakly determined directions by millimetres.
+    ``cov_free`` (n, n) is the fit's covariance of the ``free`` unknowns (indices, table first),
+    ``jac_free`` (m, n) / ``jac_held`` (m, h) their whitened, weighted Jacobians, ``held`` (h,) the
+    held table indices with prior sigma ``held_sigma`` (h,) in internal units.
+    """
+    free, held = np.asarray(free), np.asarray(held)
+    table = free < 24
+    sensitivity = np.zeros((24, held.size))
+    sensitivity[free[table]] = -(cov_free @ (jac_free.T @ jac_held))[table]
+    sensitivity[held, np.arange(held.size)] += 1.0
     cov = np.zeros((24, 24))
-    cov[np.ix_(table, table)] = cov_free[np.ix_(pos, pos)]
-    for k, s in weak_sigma.items():
-        cov[k, k] = s**2
-    return cov
+    cov[np.ix_(free[table], free[table])] = cov_free[np.ix_(table, table)]
+    return cov + (sensitivity * held_sigma**2) @ sensitivity.T

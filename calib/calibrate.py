@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calib.accuracy import table_covariance
 from calib.identifiability import redundancy_partners, select_columns, tolerance, weakly_determined
 from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
 from calib.models import GROUP_PRIOR, N_DH, MeasurementModel
@@ -59,18 +60,19 @@ class CalibrationOptions:
 @dataclass
 class Calibration:
     """Result: the ``before`` (setup-only) and ``after`` fits, the ``identified`` table/setup mask
-    (free in the final fit), ``held`` parameters with reasons, the prior sigma of those ``weak``ly
-    determined (by index), parameter ``sigma`` (internal units, NaN where held), the residual
-    ``scale`` per group and the ``downweighted`` sample rows."""
+    (free in the final fit), ``held`` parameters with reasons, parameter ``sigma`` (internal units,
+    NaN where held), the fit's ``covariance`` of the free unknowns, the ``table_covariance``
+    (24, 24) with the held parameters' tolerances considered, the residual ``scale`` per group and
+    the ``downweighted`` sample rows."""
 
     names: tuple[str, ...]
     before: LMResult
     after: LMResult
     identified: np.ndarray
     held: dict[str, str]
-    weak: dict[int, float]
     sigma: np.ndarray
     covariance: np.ndarray
+    table_covariance: np.ndarray
     scale: np.ndarray
     downweighted: np.ndarray
 
@@ -130,19 +132,18 @@ def identify(
         )
     table = np.zeros(len(names), bool)
     table[[k for k in kept_table if k not in weak]] = True
-    return table, held, {k: float(tol[k]) for k in weak}
+    return table, held
 
 
 @dataclass
 class Prepared:
     """The setup-only fit (``before``), the prior-augmented model it used, the identified mask
-    (``free``), the ``held`` reasons and the ``weak`` priors: all a table fit starts from."""
+    (``free``) and the ``held`` reasons: all a table fit starts from."""
 
     prior: WithPrior
     before: LMResult
     free: np.ndarray
     held: dict[str, str]
-    weak: dict[int, float]
 
 
 def prepare(model: MeasurementModel, options: CalibrationOptions = CalibrationOptions()) -> Prepared:
@@ -151,8 +152,8 @@ def prepare(model: MeasurementModel, options: CalibrationOptions = CalibrationOp
     free_setup = model.setup_mask & ~np.isin(model.names, list(gauges))
     prior = WithPrior(model, model.x0)
     before, _ = robust_fit(prior, model.x0, free_setup, options)
-    table, held, weak = identify(model, before.x, free_setup, gauges, options.rank_rtol)
-    return Prepared(prior, before, free_setup | table, held, weak)
+    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol)
+    return Prepared(prior, before, free_setup | table, held)
 
 
 def calibrate(
@@ -161,7 +162,7 @@ def calibrate(
     """Run the whole pipeline on ``model`` (see the module docstring)."""
     prep = prepare(model, options)
     after, scale = robust_fit(prep.prior, prep.before.x, prep.free, options, callback)
-    sigma, cov = _uncertainty(after)
+    sigma, cov, table_cov = _uncertainty(prep.prior, after, prep.free, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[prep.free] = sigma
     return Calibration(
@@ -170,9 +171,9 @@ def calibrate(
         after=after,
         identified=prep.free,
         held=prep.held,
-        weak=prep.weak,
         sigma=full_sigma,
         covariance=cov,
+        table_covariance=table_cov,
         scale=scale,
         downweighted=_downweighted_rows(prep.prior, after, scale, options),
     )
@@ -186,13 +187,19 @@ def _scale(result: LMResult, model) -> np.ndarray:
     return scale
 
 
-def _uncertainty(result: LMResult) -> tuple[np.ndarray, np.ndarray]:
-    """Standard deviations and covariance of the free parameters, scaled by the fitted noise."""
-    wj = result.jacobian * result.weights[:, None]
-    wr = result.residuals * result.weights
-    dof = max(wj.shape[0] - wj.shape[1], 1)
-    cov = np.linalg.pinv(wj.T @ wj) * (wr @ wr / dof)
-    return np.sqrt(np.diag(cov)), cov
+def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np.ndarray):
+    """Standard deviations and covariance of the free unknowns, and the table covariance with the
+    held table parameters considered at their tolerance. Each instrument's rows are weighted by its
+    fitted noise ``scale`` (per group); the prior rows as stated: what was known before measuring
+    does not shrink because the instruments read better than their stated sigma."""
+    noise = np.where(model.groups == GROUP_PRIOR, 1.0, scale[model.groups])
+    _, jac = model.residuals_and_jacobian(result.x)
+    jac = jac * (result.weights / noise)[:, None]
+    held = np.flatnonzero(~free[:N_DH])
+    cov = np.linalg.pinv(jac[:, free].T @ jac[:, free])
+    held_sigma = tolerance([model.names[k] for k in held])
+    table_cov = table_covariance(cov, jac[:, free], jac[:, held], np.flatnonzero(free), held, held_sigma)
+    return np.sqrt(np.diag(cov)), cov, table_cov
 
 
 def _downweighted_rows(model, result: LMResult, scale, options: CalibrationOptions) -> np.ndarray:

@@ -36,12 +36,14 @@ class LineReference:
     e2: np.ndarray
 
     @classmethod
-    def from_point_direction(cls, point, direction) -> LineReference:
+    def from_point_direction(cls, point, direction, normal=None) -> LineReference:
+        """``e1`` along ``normal`` (e.g. the dial's axis) made perpendicular to the line, if given."""
         u = np.asarray(direction, float)
         u = u / np.linalg.norm(u)
-        helper = np.eye(3)[np.argmin(np.abs(u))]
-        e1 = np.cross(u, helper)
-        e1 /= np.linalg.norm(e1)
+        e1 = None if normal is None else np.asarray(normal, float) - (np.asarray(normal, float) @ u) * u
+        if e1 is None or np.linalg.norm(e1) < 1e-6:
+            e1 = np.cross(u, np.eye(3)[np.argmin(np.abs(u))])
+        e1 = e1 / np.linalg.norm(e1)
         return cls(np.asarray(point, float), u, e1, np.cross(u, e1))
 
     def line(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,11 +54,12 @@ class LineReference:
         return point, u / np.linalg.norm(u)
 
 
-def fit_line(points: np.ndarray) -> LineReference:
-    """Least-squares line through ``points`` (N, 3) [mm], N >= 2, centred on their mean."""
+def fit_line(points: np.ndarray, normal=None) -> LineReference:
+    """Least-squares line through ``points`` (N, 3) [mm], N >= 2, centred on their mean; ``e1``
+    along ``normal`` where given."""
     centre = points.mean(axis=0)
     _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
-    return LineReference.from_point_direction(centre, vt[0])
+    return LineReference.from_point_direction(centre, vt[0], normal)
 
 
 def line_residual(

@@ -25,7 +25,9 @@ from calib.lines import N_LINE_PARAMS, LineReference, fit_line, line_residual
 from calib.params import DH_NAMES
 
 N_DH = 24
-GROUP_LENGTH, GROUP_LINE, GROUP_PRIOR = 0, 1, 2
+GROUP_LENGTH, GROUP_LINE_DIAL, GROUP_LINE_ACROSS, GROUP_PRIOR = 0, 1, 2, 3
+"""Residual groups, each with its own fitted noise scale: the drawstring; a line contact along the
+dial's axis (dial noise) and across it (only the arm's own noise); prior rows."""
 
 
 class MeasurementModel(Protocol):
@@ -83,6 +85,9 @@ class DrawstringSetup:
     anchor_tolerance: float = 50.0
     offset_tolerance: float = 10.0
 
+    def dial_axis_of(self, line_id: int) -> np.ndarray | None:
+        return self.dial_axis.get(line_id, self.default_dial_axis)
+
 
 @dataclass(frozen=True)
 class DrawstringFrame:
@@ -100,7 +105,7 @@ class DrawstringFrame:
         is one named unknown."""
         p = tcp_position(dh, samples.q, tool)
         ids = sorted(int(i) for i in np.unique(samples.line) if i >= 0)
-        lines = {i: fit_line(p[samples.line == i]) for i in ids}
+        lines = {i: fit_line(p[samples.line == i], setup.dial_axis_of(i)) for i in ids}
         anchor0 = np.asarray(setup.anchor, float)
         basis = np.eye(3)
         if len(lines) == 1:
@@ -144,7 +149,8 @@ class DrawstringLineModel:
         line_rows = np.concatenate([self._on_line[lid] for lid in self.line_ids] or [[]]).astype(int)
         n = len(samples)
         self.rows = np.concatenate([np.arange(n), np.repeat(line_rows, 2)])
-        self.groups = np.concatenate([np.full(n, GROUP_LENGTH), np.full(2 * line_rows.size, GROUP_LINE)])
+        line_groups = np.tile([GROUP_LINE_DIAL, GROUP_LINE_ACROSS], line_rows.size)
+        self.groups = np.concatenate([np.full(n, GROUP_LENGTH), line_groups])
 
     def gauges(self) -> dict[str, str]:
         held = structural_holds(self.x0[:N_DH].reshape(6, 4), self.tool, "anchor and the lines")
@@ -224,7 +230,7 @@ class DrawstringLineModel:
         return (r, np.concatenate(jparts)) if jacobian else (r, None)
 
     def _dial_shift(self, rows: np.ndarray, lid: int) -> np.ndarray:
-        axis = self.setup_values.dial_axis.get(lid, self.setup_values.default_dial_axis)
+        axis = self.setup_values.dial_axis_of(lid)
         if axis is None:
             return np.zeros((rows.size, 3))
         return np.nan_to_num(self.samples.dial[rows])[:, None] * np.asarray(axis, float)

@@ -10,7 +10,11 @@ from datetime import datetime, timezone
 
 import numpy as np
 
-from calib.accuracy import predicted_workspace_rmse, table_covariance
+from calib.accuracy import (
+    predicted_workspace_rmse,
+    workspace_error_modes,
+    workspace_rmse_bound,
+)
 from calib.calibrate import Calibration, CalibrationOptions, calibrate, prepare
 from calib.metrics import error_metrics
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
@@ -103,10 +107,7 @@ def run(
         "held": [{"param": p, "reason": r} for p, r in cal.held.items()],
         "parameters": _parameters(cal),
         "downweighted": [int(r) for r in cal.downweighted],
-        "workspace": {
-            "predicted_rmse_mm": predicted_workspace(robot, cal),
-            "configurations": WORKSPACE_POSES,
-        },
+        "workspace": predicted_workspace(robot, cal),
         "warnings": [],
         "iterations": int(cal.after.nit),
         "time_s": round(elapsed, 4),
@@ -145,25 +146,33 @@ def _subset(samples: Samples, rows: np.ndarray):
     )
 
 
-def predicted_workspace(robot: RobotFile, cal: Calibration) -> float:
-    """Predicted RMS TCP error [mm] over random configurations within the joint limits."""
+def predicted_workspace(robot: RobotFile, cal: Calibration) -> dict:
+    """The report's ``workspace``: expected RMS TCP error [mm] over random configurations within
+    the joint limits, and the RMS one calibration stays below with 95 % probability."""
     limits = np.radians(robot.limits_deg())
     q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
-    cov = table_covariance(cal.covariance, cal.identified, cal.weak)
-    return predicted_workspace_rmse(cal.x[:N_DH].reshape(6, 4), np.asarray(robot.tool_mm), q, cov)
+    dh = cal.x[:N_DH].reshape(6, 4)
+    modes = workspace_error_modes(dh, np.asarray(robot.tool_mm), q, cal.table_covariance)
+    return {
+        "predicted_rmse_mm": predicted_workspace_rmse(modes),
+        "predicted_rmse_95_mm": workspace_rmse_bound(modes, 0.95),
+        "configurations": WORKSPACE_POSES,
+    }
 
 
 def warnings(report: dict, model) -> list[str]:
     """Say when the samples fit well but cannot deliver that accuracy over the workspace."""
     fit = report["after"]["train"]["rmse_mm"]
     predicted = report["workspace"]["predicted_rmse_mm"]
+    bound = report["workspace"]["predicted_rmse_95_mm"]
     if predicted <= max(10 * fit, 0.5):
         return []
     directions = np.array([ln["direction"] for ln in report["lines"]])
     suggestion = _new_direction(directions)
     where = "its own line" if len(directions) == 1 else f"its own {len(directions)} lines"
     return [
-        f"fits {where} to {fit:.3f} mm; predicted workspace error {predicted:.2f} mm; add a line placement "
+        f"fits {where} to {fit:.3f} mm; predicted workspace error {predicted:.2f} mm (up to {bound:.2f} mm, "
+        "95 %); add a line placement "
         f"along [{suggestion[0]:.2f}, {suggestion[1]:.2f}, {suggestion[2]:.2f}] (base frame), "
         "elsewhere in the workspace and with varied tool orientations"
     ]

@@ -8,6 +8,7 @@ from calib.identifiability import structural_holds
 from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
 from calib.params import DH_NAMES, dh_from_degrees
+from sim_fixtures.scenario import write_scenario
 from station import calibration
 from station.files import load_robot, load_samples, load_setup
 
@@ -76,7 +77,7 @@ def test_structural_holds_agree_with_the_numbers(three):
     model = calibration.build_model(
         load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup), "setup"
     )
-    table, numeric_held, _ = identify(model, out.calibration.before.x, model.setup_mask, {}, rtol=1e-6)
+    table, numeric_held = identify(model, out.calibration.before.x, model.setup_mask, {}, rtol=1e-6)
     assert set(structural) <= set(numeric_held)
     assert not table[[DH_NAMES.index(n) for n in structural]].any()
 
@@ -93,12 +94,34 @@ def test_predicted_workspace_error_matches_the_truth_within_2x(three):
     sc, out = three
     predicted, true = out.report["workspace"]["predicted_rmse_mm"], _workspace_rms(sc, out.calibration.x)
     assert true / 2 < predicted < 2 * true
+    assert true < out.report["workspace"]["predicted_rmse_95_mm"]
     assert not out.report["warnings"]
 
 
-def test_one_line_is_not_reported_as_perfect(one_line):
+@pytest.fixture(scope="module")
+def one_line_worlds(one_line, tmp_path_factory):
+    """Four one-line cells (seeds 1-3 with 100 samples, the 200-sample seed 4) and their results."""
+    cells = [one_line] + [
+        write_scenario(tmp_path_factory.mktemp(f"one{seed}"), seed=seed, n_lines=1, n_per_line=100)
+        for seed in (1, 2, 3)
+    ]
+    return [(sc, _run(sc)) for sc in cells]
+
+
+def test_one_line_prediction_holds_over_seeds(one_line_worlds):
+    # One line leaves a few weak directions, so one calibration's error scatters widely about the
+    # expected value (a chi-square of few degrees of freedom): hence each seed within 2x, and the
+    # 95 % bound exceeded at most once in four (twice would happen 1.4 % of the time).
+    above_bound = 0
+    for sc, out in one_line_worlds:
+        ws, true = out.report["workspace"], _workspace_rms(sc, out.calibration.x)
+        assert true / 2 < ws["predicted_rmse_mm"] < 2 * true, sc.samples
+        above_bound += true > ws["predicted_rmse_95_mm"]
+    assert above_bound <= 1
+
+
+def test_one_line_is_not_reported_as_perfect(one_line_worlds):
     # One line fits itself to the noise but cannot deliver the workspace: the report must say so.
-    # (Its prediction runs low: 1.2 mm against a true 2.4 mm on this seed; see issue 3's note.)
-    out = _run(one_line)
-    assert out.report["workspace"]["predicted_rmse_mm"] > 20 * out.report["after"]["train"]["rmse_mm"]
-    assert any("predicted workspace error" in w for w in out.report["warnings"])
+    for _, out in one_line_worlds:
+        assert out.report["workspace"]["predicted_rmse_mm"] > 20 * out.report["after"]["train"]["rmse_mm"]
+        assert any("predicted workspace error" in w for w in out.report["warnings"])

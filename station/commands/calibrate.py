@@ -120,6 +120,10 @@ def summary(report: dict) -> str:
     if report["downweighted"]:
         lines.append(f"down-weighted rows: {report['downweighted']}")
     if "workspace" in report:
-        lines.append(f"predicted workspace error: {report['workspace']['predicted_rmse_mm']:.3f} mm RMS")
+        ws = report["workspace"]
+        lines.append(
+            f"predicted workspace error: {ws['predicted_rmse_mm']:.3f} mm RMS "
+            f"(95 %: below {ws['predicted_rmse_95_mm']:.3f} mm)"
+        )
     lines += [f"warning: {w}" for w in report["warnings"]]
     return "\n".join(lines)
