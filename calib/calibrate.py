@@ -188,18 +188,27 @@ def _scale(result: LMResult, model) -> np.ndarray:
 
 
 def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np.ndarray):
-    """Standard deviations and covariance of the free unknowns, and the table covariance with the
-    held table parameters considered at their tolerance. Each instrument's rows are weighted by its
-    fitted noise ``scale`` (per group); the prior rows as stated: what was known before measuring
-    does not shrink because the instruments read better than their stated sigma."""
+    """Standard deviations and covariance of the free unknowns and the table covariance, each
+    instrument's rows weighted by its fitted noise ``scale`` (per group) and the robust weights."""
     noise = np.where(model.groups == GROUP_PRIOR, 1.0, scale[model.groups])
-    _, jac = model.residuals_and_jacobian(result.x)
-    jac = jac * (result.weights / noise)[:, None]
+    cov, table_cov = covariance(model, result.x, free, result.weights / noise)
+    return np.sqrt(np.diag(cov)), cov, table_cov
+
+
+def covariance(
+    model: WithPrior, x: np.ndarray, free: np.ndarray, row_weights: np.ndarray | float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Covariance of the ``free`` unknowns at ``x`` and the (24, 24) table covariance with the held
+    table parameters considered at their tolerance. ``row_weights`` rescale the whitened data
+    rows (fitted against stated noise, robust weights); the prior rows keep theirs: what was known
+    before measuring does not shrink because the instruments read better than stated."""
+    _, jac = model.residuals_and_jacobian(x)
+    jac = jac * np.broadcast_to(row_weights, model.groups.shape)[:, None]
     held = np.flatnonzero(~free[:N_DH])
     cov = np.linalg.pinv(jac[:, free].T @ jac[:, free])
     held_sigma = tolerance([model.names[k] for k in held])
     table_cov = table_covariance(cov, jac[:, free], jac[:, held], np.flatnonzero(free), held, held_sigma)
-    return np.sqrt(np.diag(cov)), cov, table_cov
+    return cov, table_cov
 
 
 def _downweighted_rows(model, result: LMResult, scale, options: CalibrationOptions) -> np.ndarray:

@@ -264,6 +264,25 @@ class World:
                 seed = q
         return np.array(q_all), np.array(ids)
 
+    def touch_lines(self, q_plan_deg, line_ids, rng: np.random.Generator):
+        """Where the tool really goes for planned configurations (N, 6) [deg]: the pose the true
+        robot reaches there, moved (orientation kept) onto its true line, off it along the dial axis
+        by the operator's placement. Returns true configurations [deg] and the line ids of those
+        reached (a target pushed out of the joint limits is skipped, as an operator would)."""
+        by_id = {ln.id: ln for ln in self.lines}
+        q_out, ids = [], []
+        for q, lid in zip(np.atleast_2d(q_plan_deg), line_ids, strict=True):
+            ln = by_id[int(lid)]
+            pose = self.true.pose(q)
+            rel = pose[:3, 3] - ln.centre
+            offset = rng.uniform(-1, 1) * self.noise.placement_mm
+            pose[:3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + offset * ln.dial_axis
+            q_true = self.true.ik(pose, q)
+            if q_true is not None:
+                q_out.append(q_true)
+                ids.append(int(lid))
+        return np.array(q_out).reshape(-1, 6), np.array(ids, int)
+
     def _seed_for(self, ln: GaugeLine) -> np.ndarray:
         """A configuration at the line's centre with the tool along its approach direction: of the
         IK solutions from 40 seeded restarts, the one closest to the working pose."""

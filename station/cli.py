@@ -9,7 +9,7 @@ import sys
 from station.errors import DeviceError, InputError
 
 # One module per command; each exposes ``register(subparsers)`` which sets ``func`` on its parser.
-COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare")
+COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare", "plan")
 
 
 def build_parser() -> argparse.ArgumentParser:

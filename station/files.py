@@ -73,8 +73,15 @@ class Dial(_Strict):
 
 
 class LineSetup(_Strict):
+    """One gauge-block placement; ``point_mm``, ``direction`` (base frame), usable ``length_mm`` and
+    the tool ``approach`` direction are needed only to plan measurements (``station plan``)."""
+
     id: int
     dial_axis: Vec3 | None = None
+    point_mm: Vec3 | None = None
+    direction: Vec3 | None = None
+    length_mm: float = Field(400.0, gt=0)
+    approach: Vec3 | None = None
 
 
 class SetupFile(_Strict):

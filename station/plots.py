@@ -1,8 +1,9 @@
 """Figures as PNG files (matplotlib, no display needed): the method comparison of the paper's
-Fig. 2 (accuracy bars) and Fig. 3 (training curves, time)."""
+Fig. 2 (accuracy bars) and Fig. 3 (training curves, time), and a measurement plan (Fig. 5a)."""
 
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -50,3 +51,43 @@ def comparison_figure(report: dict, path: Path, labels: dict[str, str]) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plan_figure(report: dict, path: Path) -> None:
+    """Two panels from a ``station plan`` report: (a) the O1 index against the number of
+    configurations, the chosen N marked; (b) predicted workspace error per line placement."""
+    fig, (ax_index, ax_lines) = plt.subplots(1, 2, figsize=(12, 4.5))
+    curve, n = report["selection"]["curve"], report["selection"]["n"]
+    ax_index.plot(curve["n"], curve["O1"], "o-")
+    ax_index.axvline(n, color="k", linestyle="--", label=f"chosen N = {n}")
+    ax_index.set_xlabel("configurations N")
+    ax_index.set_ylabel("O1 (best random subsets)")
+    ax_index.set_title("(a) observability index")
+    ax_index.legend()
+    rows = [("+".join(map(str, p["lines"])), p) for p in report["placements"]]
+    rows += [(f"+next {k + 1}", p) for k, p in enumerate(report["next"])]
+    xs = range(len(rows))
+    ax_lines.bar(xs, [p["predicted_rmse_mm"] for _, p in rows], label="expected")
+    ax_lines.scatter(
+        xs, [p["predicted_rmse_95_mm"] for _, p in rows], color="k", marker="_", s=400, label="95 %"
+    )
+    ax_lines.set_xticks(list(xs), [name for name, _ in rows], rotation=45)
+    ax_lines.set_yscale("log")
+    ax_lines.set_ylabel("predicted workspace error [mm RMS]")
+    ax_lines.set_title("(b) gauge-line placements")
+    ax_lines.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_png(draw, report: dict, path: Path) -> None:
+    """``draw(report, file)`` into a temporary file beside ``path``, then rename: a failed plot
+    leaves no half file."""
+    with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".png", delete=False) as tmp:
+        tmp_path = Path(tmp.name)
+    try:
+        draw(report, tmp_path)
+        tmp_path.replace(path)
+    finally:
+        tmp_path.unlink(missing_ok=True)

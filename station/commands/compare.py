@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 from pathlib import Path
 
 from calib.baselines import BaselineOptions
@@ -57,16 +56,9 @@ def main(args) -> int:
 
 
 def _write_plot(report: dict, path: Path) -> None:
-    """Draw into a temporary file beside ``path`` and rename, so a failed plot leaves no half file."""
-    from station.plots import comparison_figure
+    from station.plots import comparison_figure, write_png
 
-    with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".png", delete=False) as tmp:
-        tmp_path = Path(tmp.name)
-    try:
-        comparison_figure(report, tmp_path, comparison.LABELS)
-        tmp_path.replace(path)
-    finally:
-        tmp_path.unlink(missing_ok=True)
+    write_png(lambda rep, file: comparison_figure(rep, file, comparison.LABELS), report, path)
 
 
 def _methods(text: str) -> tuple[str, ...]:

@@ -1,0 +1,68 @@
+"""``station plan``: choose the configurations to measure before measuring (MCS on candidates)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from station import planner
+from station.errors import InputError
+from station.files import atomic_write, check_writable, load_robot, load_setup
+
+
+def register(sub) -> None:
+    p = sub.add_parser("plan", help="choose the configurations to measure along the setup's gauge lines")
+    p.add_argument("--robot", type=Path, required=True, help="robot model TOML")
+    p.add_argument("--setup", type=Path, required=True, help="setup TOML with each line's point_mm/direction")
+    p.add_argument("--out", type=Path, required=True, help="plan CSV to write (what station sample follows)")
+    p.add_argument("--per-line", type=_positive, default=100, help="candidate points per line (default 100)")
+    p.add_argument(
+        "--select", type=_positive, metavar="N", help="configurations to keep (default: where O1 flattens)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
+    p.add_argument("--report", type=Path, help="plan report JSON to write")
+    p.add_argument("--plot", type=Path, help="PNG to write: O1 curve and line placements")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
+        if path:
+            check_writable(path, flag)
+    robot, setup = load_robot(args.robot), load_setup(args.setup)
+    total = args.per_line * len(setup.lines)
+    if args.select is not None and args.select > total:
+        raise InputError(f"--select {args.select}: more than the {total} candidates")
+    design = planner.design(
+        robot,
+        setup,
+        str(args.setup),
+        per_line=args.per_line,
+        n_select=args.select,
+        seed=args.seed,
+        suggest=not args.no_suggest,
+        progress=lambda message: print(f"... {message}", file=sys.stderr, flush=True),
+    )
+    atomic_write(args.out, design.plan.csv_text())
+    if args.report:
+        atomic_write(args.report, json.dumps(design.report, indent=2) + "\n")
+    if args.plot:
+        from station.plots import plan_figure, write_png
+
+        write_png(plan_figure, design.report, args.plot)
+    print(planner.summary(design))
+    print("wrote " + ", ".join(str(p) for p in (args.out, args.report, args.plot) if p))
+    return 0
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
+    return value

@@ -1,0 +1,234 @@
+"""``station plan`` behind the command line: candidate configurations on every gauge line of the
+setup, MCS to choose the plan, and what each choice promises over the workspace.
+
+All promises are expectations from the nominal robot and the instruments' stated noise
+(``calib.planning``): before anything is measured, nothing else is known.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib import ik
+from calib.accuracy import predicted_workspace_rmse, workspace_rmse_bound
+from calib.params import dh_from_degrees
+from calib.planning import design_model, expected_modes, line_candidates
+from station.calibration import WORKSPACE_POSES, drawstring_setup, select_measurements
+from station.errors import InputError
+from station.files import RobotFile, SetupFile
+from station.plan import Plan
+
+NEXT_CONFIGURATIONS = 12
+"""Random well-conditioned poses whose TCP and tool axis seed the candidate next placements."""
+
+
+@dataclass
+class Design:
+    """The chosen ``plan`` and the ``report`` (JSON-ready) of how it was chosen and what it promises."""
+
+    plan: Plan
+    report: dict
+
+
+Line = tuple[np.ndarray, np.ndarray, float, np.ndarray]
+
+
+def placements(setup: SetupFile, where: str) -> dict[int, Line]:
+    """Each ``[[lines]]`` entry as (point [mm], unit direction, length [mm], unit approach); the
+    approach defaults to pressing against the dial (minus its axis)."""
+    if not setup.lines:
+        raise InputError(f"{where}: no [[lines]]: station plan needs each gauge line's rough placement")
+    out = {}
+    for ln in setup.lines:
+        name = f"{where}: [[lines]] id {ln.id}"
+        if ln.point_mm is None or ln.direction is None:
+            raise InputError(f"{name}: missing point_mm or direction (needed to plan measurements)")
+        approach = ln.approach or ([-v for v in ln.dial_axis] if ln.dial_axis else None)
+        if approach is None:
+            raise InputError(f"{name}: missing approach (or dial_axis): which way the tool points")
+        direction, approach = _unit(ln.direction, f"{name}: direction"), _unit(approach, f"{name}: approach")
+        if abs(direction @ approach) > 0.9:
+            raise InputError(f"{name}: approach runs along the line; the tool must meet the edge across it")
+        out[ln.id] = (np.array(ln.point_mm, float), direction, ln.length_mm, approach)
+    return out
+
+
+def design(
+    robot: RobotFile,
+    setup: SetupFile,
+    where: str = "setup",
+    *,
+    per_line: int = 100,
+    n_select: int | None = None,
+    seed: int = 0,
+    suggest: bool = True,
+    progress=lambda message: None,
+) -> Design:
+    """Candidates on every line, the MCS plan, its promise next to all candidates', every subset
+    of the lines, and (``suggest``) the best next line placements."""
+    lines = placements(setup, where)
+    ds_setup = drawstring_setup(setup, where)
+    dh, tool = robot_arrays(robot)
+    limits = np.radians(robot.limits_deg())
+    rng = np.random.default_rng(seed)
+    q_line = {}
+    for lid, line in lines.items():
+        progress(f"candidates on line {lid}")
+        q, ok = line_candidates(dh, tool, limits, line, per_line, rng)
+        if ok.sum() < 4:
+            raise InputError(
+                f"{where}: [[lines]] id {lid}: only {int(ok.sum())} of {per_line} points reachable "
+                "within the joint limits away from singularities; move the gauge block"
+            )
+        q_line[lid] = q[ok]
+    q_all = np.concatenate(list(q_line.values()))
+    line_all = np.concatenate([np.full(len(q), lid) for lid, q in q_line.items()])
+    model = design_model(dh, tool, ds_setup, q_all, line_all)
+    progress("selecting configurations (MCS)")
+    mcs = select_measurements(model, n_select)
+    rows = np.sort(mcs.selection.rows)
+    workspace_q = rng.uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    plan_modes = expected_modes(model.with_samples(model.samples.subset(rows)), workspace_q)
+    all_modes = expected_modes(model, workspace_q)
+    report = {
+        "candidates": {str(lid): len(q) for lid, q in q_line.items()},
+        "selection": {
+            "n": int(len(rows)),
+            "index": "O1",
+            "value": float(mcs.selection.value),
+            "curve": {"n": mcs.sizes.tolist(), "O1": mcs.curve.tolist()},
+        },
+        "predicted": {"plan": _promise(plan_modes), "all_candidates": _promise(all_modes)},
+        "placements": [
+            {
+                "lines": [int(i) for i in subset],
+                **_promise(expected_modes(_on(model, line_all, subset), workspace_q)),
+            }
+            for subset in _subsets(list(q_line))
+        ],
+        "next": [],
+    }
+    if suggest:
+        progress("trying further gauge-line placements")
+        report["next"] = _next_placements(
+            dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng
+        )
+    plan = Plan(np.arange(len(rows)), line_all[rows], np.degrees(q_all[rows]))
+    return Design(plan, report)
+
+
+def robot_arrays(robot: RobotFile) -> tuple[np.ndarray, np.ndarray]:
+    """The nominal table (6, 4) in internal units and the TCP [mm]."""
+    return dh_from_degrees(robot.table_deg()), np.asarray(robot.tool_mm, float)
+
+
+def summary(design_: Design) -> str:
+    """What a person reads: the plan, its promise, and the answer to "is one line enough?"."""
+    r = design_.report
+    cand = ", ".join(f"line {k}: {v}" for k, v in r["candidates"].items())
+    plan, everything = r["predicted"]["plan"], r["predicted"]["all_candidates"]
+    out = [
+        f"reachable candidates: {cand}",
+        f"O1 flattens at N = {r['selection']['n']}; chose {r['selection']['n']} by simulated annealing",
+        "predicted workspace error (RMS over random poses, after a base re-fit):",
+        f"  plan ({r['selection']['n']} poses)  {_fmt(plan)}",
+        f"  all {sum(r['candidates'].values())} candidates  {_fmt(everything)}",
+        "gauge-line placements (all candidates on the lines named):",
+    ]
+    out += [f"  lines {p['lines']}  {_fmt(p)}" for p in r["placements"]]
+    for k, nxt in enumerate(r["next"][:3]):
+        lead = "next placement" if k == 0 else "           or"
+        out.append(
+            f"{lead}: point {_vec(nxt['point_mm'], 0)} mm, direction {_vec(nxt['direction'], 2)}, tool "
+            f"approach {_vec(nxt['approach'], 2)} -> {_fmt(nxt)} with the present lines"
+        )
+    return "\n".join(out)
+
+
+def _promise(modes: np.ndarray) -> dict:
+    return {
+        "predicted_rmse_mm": predicted_workspace_rmse(modes),
+        "predicted_rmse_95_mm": workspace_rmse_bound(modes, 0.95),
+    }
+
+
+def _on(model, line_all: np.ndarray, subset) -> object:
+    return model.with_samples(model.samples.subset(np.flatnonzero(np.isin(line_all, subset))))
+
+
+def _subsets(ids: list[int], most: int = 7) -> list[tuple[int, ...]]:
+    """Non-empty subsets of the line ids, singles first, at most ``most`` of them."""
+    return [s for k in range(1, len(ids) + 1) for s in itertools.combinations(ids, k)][:most]
+
+
+def _next_placements(dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, keep: int = 3):
+    """Candidate further lines ranked by the predicted workspace error of all lines together:
+    through the TCP of random well-conditioned poses in the present lines' working area (their
+    height range, +-300 mm; their distance from the base axis, +-300 mm), along each base axis
+    across the tool, the tool meeting the edge as in that pose."""
+    new_id = max(lines) + 1
+    centres = np.array([p for p, *_ in lines.values()])
+    z_range = centres[:, 2].min() - 300.0, centres[:, 2].max() + 300.0
+    radius = np.hypot(centres[:, 0], centres[:, 1])
+    r_range = radius.min() - 300.0, radius.max() + 300.0
+    q = rng.uniform(limits[:, 0], limits[:, 1], (2000, 6))
+    p, rot = ik.tool_frames(dh, q, tool)
+    r = np.hypot(p[:, 0], p[:, 1])
+    ok = (
+        (p[:, 2] >= z_range[0])
+        & (p[:, 2] <= z_range[1])
+        & (r >= r_range[0])
+        & (r <= r_range[1])
+        & (ik.conditioning(dh, q, tool) > 0.1)
+    )
+    found = []
+    for i in np.flatnonzero(ok)[:NEXT_CONFIGURATIONS]:
+        approach = rot[i, :, 2]
+        for direction in np.eye(3):
+            if abs(direction @ approach) > 0.7:
+                continue
+            line = (p[i], direction, 400.0, approach)
+            q_new, reached = line_candidates(dh, tool, limits, line, 30, rng)
+            if reached.sum() < 20:
+                continue
+            dial = -(approach - (approach @ direction) * direction)
+            setup = dataclasses.replace(
+                ds_setup, dial_axis={**ds_setup.dial_axis, new_id: dial / np.linalg.norm(dial)}
+            )
+            model = design_model(
+                dh,
+                tool,
+                setup,
+                np.concatenate([q_all, q_new[reached]]),
+                np.concatenate([line_all, np.full(int(reached.sum()), new_id)]),
+            )
+            found.append(
+                {
+                    "point_mm": p[i].tolist(),
+                    "direction": direction.tolist(),
+                    "approach": approach.tolist(),
+                    "length_mm": 400.0,
+                    **_promise(expected_modes(model, workspace_q)),
+                }
+            )
+    return sorted(found, key=lambda f: f["predicted_rmse_mm"])[:keep]
+
+
+def _fmt(promise: dict) -> str:
+    return f"{promise['predicted_rmse_mm']:.3f} mm (95 %: below {promise['predicted_rmse_95_mm']:.3f} mm)"
+
+
+def _vec(v, digits: int) -> str:
+    return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"
+
+
+def _unit(v, what: str) -> np.ndarray:
+    v = np.asarray(v, float)
+    n = np.linalg.norm(v)
+    if not np.isfinite(n) or n < 1e-9:
+        raise InputError(f"{what}: {list(v)} is not a direction")
+    return v / n
