@@ -15,16 +15,24 @@ from calib.accuracy import (
     workspace_error_modes,
     workspace_rmse_bound,
 )
-from calib.calibrate import Calibration, CalibrationOptions, calibrate, prepare
+from calib.baselines import BASELINES, BaselineOptions, run_method
+from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, prepare
 from calib.metrics import error_metrics
-from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.models import (
+    GROUP_PRIOR,
+    N_DH,
+    DrawstringFrame,
+    DrawstringLineModel,
+    DrawstringSamples,
+    DrawstringSetup,
+)
 from calib.observability import MCSResult, select_configurations
 from calib.params import DH_NAMES, dh_from_degrees, dh_to_degrees, display_factor
 from calib.position import PositionModel, PositionSamples
 from station.errors import InputError
 from station.files import RobotFile, Samples, SetupFile
 
-METHODS = ("lmlc", "mcs-lmlc")
+METHODS = BASELINES + ("lmlc", "mcs-lmlc")
 WORKSPACE_POSES = 1000
 
 
@@ -82,7 +90,7 @@ def run(
     t0 = time.perf_counter()
     model = build_model(samples, robot, setup, setup_where)
     check_enough(samples, model)
-    mcs = None
+    mcs, optimum = None, None
     if select is not None and method != "mcs-lmlc":
         raise InputError(f"--select {select}: selecting configurations needs --method mcs-lmlc")
     if select is not None and not len(model.names) - len(model.gauges()) <= select <= len(samples):
@@ -93,6 +101,8 @@ def run(
     if method == "mcs-lmlc":
         mcs = select_measurements(model, select)
         cal = calibrate(model.with_samples(_subset(samples, mcs.selection.rows)), CalibrationOptions())
+    elif method in BASELINES:
+        cal, optimum = baseline(model, method)
     else:
         cal = calibrate(model, CalibrationOptions())
     elapsed = time.perf_counter() - t0
@@ -120,8 +130,49 @@ def run(
             "value": mcs.selection.value,
         }
         report["downweighted"] = [int(mcs.selection.rows[r]) for r in cal.downweighted]
-    report["warnings"] = warnings(report, model)
+    report["warnings"] = warnings(report, model) + short_of_optimum(model, cal.x, optimum, method)
     return Outcome(report, corrected_table(robot, cal, samples, method), cal)
+
+
+def baseline(model, method: str) -> tuple[Calibration, np.ndarray]:
+    """One of the paper's other calibrators (``calib.baselines``) from the pipeline's common start
+    and identified parameters; its uncertainty from the Jacobian at its own solution, with the
+    noise LMLC fitted. Nothing is down-weighted: these methods have no robust loss. Also returns
+    LMLC's solution, the optimum it is judged against."""
+    start = calibrate(model, CalibrationOptions())
+    found = run_method(method, model, start.before.x, start.identified, BaselineOptions())
+    prior = WithPrior(model, model.x0)
+    noise = np.where(prior.groups == GROUP_PRIOR, 1.0, start.scale[prior.groups])
+    cov, table_cov = covariance(prior, found.x, start.identified, 1.0 / noise)
+    sigma = np.full(len(model.names), np.nan)
+    sigma[start.identified] = np.sqrt(np.diag(cov))
+    after = dataclasses.replace(
+        start.after, x=found.x, cost=found.cost, nit=found.iterations, nfev=found.nfev
+    )
+    cal = dataclasses.replace(
+        start,
+        after=after,
+        sigma=sigma,
+        covariance=cov,
+        table_covariance=table_cov,
+        downweighted=np.array([], int),
+    )
+    return cal, start.x
+
+
+def short_of_optimum(model, x: np.ndarray, optimum: np.ndarray | None, method: str) -> list[str]:
+    """A warning when a method stopped well short of the least-squares optimum: its sigmas and
+    predicted workspace error describe the optimum, not where it stopped."""
+    if optimum is None:
+        return []
+    rms, best = (float(np.sqrt(np.mean(model.residuals(v) ** 2))) for v in (x, optimum))
+    if rms <= 1.5 * best:
+        return []
+    return [
+        f"{method} stopped short of the least-squares optimum (whitened residual RMS {rms:.2f} against "
+        f"{best:.2f} for lmlc): its table is worse than the data allows and the predicted workspace "
+        "error does not apply to it"
+    ]
 
 
 def select_measurements(model, n_select: int | None) -> MCSResult:

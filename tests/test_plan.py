@@ -110,3 +110,16 @@ def test_a_line_out_of_reach_is_a_one_line_error(tmp_path, capsys):
     assert cli.main(argv) == 2
     errors = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("... ")]  # progress
     assert len(errors) == 1 and "id 1: only 0 of 100 points reachable" in errors[0]
+
+
+def test_plan_reads_robot_and_setup_from_a_session_folder(tmp_path, capsys):
+    session = tmp_path / "session"
+    session.mkdir()
+    content = {"robot": read_toml(ROBOT), "setup": read_toml(SETUP)}
+    (session / "session.toml").write_text(tomli_w.dumps(content))
+    argv = ["plan", str(session), "--out", str(tmp_path / "p.csv"), "--no-suggest", "--per-line", "30"]
+    assert cli.main(argv) == 0
+    plan = load_plan(tmp_path / "p.csv")
+    assert set(plan.line) == {0, 1, 2}
+    assert cli.main(["plan", "--out", str(tmp_path / "q.csv")]) == 2
+    assert "needs --robot and --setup" in capsys.readouterr().err

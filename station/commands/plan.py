@@ -9,13 +9,14 @@ from pathlib import Path
 
 from station import planner
 from station.errors import InputError
-from station.files import atomic_write, check_writable, load_robot, load_setup
+from station.files import atomic_write, check_writable, load_robot, load_session, load_setup
 
 
 def register(sub) -> None:
     p = sub.add_parser("plan", help="choose the configurations to measure along the setup's gauge lines")
-    p.add_argument("--robot", type=Path, required=True, help="robot model TOML")
-    p.add_argument("--setup", type=Path, required=True, help="setup TOML with each line's point_mm/direction")
+    p.add_argument("session", type=Path, nargs="?", help="a session folder: its robot table and setup")
+    p.add_argument("--robot", type=Path, help="robot model TOML (required without a session)")
+    p.add_argument("--setup", type=Path, help="setup TOML with each line's point_mm/direction (ditto)")
     p.add_argument("--out", type=Path, required=True, help="plan CSV to write (what station sample follows)")
     p.add_argument("--per-line", type=_positive, default=100, help="candidate points per line (default 100)")
     p.add_argument(
@@ -32,14 +33,14 @@ def main(args) -> int:
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
         if path:
             check_writable(path, flag)
-    robot, setup = load_robot(args.robot), load_setup(args.setup)
+    robot, setup, where = _inputs(args)
     total = args.per_line * len(setup.lines)
     if args.select is not None and args.select > total:
         raise InputError(f"--select {args.select}: more than the {total} candidates")
     design = planner.design(
         robot,
         setup,
-        str(args.setup),
+        where,
         per_line=args.per_line,
         n_select=args.select,
         seed=args.seed,
@@ -56,6 +57,18 @@ def main(args) -> int:
     print(planner.summary(design))
     print("wrote " + ", ".join(str(p) for p in (args.out, args.report, args.plot) if p))
     return 0
+
+
+def _inputs(args):
+    """Robot table, setup and the setup's name for messages: from the flags, else the session."""
+    if args.session is not None:
+        robot, setup, _ = load_session(args.session)
+        where = f"{args.session / 'session.toml'} [setup]"
+    elif args.robot is None or args.setup is None:
+        raise InputError("station plan needs --robot and --setup (or a session folder)")
+    robot = load_robot(args.robot) if args.robot else robot
+    setup = load_setup(args.setup) if args.setup else setup
+    return robot, setup, str(args.setup) if args.setup else where
 
 
 def _positive(text: str) -> int:
