@@ -20,9 +20,10 @@ from calib.calibrate import CalibrationOptions, covariance, prepare
 from calib.kinematics import tcp_position
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 
-MIN_CONDITIONING = 0.01
+MIN_CONDITIONING = 0.04
 """Inverse condition number of the scaled geometric Jacobian below which a pose counts as near a
-singularity (a wrist flip or a stretched arm): small joint noise moves the tool a lot there."""
+singularity (on the JR680: within about 10 deg of the wrist's, q5 = -90): there a millimetre of
+tool correction turns the wrist by degrees, and joint noise moves the tool a lot."""
 
 
 def line_candidates(

@@ -66,6 +66,14 @@ def make_cell(seed: int, targets_per_line: int = 70) -> WorldCell:
     return WorldCell(world, q, lines)
 
 
+def planned_cell(seed: int, plan_deg: np.ndarray, plan_lines: np.ndarray) -> WorldCell:
+    """The cell of ``[sim] seed`` walking a designed plan (``station plan``): each planned pose
+    moved onto its true line, as the robot program touches the edge near the planned pose."""
+    world = World.create(seed)
+    q, lines = world.touch_lines(plan_deg, plan_lines, np.random.default_rng([seed, 5]))
+    return WorldCell(world, q, lines)
+
+
 def _pty_link(port: str, section: str) -> Path:
     """A pty link path from the config; refuses to replace anything that is not a symlink."""
     path = Path(port)
@@ -81,7 +89,13 @@ class SimStation:
     """The simulated devices of ``cfg``; ``start()`` returns one address dict per device and
     ``stop()`` ends them all (safe after a partial start)."""
 
-    def __init__(self, cfg: StationConfig, hold: bool = False, faults: Sequence[RobotFault] = ()):
+    def __init__(
+        self,
+        cfg: StationConfig,
+        hold: bool = False,
+        faults: Sequence[RobotFault] = (),
+        plan: tuple[np.ndarray, np.ndarray] | None = None,
+    ):
         if not isinstance(cfg.robot, RobotRtde):
             raise InputError(
                 f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE "
@@ -89,7 +103,10 @@ class SimStation:
             )
         self.cfg = cfg
         self.clock = SimClock()
-        cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
+        if plan is None:
+            cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
+        else:
+            cell = planned_cell(cfg.sim.seed, *plan)
         self.robot = SimRobot(
             cell.plan_deg,
             speed_deg_s=cfg.sim.speed_deg_s,

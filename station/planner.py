@@ -88,6 +88,13 @@ def design(
     q_all = np.concatenate(list(q_line.values()))
     line_all = np.concatenate([np.full(len(q), lid) for lid, q in q_line.items()])
     model = design_model(dh, tool, ds_setup, q_all, line_all)
+    unknowns = len(model.names) - len(model.gauges())
+    if len(q_all) <= unknowns or (n_select is not None and not unknowns <= n_select <= len(q_all)):
+        asked = "" if n_select is None else f"--select {n_select}: "
+        raise InputError(
+            f"{asked}{len(q_all)} reachable candidates for {unknowns} unknowns: the plan must lie between "
+            "the two; raise --per-line or change --select"
+        )
     progress("selecting configurations (MCS)")
     mcs = select_measurements(model, n_select)
     rows = np.sort(mcs.selection.rows)

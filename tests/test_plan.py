@@ -12,6 +12,7 @@ from calib import ik
 from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
 from calib.params import dh_from_degrees
+from calib.planning import MIN_CONDITIONING
 from sim_fixtures.scenario import setup_dict
 from sim_fixtures.world import World
 from station import calibration, cli
@@ -41,7 +42,7 @@ def test_plan_targets_touch_their_lines_within_the_limits(planned):
         off = np.linalg.norm(np.cross(p[on] - ln.point_mm, direction), axis=1)
         assert on.sum() >= 4 and off.max() < 1e-3
     assert np.all((plan.q_deg >= limits[:, 0]) & (plan.q_deg <= limits[:, 1]))
-    assert ik.conditioning(dh, q, np.zeros(3)).min() > 0.01
+    assert ik.conditioning(dh, q, np.zeros(3)).min() > MIN_CONDITIONING
     assert len(plan) == report["selection"]["n"] < sum(report["candidates"].values())
     assert (out / "plan.png").stat().st_size > 10_000
 
@@ -123,3 +124,10 @@ def test_plan_reads_robot_and_setup_from_a_session_folder(tmp_path, capsys):
     assert set(plan.line) == {0, 1, 2}
     assert cli.main(["plan", "--out", str(tmp_path / "q.csv")]) == 2
     assert "needs --robot and --setup" in capsys.readouterr().err
+
+
+def test_a_selection_below_the_unknowns_is_a_one_line_error(tmp_path, capsys):
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--out", str(tmp_path / "p.csv")]
+    assert cli.main(argv + ["--select", "5", "--no-suggest"]) == 2
+    errors = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("... ")]
+    assert len(errors) == 1 and "--select 5:" in errors[0] and "unknowns" in errors[0]

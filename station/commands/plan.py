@@ -34,9 +34,6 @@ def main(args) -> int:
         if path:
             check_writable(path, flag)
     robot, setup, where = _inputs(args)
-    total = args.per_line * len(setup.lines)
-    if args.select is not None and args.select > total:
-        raise InputError(f"--select {args.select}: more than the {total} candidates")
     design = planner.design(
         robot,
         setup,

@@ -1,4 +1,4 @@
-"""``station sim serve [--config F] [--hold]``: run the simulated devices until SIGINT/SIGTERM.
+"""``station sim serve [--config F] [--hold] [--plan P.csv]``: run the simulated devices until SIGINT/SIGTERM.
 
 Prints one JSON line per device with its address, then serves; on a signal it stops every
 device and removes the pty links.
@@ -10,11 +10,13 @@ import json
 import logging
 import signal
 import threading
+from pathlib import Path
 
 import configs
 from drivers.config import load_station_config
 from sim_fixtures.station_sim import SimStation
 from station.errors import DeviceError
+from station.plan import load_plan
 
 
 def register(subparsers) -> None:
@@ -29,6 +31,9 @@ def register(subparsers) -> None:
     serve.add_argument(
         "--hold", action="store_true", help="keep the simulated robot still at its first target"
     )
+    serve.add_argument(
+        "--plan", type=Path, help="plan CSV (station plan) for the simulated robot to walk instead of its own"
+    )
     serve.set_defaults(func=serve_command)
 
 
@@ -36,7 +41,8 @@ def serve_command(args) -> int:
     cfg = load_station_config(args.config)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # faults are reported by drivers
     stop = threading.Event()
-    station = SimStation(cfg, hold=args.hold)
+    plan = load_plan(args.plan) if args.plan else None
+    station = SimStation(cfg, hold=args.hold, plan=None if plan is None else (plan.q_deg, plan.line))
     try:
         # Children start with Ctrl-C ignored (a terminal sends it to the whole process group):
         # this process alone handles it and stops them.
