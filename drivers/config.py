@@ -36,7 +36,7 @@ class _Section(BaseModel):
 
 class Registers(_Section):
     """Modbus layout of the length: defaults are holding register 0, INT32 micrometres, high
-    word first, scale 1 (``length_mm = raw * mm_per_count * scale``)."""
+    word first, scale 1 (``length_mm = raw * unit_per_count * scale``)."""
 
     address: int = Field(0, ge=0, le=65535)
     encoding: Literal[tuple(ENCODINGS)] = "int32_um"  # type: ignore[valid-type]

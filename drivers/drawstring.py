@@ -3,13 +3,13 @@
 Modbus register layout is configuration (:class:`RegisterMap`); the encodings a sensor may use are
 declared once in :data:`ENCODINGS`. Defaults: holding register 0, device id 1, ``int32_um``
 (signed 32-bit micrometres, two registers), big-endian word order (high word first), scale 1.
-The reading is ``length_mm = raw * encoding.mm_per_count * scale``.
+The reading is ``length_mm = raw * encoding.unit_per_count * scale``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar
 
 import serial
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -27,17 +27,7 @@ from drivers.base import (
     GarbledReply,
     Reading,
 )
-
-DataType = ModbusTcpClient.DATATYPE
-
-
-@dataclass(frozen=True)
-class Encoding:
-    """How a length is held in registers: pymodbus data type and mm per raw count."""
-
-    datatype: DataType
-    mm_per_count: float
-
+from drivers.registers import DataType, Encoding, RegisterLayout
 
 ENCODINGS: dict[str, Encoding] = {
     "int32_um": Encoding(DataType.INT32, 0.001),  # signed micrometres, 1 um resolution
@@ -46,39 +36,19 @@ ENCODINGS: dict[str, Encoding] = {
 
 
 @dataclass(frozen=True)
-class RegisterMap:
+class RegisterMap(RegisterLayout):
     """Where and how the sensor publishes its length (see the module docstring for defaults)."""
 
-    address: int = 0
+    ENCODINGS: ClassVar[dict[str, Encoding]] = ENCODINGS
     encoding: str = "int32_um"
-    word_order: Literal["big", "little"] = "big"
-    scale: float = 1.0
-    device_id: int = 1
-    table: Literal["holding", "input"] = "holding"
-
-    def __post_init__(self):
-        if self.encoding not in ENCODINGS:
-            raise ValueError(f"encoding must be one of {sorted(ENCODINGS)}, got {self.encoding!r}")
-
-    @property
-    def count(self) -> int:
-        """Registers per reading."""
-        return ENCODINGS[self.encoding].datatype.value[1]
 
     def decode_mm(self, registers: list[int]) -> float:
         """Length in mm from the raw registers."""
-        enc = ENCODINGS[self.encoding]
-        raw = ModbusTcpClient.convert_from_registers(registers, enc.datatype, self.word_order)
-        return float(raw) * enc.mm_per_count * self.scale
+        return self.decode(registers)[0]
 
     def encode_mm(self, length_mm: float) -> list[int]:
-        """The registers a sensor publishes for ``length_mm`` (the inverse of ``decode_mm``;
-        integer encodings round to the nearest count)."""
-        enc = ENCODINGS[self.encoding]
-        raw = length_mm / (enc.mm_per_count * self.scale)
-        if enc.datatype is not DataType.FLOAT32:
-            raw = round(raw)
-        return ModbusTcpClient.convert_to_registers(raw, enc.datatype, self.word_order)
+        """The registers a sensor publishes for ``length_mm`` (the inverse of ``decode_mm``)."""
+        return self.encode([length_mm])
 
 
 FUNCTION_CODES = {"holding": 3, "input": 4}  # Modbus read holding / read input registers

@@ -23,7 +23,7 @@ import socket
 import struct
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar
 
 import rtde_receive
 from pymodbus.client import ModbusTcpClient
@@ -38,6 +38,7 @@ from drivers.base import (
     Reading,
 )
 from drivers.drawstring import ModbusDrawstring
+from drivers.registers import DataType, Encoding, RegisterLayout
 
 RTDE_PORT = 30004
 RTDE_VARIABLES = ("timestamp", "actual_q", "actual_qd", "robot_mode")
@@ -179,60 +180,30 @@ def _recv_exactly(sock: socket.socket, n: int) -> bytes:
     return data
 
 
-DataType = ModbusTcpClient.DATATYPE
-
-
-@dataclass(frozen=True)
-class JointEncoding:
-    """How one joint is held in registers: pymodbus data type and degrees per raw count."""
-
-    datatype: DataType
-    deg_per_count: float
-
-
-JOINT_ENCODINGS: dict[str, JointEncoding] = {
-    "int32_mdeg": JointEncoding(DataType.INT32, 0.001),  # signed millidegrees, 2 registers
-    "float32_deg": JointEncoding(DataType.FLOAT32, 1.0),  # IEEE-754 single degrees, 2 registers
+JOINT_ENCODINGS: dict[str, Encoding] = {
+    "int32_mdeg": Encoding(DataType.INT32, 0.001),  # signed millidegrees, 2 registers
+    "float32_deg": Encoding(DataType.FLOAT32, 1.0),  # IEEE-754 single degrees, 2 registers
 }
 
 
 @dataclass(frozen=True)
-class JointRegisterMap:
+class JointRegisterMap(RegisterLayout):
     """Where a controller publishes its six joints: consecutive values from ``address`` (joint 1
-    first), each in ``encoding`` with ``word_order`` (``big``: high word first); the reading is
-    ``q_deg = raw * deg_per_count * scale``. Defaults: holding register 0, device id 1, INT32
-    millidegrees, high word first."""
+    first); ``q_deg = raw * unit_per_count * scale``. Defaults: holding register 0, device id 1,
+    INT32 millidegrees, high word first."""
 
-    address: int = 0
+    ENCODINGS: ClassVar[dict[str, Encoding]] = JOINT_ENCODINGS
+    VALUES: ClassVar[int] = JOINTS
+
     encoding: str = "int32_mdeg"
-    word_order: Literal["big", "little"] = "big"
-    scale: float = 1.0
-    device_id: int = 1
-    table: Literal["holding", "input"] = "holding"
-
-    def __post_init__(self):
-        if self.encoding not in JOINT_ENCODINGS:
-            raise ValueError(f"encoding must be one of {sorted(JOINT_ENCODINGS)}, got {self.encoding!r}")
-
-    @property
-    def count(self) -> int:
-        """Registers for all six joints."""
-        return JOINTS * JOINT_ENCODINGS[self.encoding].datatype.value[1]
 
     def decode_deg(self, registers: list[int]) -> tuple[float, ...]:
         """Six joint angles (deg) from the raw registers."""
-        enc = JOINT_ENCODINGS[self.encoding]
-        raw = ModbusTcpClient.convert_from_registers(registers, enc.datatype, self.word_order)
-        return tuple(float(r) * enc.deg_per_count * self.scale for r in raw)
+        return self.decode(registers)
 
     def encode_deg(self, q_deg) -> list[int]:
-        """The registers a controller publishes for ``q_deg`` (inverse of :meth:`decode_deg`;
-        integer encodings round to the nearest count)."""
-        enc = JOINT_ENCODINGS[self.encoding]
-        raw = [q / (enc.deg_per_count * self.scale) for q in q_deg]
-        if enc.datatype is not DataType.FLOAT32:
-            raw = [round(r) for r in raw]
-        return ModbusTcpClient.convert_to_registers(raw, enc.datatype, self.word_order)
+        """The registers a controller publishes for ``q_deg`` (inverse of :meth:`decode_deg`)."""
+        return self.encode(q_deg)
 
 
 MODBUS_FIELDS = {"q_deg": Field("deg", (JOINTS,), "joint positions from the controller")}
