@@ -245,6 +245,22 @@ def _line_ids(path, body, c) -> np.ndarray:
 
 
 # -- sessions and outputs --------------------------------------------------------------------------
+def load_robot_and_setup(session: Path | None, robot: Path | None, setup: Path | None):
+    """Robot table, setup, the setup's name for messages and the session's samples path: from a
+    ``session`` folder's ``session.toml`` if given, the ``robot``/``setup`` files overriding it;
+    None where neither."""
+    robot_file = setup_file = samples = None
+    where = str(setup)
+    if session is not None:
+        robot_file, setup_file, samples = load_session(session)
+        where = f"{Path(session) / 'session.toml'} [setup]"
+    if robot:
+        robot_file = load_robot(robot)
+    if setup:
+        setup_file, where = load_setup(setup), str(setup)
+    return robot_file, setup_file, where, samples
+
+
 def load_session(folder: Path) -> tuple[RobotFile, SetupFile, Path]:
     """Robot table, setup and samples path embedded in a session folder's ``session.toml``."""
     folder = Path(folder)

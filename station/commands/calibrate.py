@@ -14,10 +14,8 @@ from station.files import (
     SetupFile,
     atomic_write,
     check_writable,
-    load_robot,
+    load_robot_and_setup,
     load_samples,
-    load_session,
-    load_setup,
     toml_text,
 )
 
@@ -81,20 +79,11 @@ class Inputs:
 def load_inputs(args) -> Inputs:
     """Samples (CSV or session folder), robot, setup and hold-out from ``args``; the flags override
     what a session folder embeds."""
-    robot = setup = None
-    setup_where = str(args.setup)
-    if args.samples.is_dir():
-        robot, setup, samples_path = load_session(args.samples)
-        setup_where = f"{args.samples / 'session.toml'} [setup]"
-    else:
-        samples_path = args.samples
-        if args.robot is None:
-            raise InputError(f"{args.samples}: a samples CSV needs --robot")
-    if args.robot:
-        robot = load_robot(args.robot)
-    if args.setup:
-        setup, setup_where = load_setup(args.setup), str(args.setup)
-    samples = load_samples(samples_path)
+    session = args.samples if args.samples.is_dir() else None
+    if session is None and args.robot is None:
+        raise InputError(f"{args.samples}: a samples CSV needs --robot")
+    robot, setup, setup_where, session_samples = load_robot_and_setup(session, args.robot, args.setup)
+    samples = load_samples(session_samples or args.samples)
     holdout = load_samples(args.holdout) if args.holdout else None
     if holdout is not None and holdout.kind != samples.kind:
         raise InputError(f"{args.holdout}: a {holdout.kind} set cannot hold out for a {samples.kind} set")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from station import planner
 from station.errors import InputError
-from station.files import atomic_write, check_writable, load_robot, load_session, load_setup
+from station.files import atomic_write, check_writable, load_robot_and_setup
 
 
 def register(sub) -> None:
@@ -57,15 +57,11 @@ def main(args) -> int:
 
 
 def _inputs(args):
-    """Robot table, setup and the setup's name for messages: from the flags, else the session."""
-    if args.session is not None:
-        robot, setup, _ = load_session(args.session)
-        where = f"{args.session / 'session.toml'} [setup]"
-    elif args.robot is None or args.setup is None:
+    """Robot table, setup and the setup's name for messages: the session's, the flags overriding."""
+    robot, setup, where, _ = load_robot_and_setup(args.session, args.robot, args.setup)
+    if robot is None or setup is None:
         raise InputError("station plan needs --robot and --setup (or a session folder)")
-    robot = load_robot(args.robot) if args.robot else robot
-    setup = load_setup(args.setup) if args.setup else setup
-    return robot, setup, str(args.setup) if args.setup else where
+    return robot, setup, where
 
 
 def _positive(text: str) -> int:
