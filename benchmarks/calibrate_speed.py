@@ -23,8 +23,9 @@ from scipy.optimize import least_squares
 
 from calib.calibrate import CalibrationOptions, prepare, robust_fit
 from sim_fixtures.scenario import write_scenario
-from station import calibration
-from station.files import load_robot, load_samples, load_setup
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot, load_setup
+from station.jobs import calibrate as calibration
 
 
 def median_time(fn, repeats: int) -> float:

@@ -33,8 +33,8 @@ from calib.metrics import error_metrics  # noqa: E402
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
 from calib.params import dh_from_degrees  # noqa: E402
 from calib.position import N_DH, Compliance, LinkMasses, PositionModel, PositionSamples, register  # noqa: E402
-from station.files import load_robot  # noqa: E402
-from station.ipa import probe_file_for, read_probe_mm, read_series  # noqa: E402
+from station.formats.ipa import probe_file_for, read_probe_mm, read_series  # noqa: E402
+from station.formats.tables import load_robot  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SERIES = {

@@ -17,8 +17,9 @@ import numpy as np
 from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
 from sim_fixtures.scenario import write_scenario
-from station import calibration
-from station.files import load_robot, load_samples, load_setup
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot, load_setup
+from station.jobs import calibrate as calibration
 
 
 def workspace_rms(world, x) -> float:

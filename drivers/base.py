@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TypeVar
 
-from station.errors import DeviceError
+from errors import DeviceError
 
 T = TypeVar("T")
 

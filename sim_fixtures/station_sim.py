@@ -21,19 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from drivers.ascii import DIALECTS
-from drivers.config import (
-    DrawstringAscii,
-    DrawstringModbusTcp,
-    RobotRtde,
-    StationConfig,
-)
+from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotRtde
+from errors import InputError
 from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.robot_program import RobotFault, SimRobot
 from sim_fixtures.rtde_server import RtdeServerProcess
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, Instrument, SimClock
 from sim_fixtures.world import World
-from station.errors import InputError
 
 DRAWSTRING_SIGMA_MM = 0.02
 DIAL_SIGMA_MM = 0.002
@@ -86,12 +81,14 @@ def _pty_link(port: str, section: str) -> Path:
 
 
 class SimStation:
-    """The simulated devices of ``cfg``; ``start()`` returns one address dict per device and
-    ``stop()`` ends them all (safe after a partial start)."""
+    """The simulated devices of a station configuration ``cfg`` (its device sections from
+    ``drivers.config``, ``time_scale`` and ``sim``: seed and robot motion); ``start()`` returns one
+    address dict per device and ``stop()`` ends them all (safe after a partial start).
+    ``plan_deg``/``plan_lines`` are the targets the simulated robot walks."""
 
     def __init__(
         self,
-        cfg: StationConfig,
+        cfg,
         hold: bool = False,
         faults: Sequence[RobotFault] = (),
         plan: tuple[np.ndarray, np.ndarray] | None = None,
@@ -117,6 +114,7 @@ class SimStation:
             faults=faults,
             rng=np.random.default_rng([cfg.sim.seed, 3]),
         )
+        self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
         self.source = CellSource(self.robot, cell)
         rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in range(2)]
         self._length = Instrument(DRAWSTRING_SIGMA_MM, RESOLUTION_MM, rngs[0])

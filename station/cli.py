@@ -6,7 +6,7 @@ import argparse
 import importlib
 import sys
 
-from station.errors import DeviceError, InputError
+from errors import DeviceError, InputError
 
 # One module per command; each exposes ``register(subparsers)`` which sets ``func`` on its parser.
 COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare", "plan")

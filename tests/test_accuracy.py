@@ -13,7 +13,7 @@ from calib.accuracy import (
 from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
 from calib.params import dh_from_degrees
-from station.files import load_robot
+from station.formats.tables import load_robot
 
 
 def _jr680():

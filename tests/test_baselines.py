@@ -14,9 +14,10 @@ import pytest
 from calib.baselines import BASELINES, METHODS, BaselineOptions, run_method, search_half_widths
 from calib.calibrate import calibrate
 from sim_fixtures.scenario import write_scenario
-from station import calibration
 from station.cli import main
-from station.files import load_robot, load_samples, load_setup
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot, load_setup
+from station.jobs import calibrate as calibration
 
 SIGMA = 0.02  # drawstring noise [mm] of the simulated world (sim_fixtures.world.Noise)
 SMALL = BaselineOptions(max_iter=80, swarm=20, popsize=5, particles=60, max_steps=20, passes=2)

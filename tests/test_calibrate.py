@@ -1,4 +1,4 @@
-"""Recovery of the simulated truth by the whole pipeline (station.calibration on contract files)."""
+"""Recovery of the simulated truth by the whole pipeline (station.jobs.calibrate on contract files)."""
 
 import numpy as np
 import pytest
@@ -9,8 +9,9 @@ from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
 from calib.params import DH_NAMES, dh_from_degrees
 from sim_fixtures.scenario import write_scenario
-from station import calibration
-from station.files import load_robot, load_samples, load_setup
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot, load_setup
+from station.jobs import calibrate as calibration
 
 
 def _run(sc):

@@ -9,7 +9,8 @@ import numpy as np
 from rerun.chunk import RrdReader
 
 from station import cli
-from station.files import load_robot, load_session
+from station.formats.session_folder import load_session
+from station.formats.tables import load_robot
 
 
 def test_demo_writes_session_report_and_a_better_table(tmp_path, capsys):

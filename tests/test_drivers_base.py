@@ -14,7 +14,7 @@ from drivers.base import (
     Reading,
     call_with_reconnect,
 )
-from station.errors import DeviceError
+from errors import DeviceError
 
 
 class Flaky(Driver):

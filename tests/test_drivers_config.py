@@ -4,10 +4,10 @@ naming the file, the key and the problem."""
 import pytest
 
 import configs
-from drivers.config import load_station_config
 from drivers.dial import DialIndicator
 from drivers.drawstring import AsciiDrawstring, ModbusDrawstring, RegisterMap
-from station.errors import InputError
+from errors import InputError
+from station.config import load_station_config
 
 MINIMAL = """
 [robot]

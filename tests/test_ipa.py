@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from errors import InputError
 from station.cli import main
-from station.errors import InputError
-from station.files import load_samples
-from station.ipa import probe_file_for, read_probe_mm, read_series
+from station.formats.ipa import probe_file_for, read_probe_mm, read_series
+from station.formats.samples import load_samples
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("STATION_IPA_DATA", ROOT / "../shared/datasets/ipa-robot-accuracy"))

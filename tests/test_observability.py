@@ -2,9 +2,10 @@ import numpy as np
 import pytest
 
 from calib.observability import anneal, configuration_information, indices, singular_values
-from station import calibration
-from station.errors import InputError
-from station.files import load_robot, load_samples, load_setup
+from errors import InputError
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot, load_setup
+from station.jobs import calibrate as calibration
 
 
 @pytest.fixture(scope="module")

@@ -9,15 +9,18 @@ import tomli_w
 
 import configs
 from calib import ik
+from calib.experiment import MIN_CONDITIONING
 from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
 from calib.params import dh_from_degrees
-from calib.planning import MIN_CONDITIONING
 from sim_fixtures.scenario import setup_dict
 from sim_fixtures.world import World
-from station import calibration, cli
-from station.files import Samples, SetupFile, load_robot, load_setup, read_toml
-from station.plan import load_plan
+from station import cli
+from station.formats.base import read_toml
+from station.formats.plan import load_plan
+from station.formats.samples import Samples
+from station.formats.tables import SetupFile, load_robot, load_setup
+from station.jobs import calibrate as calibration
 
 ROBOT, SETUP = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.toml")
 

@@ -26,12 +26,18 @@ import tomli_w
 from rerun.chunk import RrdReader
 
 import configs
-from drivers.config import StationConfig
 from sim_fixtures.robot_program import RobotFault
 from sim_fixtures.station_sim import DIAL_SIGMA_MM, DRAWSTRING_SIGMA_MM, SimStation, make_cell
-from station import cli, planner, sampling
-from station.files import load_robot, load_samples, load_session, load_setup
-from station.session import State
+from station import cli
+from station.acquire import runner as sampling
+from station.acquire.session import State
+from station.commands.sim import publish_plan
+from station.config import StationConfig
+from station.formats.plan import Plan
+from station.formats.samples import load_samples
+from station.formats.session_folder import load_session
+from station.formats.tables import load_robot, load_setup
+from station.jobs import planning as planner
 
 ROOT = Path(__file__).resolve().parents[1]
 PER_LINE = 3
@@ -52,8 +58,14 @@ def write_config(folder: Path, **session) -> Path:
         "drawstring": {"kind": "modbus_tcp", "port": _free_port()},
         "dial": {"port": str(folder / "dial")},
         "reconnect": {"attempts": 2, "initial_s": 0.05},
-        "session": session,
-        "sim": {"speed_deg_s": 120.0, "accel_deg_s2": 480.0, "dwell_s": 2.0, "targets_per_line": PER_LINE},
+        "session": {"plan": str(folder / "plan.csv"), **session},
+        "sim": {
+            "speed_deg_s": 120.0,
+            "accel_deg_s2": 480.0,
+            "dwell_s": 2.0,
+            "targets_per_line": PER_LINE,
+            "plan_csv": str(folder / "plan.csv"),
+        },
     }
     path = folder / "station.toml"
     path.write_text(tomli_w.dumps(raw))
@@ -63,7 +75,10 @@ def write_config(folder: Path, **session) -> Path:
 @contextlib.contextmanager
 def simulated(config: Path, faults=(), plan=None):
     raw = __import__("tomllib").loads(config.read_text())
-    sim = SimStation(StationConfig.model_validate(raw), faults=faults, plan=plan)
+    cfg = StationConfig.model_validate(raw)
+    sim = SimStation(cfg, faults=faults, plan=plan)
+    if plan is None:
+        publish_plan(Path(cfg.sim.plan_csv), Plan.of(sim.plan_deg, sim.plan_lines))
     sim.start()
     try:
         yield sim
@@ -258,6 +273,7 @@ def test_read_only_output_folder_fails_before_any_device_is_touched(tmp_path, ca
     ro.chmod(0o555)
     target = ro / "sess" if not os.access(ro, os.W_OK) else Path("/sys/station-test-session")  # root: a ro fs
     config = write_config(tmp_path)  # no simulated devices at all: they must not be needed
+    (tmp_path / "plan.csv").write_text(Plan.of(np.zeros((1, 6)), [0]).csv_text())
     code = cli.main(["sample", "--config", str(config), "--out", str(target)])
     err = capsys.readouterr().err
     assert code == 2
@@ -288,7 +304,7 @@ def test_ctrl_c_stops_after_the_sample_in_flight_with_exit_130(tmp_path):
 
 
 def test_progress_is_a_bar_on_a_terminal():
-    from station.progress import Progress
+    from station.acquire.progress import Progress
 
     written: list[str] = []
     tty = _Sink(written)

@@ -172,9 +172,9 @@ def test_bad_config_exits_2_with_one_line(tmp_path, command):
     ],
 )
 def test_serial_drawstrings_are_served_where_the_config_says(tmp_path, drawstring):
-    from drivers.config import load_station_config
     from sim_fixtures.station_sim import SimStation
     from station.commands.read import read_once
+    from station.config import load_station_config
 
     config = tmp_path / "station.toml"
     config.write_text(

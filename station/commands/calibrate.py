@@ -6,18 +6,12 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from station import calibration
-from station.errors import InputError
-from station.files import (
-    RobotFile,
-    Samples,
-    SetupFile,
-    atomic_write,
-    check_writable,
-    load_robot_and_setup,
-    load_samples,
-    toml_text,
-)
+from errors import InputError
+from station.formats.base import atomic_write, check_writable, toml_text
+from station.formats.samples import Samples, load_samples
+from station.formats.session_folder import load_robot_and_setup
+from station.formats.tables import RobotFile, SetupFile
+from station.jobs import calibrate as calibration
 
 
 def register(sub) -> None:

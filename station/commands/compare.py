@@ -7,10 +7,10 @@ import json
 from pathlib import Path
 
 from calib.baselines import BaselineOptions
-from station import comparison
 from station.commands.calibrate import load_inputs
-from station.comparison import COMPARED as METHODS
-from station.files import atomic_write, check_writable
+from station.formats.base import atomic_write, check_writable
+from station.jobs import compare as comparison
+from station.jobs.compare import COMPARED as METHODS
 
 
 def register(sub) -> None:
@@ -56,7 +56,7 @@ def main(args) -> int:
 
 
 def _write_plot(report: dict, path: Path) -> None:
-    from station.plots import comparison_figure, write_png
+    from station.view.plots import comparison_figure, write_png
 
     write_png(lambda rep, file: comparison_figure(rep, file, comparison.LABELS), report, path)
 

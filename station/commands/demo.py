@@ -21,13 +21,16 @@ import tomli_w
 
 from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
-from drivers.config import StationConfig
+from errors import DeviceError, InputError
 from sim_fixtures.station_sim import SimStation, make_cell
-from station import calibration, sampling
+from station.acquire import runner as sampling
+from station.acquire.session import State
 from station.commands.calibrate import summary
-from station.errors import DeviceError, InputError
-from station.files import atomic_write, check_writable, load_samples, toml_text
-from station.session import State
+from station.config import StationConfig
+from station.formats.base import atomic_write, check_writable, toml_text
+from station.formats.plan import Plan
+from station.formats.samples import load_samples
+from station.jobs import calibrate as calibration
 
 TIME_SCALE = 40.0
 CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial": "/tmp/station-sim/dial"}
@@ -64,7 +67,9 @@ def main(args) -> int:
     except (OSError, RuntimeError) as exc:
         raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
     try:
-        prep = sampling.new_session(out / "session", config_path, None)
+        plan_path = out / "plan.csv"
+        atomic_write(plan_path, Plan.of(sim.plan_deg, sim.plan_lines).csv_text())
+        prep = sampling.new_session(out / "session", config_path, plan_path)
         print(
             f"session of {len(prep.plan)} targets on 3 gauge lines -> {prep.folder.path} "
             f"(simulated time x{TIME_SCALE:g})"

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from station.errors import InputError
-from station.ipa import read_series
+from errors import InputError
+from station.formats.ipa import read_series
 
 HEADER = "sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"
 

@@ -7,9 +7,10 @@ import json
 import sys
 from pathlib import Path
 
-from station import planner
-from station.errors import InputError
-from station.files import atomic_write, check_writable, load_robot_and_setup
+from errors import InputError
+from station.formats.base import atomic_write, check_writable
+from station.formats.session_folder import load_robot_and_setup
+from station.jobs import planning as planner
 
 
 def register(sub) -> None:
@@ -48,7 +49,7 @@ def main(args) -> int:
     if args.report:
         atomic_write(args.report, json.dumps(design.report, indent=2) + "\n")
     if args.plot:
-        from station.plots import plan_figure, write_png
+        from station.view.plots import plan_figure, write_png
 
         write_png(plan_figure, design.report, args.plot)
     print(planner.summary(design))

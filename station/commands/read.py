@@ -12,7 +12,7 @@ import logging
 
 import configs
 from drivers.base import Backoff, Driver, Reading, call_with_reconnect
-from drivers.config import load_station_config
+from station.config import load_station_config
 
 
 def register(subparsers) -> None:

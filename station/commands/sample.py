@@ -10,9 +10,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import configs
-from station import sampling
-from station.errors import InputError
-from station.session import State
+from errors import InputError
+from station.acquire import runner as sampling
+from station.acquire.session import State
 
 EXIT = {State.DONE: 0, State.STOPPED: 130, State.TIMED_OUT: 1}
 

@@ -1,7 +1,8 @@
 """``station sim serve [--config F] [--hold] [--plan P.csv]``: run the simulated devices until SIGINT/SIGTERM.
 
-Prints one JSON line per device with its address, then serves; on a signal it stops every
-device and removes the pty links.
+Publishes the plan its robot walks at ``[sim] plan_csv`` (where ``station sample`` looks by
+default), prints one JSON line per device with its address, then serves; on a signal it stops
+every device and removes the pty links.
 """
 
 from __future__ import annotations
@@ -13,10 +14,11 @@ import threading
 from pathlib import Path
 
 import configs
-from drivers.config import load_station_config
+from errors import DeviceError
 from sim_fixtures.station_sim import SimStation
-from station.errors import DeviceError
-from station.plan import load_plan
+from station.config import load_station_config
+from station.formats.base import atomic_write
+from station.formats.plan import Plan, load_plan
 
 
 def register(subparsers) -> None:
@@ -43,6 +45,7 @@ def serve_command(args) -> int:
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
     station = SimStation(cfg, hold=args.hold, plan=None if plan is None else (plan.q_deg, plan.line))
+    publish_plan(Path(cfg.sim.plan_csv), plan or Plan.of(station.plan_deg, station.plan_lines))
     try:
         # Children start with Ctrl-C ignored (a terminal sends it to the whole process group):
         # this process alone handles it and stops them.
@@ -60,3 +63,12 @@ def serve_command(args) -> int:
     finally:
         station.stop()
     return 0
+
+
+def publish_plan(path: Path, plan: Plan) -> None:
+    """Write the plan the simulated robot walks where ``station sample`` finds it by default."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(path, plan.csv_text())
+    except OSError as exc:
+        raise DeviceError(f"cannot publish the simulated plan at {path}: {exc.strerror or exc}") from exc

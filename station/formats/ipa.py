@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.errors import InputError
+from errors import InputError
 
 JOINT_COLUMNS = (
     "shoulder_pan_joint",

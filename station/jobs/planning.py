@@ -2,7 +2,7 @@
 setup, MCS to choose the plan, and what each choice promises over the workspace.
 
 All promises are expectations from the nominal robot and the instruments' stated noise
-(``calib.planning``): before anything is measured, nothing else is known.
+(``calib.experiment``): before anything is measured, nothing else is known.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ import numpy as np
 
 from calib import ik
 from calib.accuracy import predicted_workspace_rmse, workspace_rmse_bound
+from calib.experiment import design_model, expected_modes, line_candidates
 from calib.params import dh_from_degrees
-from calib.planning import design_model, expected_modes, line_candidates
-from station.calibration import WORKSPACE_POSES, drawstring_setup, select_measurements
-from station.errors import InputError
-from station.files import RobotFile, SetupFile
-from station.plan import Plan
+from errors import InputError
+from station.formats.plan import Plan
+from station.formats.tables import RobotFile, SetupFile
+from station.jobs.calibrate import WORKSPACE_POSES, drawstring_setup, select_measurements
 
 NEXT_CONFIGURATIONS = 12
 """Random well-conditioned poses whose TCP and tool axis seed the candidate next placements."""

@@ -13,7 +13,7 @@ from scipy.optimize import least_squares
 
 from calib.kinematics import tcp_position
 from calib.params import dh_from_degrees
-from station.files import RobotFile, SetupFile
+from station.formats.tables import RobotFile, SetupFile
 
 
 class LiveFit:

@@ -4,7 +4,7 @@ One common start for M1-M8: the pipeline's setup-only fit of the nominal table (
 "before") and its identification of the free parameters (``calib.calibrate.calibrate``). Each
 method then runs from that point over those parameters on all samples; its ``time_s`` covers only
 its own search. M9 (``mcs-lmlc``) is the whole pipeline on the configurations MCS selects
-(``station.calibration.select_measurements``): its time includes the selection and its own setup
+(``station.jobs.calibrate.select_measurements``): its time includes the selection and its own setup
 fit; its metrics, like everyone's, cover all training rows.
 """
 
@@ -17,8 +17,9 @@ import numpy as np
 
 from calib.baselines import METHODS, BaselineOptions, MethodResult, run_method
 from calib.calibrate import calibrate
-from station import calibration
-from station.files import RobotFile, Samples, SetupFile
+from station.formats.samples import Samples
+from station.formats.tables import RobotFile, SetupFile
+from station.jobs import calibrate as calibration
 
 LABELS = {
     "pso": "M1 PSO",

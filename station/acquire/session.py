@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.capture import (
+from errors import DeviceError
+from station.acquire.capture import (
     Capture,
     Devices,
     Rejected,
@@ -31,9 +32,8 @@ from station.capture import (
     check_gates,
     check_running,
 )
-from station.errors import DeviceError
-from station.plan import Plan
-from station.session_files import SessionFolder
+from station.formats.plan import Plan
+from station.formats.session_folder import SessionFolder
 
 
 class State(enum.Enum):

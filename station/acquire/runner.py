@@ -13,16 +13,17 @@ from pathlib import Path
 
 import configs
 from drivers.base import DeviceReplyError, DriverError, call_with_reconnect
-from drivers.config import StationConfig, load_station_config
-from station.capture import Devices, Rules
-from station.errors import DeviceError, InputError
-from station.files import RobotFile, SetupFile, load_robot, load_setup, validate
-from station.livefit import LiveFit, line_segments
-from station.liveview import LiveView
-from station.plan import Plan, load_plan, simulated_plan
-from station.progress import Progress
-from station.session import Listener, Session, State
-from station.session_files import SessionFolder
+from errors import DeviceError, InputError
+from station.acquire.capture import Devices, Rules
+from station.acquire.livefit import LiveFit, line_segments
+from station.acquire.progress import Progress
+from station.acquire.session import Listener, Session, State
+from station.config import StationConfig, load_station_config
+from station.formats.base import validate
+from station.formats.plan import Plan, load_plan
+from station.formats.session_folder import SessionFolder
+from station.formats.tables import RobotFile, SetupFile, load_robot, load_setup
+from station.view.live import LiveView
 
 
 @dataclass
@@ -47,6 +48,17 @@ def _plain(model) -> dict:
     return json.loads(model.model_dump_json(exclude_none=True))
 
 
+def default_plan(cfg: StationConfig, config_path: Path) -> Path:
+    """The plan named by ``[session] plan``; missing: an InputError that says where plans come from."""
+    path = config_path.parent / cfg.session.plan
+    if not path.is_file():
+        raise InputError(
+            f"{config_path}: [session] plan = {cfg.session.plan!r}: no such file; give --plan P.csv "
+            "(`station plan` designs one) or start `station sim serve`, which publishes its plan there"
+        )
+    return path
+
+
 def new_session(out: Path, config_path: Path, plan_path: Path | None) -> Prepared:
     """Validate the inputs, then create ``out`` with ``session.toml`` (fails before any sample)."""
     cfg = load_station_config(config_path)
@@ -54,12 +66,13 @@ def new_session(out: Path, config_path: Path, plan_path: Path | None) -> Prepare
     setup = load_setup(resolve(cfg.session.setup, config_path))
     if setup.drawstring is None:
         raise InputError(f"{resolve(cfg.session.setup, config_path)}: missing table [drawstring]")
-    plan = load_plan(plan_path) if plan_path else simulated_plan(cfg.sim.seed, cfg.sim.targets_per_line)
+    plan_path = plan_path or default_plan(cfg, config_path)
+    plan = load_plan(plan_path)
     header = {
         "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "start_wall_s": time.time(),
         "config": str(config_path),
-        "plan_source": str(plan_path) if plan_path else f"simulated cell, seed {cfg.sim.seed}",
+        "plan_source": str(plan_path),
         "robot": _plain(robot),
         "setup": _plain(setup),
         "station": _plain(cfg),

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.base import Backoff, DeviceReplyError, Driver, DriverError, Reading, call_with_reconnect
-from drivers.config import Session as SessionSection
+from station.config import SessionConfig
 
 RUNNING = 7  # UR robot_mode RUNNING (RTDE guide)
 
@@ -46,8 +46,8 @@ class Rules:
     unreachable_s: float
 
     @classmethod
-    def from_config(cls, section: SessionSection, time_scale: float) -> Rules:
-        values = section.model_dump(exclude={"robot_model", "setup"})
+    def from_config(cls, section: SessionConfig, time_scale: float) -> Rules:
+        values = section.model_dump(exclude={"robot_model", "setup", "plan"})
         for key in ("settle_s", "window_s", "target_timeout_s"):
             values[key] /= time_scale
         return cls(**values)

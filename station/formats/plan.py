@@ -1,8 +1,8 @@
 """The plan: the configurations to measure, in order (contract: ``target,line,q1_deg..q6_deg``).
 
-Until ``station plan`` (issue 6) designs plans, the default plan is the simulated cell's own: the
-targets the simulated robot program walks along each gauge-block line (``sim serve`` and
-``station sample`` build it from the same ``[sim] seed``, so they agree target for target).
+``station plan`` designs one; ``station sim serve`` publishes the plan its simulated robot walks
+(``[sim] plan_csv``), which is where ``station sample`` looks when given no ``--plan``
+(``[session] plan``).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from station.errors import InputError
-from station.files import Q_COLUMNS
+from errors import InputError
+from station.formats.samples import Q_COLUMNS
 
 PLAN_COLUMNS = ("target", "line", *Q_COLUMNS)
 
@@ -45,6 +45,12 @@ class Plan:
             {"target": int(t), "line": int(ln), "q_deg": [float(v) for v in q]}
             for t, ln, q in zip(self.target, self.line, self.q_deg, strict=True)
         ]
+
+    @classmethod
+    def of(cls, q_deg, line) -> Plan:
+        """Targets numbered 0.. in order, from configurations (M, 6) [deg] and line ids (M,)."""
+        q_deg = np.asarray(q_deg, float).reshape(-1, 6)
+        return cls(np.arange(len(q_deg)), np.asarray(line, int), q_deg)
 
     @classmethod
     def from_rows(cls, rows: list[dict]) -> Plan:
@@ -82,12 +88,3 @@ def load_plan(path) -> Plan:
     if len(set(target)) != len(target):
         raise InputError(f"{path}: target ids must be unique")
     return Plan(target, values[:, 1].astype(int), values[:, 2:])
-
-
-def simulated_plan(seed: int, targets_per_line: int) -> Plan:
-    """The simulated cell plan of ``[sim]`` (what ``station sim serve`` walks)."""
-    from sim_fixtures.station_sim import make_cell
-
-    cell = make_cell(seed, targets_per_line)
-    q = np.asarray(cell.plan_deg, float)
-    return Plan(np.arange(len(q)), np.asarray(cell.plan_lines, int), q)

@@ -13,8 +13,10 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from station.errors import InputError
-from station.files import Q_COLUMNS, atomic_write, read_toml, toml_text
+from errors import InputError
+from station.formats.base import atomic_write, read_toml, toml_text, validate
+from station.formats.samples import Q_COLUMNS
+from station.formats.tables import RobotFile, SetupFile, load_robot, load_setup
 
 SAMPLE_COLUMNS = (
     "sample", "target", "line", *Q_COLUMNS, "length_mm", "dial_mm", "t_s",
@@ -132,3 +134,32 @@ class SessionFolder:
     def update_header(self, **changes) -> None:
         self.header.update(changes)
         atomic_write(self.path / "session.toml", toml_text(self.header))
+
+
+def load_robot_and_setup(session: Path | None, robot: Path | None, setup: Path | None):
+    """Robot table, setup, the setup's name for messages and the session's samples path: from a
+    ``session`` folder's ``session.toml`` if given, the ``robot``/``setup`` files overriding it;
+    None where neither."""
+    robot_file = setup_file = samples = None
+    where = str(setup)
+    if session is not None:
+        robot_file, setup_file, samples = load_session(session)
+        where = f"{Path(session) / 'session.toml'} [setup]"
+    if robot:
+        robot_file = load_robot(robot)
+    if setup:
+        setup_file, where = load_setup(setup), str(setup)
+    return robot_file, setup_file, where, samples
+
+
+def load_session(folder: Path) -> tuple[RobotFile, SetupFile, Path]:
+    """Robot table, setup and samples path embedded in a session folder's ``session.toml``."""
+    folder = Path(folder)
+    where = folder / "session.toml"
+    data = read_toml(where)
+    for key in ("robot", "setup"):
+        if key not in data:
+            raise InputError(f"{where}: missing table [{key}]")
+    robot = validate(RobotFile, data["robot"], f"{where} [robot]")
+    setup = validate(SetupFile, data["setup"], f"{where} [setup]")
+    return robot, setup, folder / "samples.csv"

@@ -29,8 +29,9 @@ from calib.models import (
 from calib.observability import MCSResult, select_configurations
 from calib.params import DH_NAMES, dh_from_degrees, dh_to_degrees, display_factor
 from calib.position import PositionModel, PositionSamples
-from station.errors import InputError
-from station.files import RobotFile, Samples, SetupFile
+from errors import InputError
+from station.formats.samples import Samples
+from station.formats.tables import RobotFile, SetupFile
 
 METHODS = BASELINES + ("lmlc", "mcs-lmlc")
 WORKSPACE_POSES = 1000

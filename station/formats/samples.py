@@ -1,0 +1,126 @@
+"""The contract's sample CSVs (drawstring or position sets), validated at load: a problem is an
+``InputError`` naming the file, the row and the column."""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from errors import InputError
+
+Q_COLUMNS = tuple(f"q{i}_deg" for i in range(1, 7))
+XYZ_COLUMNS = ("x_mm", "y_mm", "z_mm")
+
+
+@dataclass(frozen=True)
+class Samples:
+    """A validated sample set: ``kind`` "drawstring" or "position", joints (N, 6) [deg], the
+    measurement (N,) length or (N, 3) position [mm], dial (N,) [mm] (NaN: none), line (N,) ids
+    (-1: no line constraint)."""
+
+    path: str
+    kind: str
+    q_deg: np.ndarray
+    measured: np.ndarray
+    dial_mm: np.ndarray
+    line: np.ndarray
+
+    def __len__(self) -> int:
+        return self.q_deg.shape[0]
+
+
+def load_samples(path) -> Samples:
+    """Read a contract sample CSV (columns in any order, unknown columns ignored)."""
+    path = Path(path)
+    try:
+        with path.open(newline="") as fh:
+            rows = list(csv.reader(fh))
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, expected a CSV file") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text CSV file") from None
+    rows = [r for r in rows if any(cell.strip() for cell in r)]
+    if not rows:
+        raise InputError(f"{path}: empty file, expected a header row and samples")
+    header = [h.strip() for h in rows[0]]
+    kind = _kind(path, header)
+    missing = [c for c in Q_COLUMNS if c not in header]
+    if missing:
+        raise InputError(f"{path}: missing column {missing[0]}")
+    if len(rows) == 1:
+        raise InputError(f"{path}: no samples after the header row")
+    col = {name: header.index(name) for name in header}
+    body = rows[1:]
+    q = _numbers(path, body, [col[c] for c in Q_COLUMNS], Q_COLUMNS)
+    if kind == "drawstring":
+        measured = _numbers(path, body, [col["length_mm"]], ["length_mm"])[:, 0]
+    else:
+        measured = _numbers(path, body, [col[c] for c in XYZ_COLUMNS], XYZ_COLUMNS)
+    dial = (
+        _numbers(path, body, [col["dial_mm"]], ["dial_mm"], allow_empty=True)[:, 0]
+        if "dial_mm" in col
+        else None
+    )
+    line = _line_ids(path, body, col.get("line"))
+    n = len(body)
+    return Samples(str(path), kind, q, measured, np.full(n, np.nan) if dial is None else dial, line)
+
+
+def _kind(path: Path, header: list[str]) -> str:
+    has_len = "length_mm" in header
+    has_xyz = any(c in header for c in XYZ_COLUMNS)
+    if has_len and has_xyz:
+        raise InputError(f"{path}: has both length_mm and x_mm/y_mm/z_mm: a set is drawstring or position")
+    if not has_len and not has_xyz:
+        raise InputError(f"{path}: has neither length_mm nor x_mm,y_mm,z_mm: nothing measured")
+    if has_xyz and not all(c in header for c in XYZ_COLUMNS):
+        missing = next(c for c in XYZ_COLUMNS if c not in header)
+        raise InputError(f"{path}: missing column {missing}")
+    return "drawstring" if has_len else "position"
+
+
+def _numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
+    out = np.empty((len(body), len(cols)))
+    for i, row in enumerate(body):
+        for j, (c, name) in enumerate(zip(cols, names, strict=True)):
+            cell = row[c].strip() if c < len(row) else ""
+            if cell == "" and allow_empty:
+                out[i, j] = math.nan
+                continue
+            try:
+                value = float(cell)
+            except ValueError:
+                value = math.nan
+                cell = cell or "(empty)"
+            if not math.isfinite(value):
+                raise InputError(f"{path}: row {i} (line {i + 2}): {name}: {cell!r} is not a finite number")
+            out[i, j] = value
+    return out
+
+
+def _line_ids(path, body, c) -> np.ndarray:
+    if c is None:
+        return np.zeros(len(body), int)
+    ids = np.empty(len(body), int)
+    for i, row in enumerate(body):
+        cell = row[c].strip() if c < len(row) else ""
+        if cell == "":
+            ids[i] = -1
+            continue
+        try:
+            ids[i] = int(float(cell))
+            if ids[i] < 0 or ids[i] != float(cell):
+                raise ValueError
+        except ValueError:
+            raise InputError(
+                f"{path}: row {i} (line {i + 2}): line: {cell!r} is not a line id (a whole number >= 0)"
+            ) from None
+    return ids
+
+
