@@ -6,7 +6,6 @@ import threading
 import numpy as np
 import pytest
 import serial
-from serial_script import ScriptedSerial
 
 from drivers.ascii import DIALECTS
 from drivers.base import (
@@ -20,6 +19,7 @@ from drivers.base import (
 from drivers.dial import DialIndicator
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import Instrument
+from tests.system.serial_script import ScriptedSerial
 
 TIMEOUT_S = 0.2
 

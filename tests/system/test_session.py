@@ -39,7 +39,7 @@ from station.formats.session_folder import load_session
 from station.formats.tables import load_robot, load_setup
 from station.jobs import planning as planner
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PER_LINE = 3
 N_TARGETS = 3 * PER_LINE
 K = 5  # readings per capture (default rule)

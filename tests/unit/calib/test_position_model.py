@@ -25,7 +25,7 @@ from calib.position import (
 from sim_fixtures.world import link
 
 SIGMA_MM = 0.02  # tracker noise per axis in the simulation
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def ur10() -> np.ndarray:

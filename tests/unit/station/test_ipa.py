@@ -13,7 +13,7 @@ from station.cli import main
 from station.formats.ipa import probe_file_for, read_probe_mm, read_series
 from station.formats.samples import load_samples
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 DATA = Path(os.environ.get("STATION_IPA_DATA", ROOT / "../shared/datasets/ipa-robot-accuracy"))
 SERIES_D = DATA / "Series_D/measurements_iso_cubes.csv"
 needs_data = pytest.mark.skipif(

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 import serial
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
-from serial_script import ScriptedSerial
 
 from drivers.ascii import DIALECTS
 from drivers.base import (
@@ -23,6 +22,7 @@ from drivers.drawstring import AsciiDrawstring, ModbusDrawstring, RegisterMap
 from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import Instrument
+from tests.system.serial_script import ScriptedSerial
 
 TIMEOUT_S = 0.3
 H = bytes.fromhex
@@ -92,16 +92,6 @@ def test_ascii_frames_byte_exact(tmp_path):
         with pytest.raises(DeviceReplyError, match="drawstring: device error 'E3'"):
             ds.read()
     assert dev.received == [b"M\r\n", b"M\r\n"]
-
-
-@pytest.mark.parametrize("encoding", ["int32_um", "float32_mm"])
-@pytest.mark.parametrize("word_order", ["big", "little"])
-def test_register_encoding_round_trips(encoding, word_order):
-    regs = RegisterMap(encoding=encoding, word_order=word_order, scale=0.5)
-    for length in (0.0, 1234.567, -0.001, 1999.999):
-        assert regs.decode_mm(regs.encode_mm(length)) == pytest.approx(length, abs=1e-4)
-    with pytest.raises(ValueError, match="encoding must be one of"):
-        RegisterMap(encoding="int16_mm")
 
 
 # ---- against the simulated sensor ----------------------------------------------------------
