@@ -21,7 +21,7 @@ from pathlib import Path
 
 from scipy.optimize import least_squares
 
-from calib.calibrate import CalibrationOptions, prepare, robust_fit
+from calib.calibrate import CalibrationOptions, fit_setup, robust_fit
 from sim_fixtures.scenario import write_scenario
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
@@ -45,7 +45,7 @@ def main() -> None:
     sc = write_scenario(folder, seed=0, n_lines=1, n_per_line=200)
     files = load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup)
     model = calibration.build_model(*files, str(sc.setup))
-    prep = prepare(model)
+    prep = fit_setup(model)
     options = CalibrationOptions(loss="linear")
 
     def ours():

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from calib.calibrate import fit_setup
 from calib.observability import anneal, configuration_information, indices, singular_values
 from errors import InputError
 from station.formats.samples import load_samples
@@ -13,7 +14,7 @@ def problem(one_line):
     model = calibration.build_model(
         load_samples(one_line.samples), load_robot(one_line.robot), load_setup(one_line.setup), "setup"
     )
-    prep = calibration.prepare(model)
+    prep = fit_setup(model)
     _, jac = model.residuals_and_jacobian(prep.before.x)
     return model, jac[:, prep.free], np.flatnonzero(prep.free) < 24
 
