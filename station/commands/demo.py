@@ -153,8 +153,8 @@ def _calibrate(out: Path, prep, view, seed: int, targets_per_line: int) -> int:
         cal = outcome.calibration
         view.calibration(
             method,
-            model.length_error_mm(cal.before.x),
-            model.length_error_mm(cal.x),
+            model.row_error_mm(cal.before.x),
+            model.row_error_mm(cal.x),
             [it.cost for it in cal.after.history],
         )
         print(summary(outcome.report))

@@ -16,7 +16,7 @@ from calib.accuracy import (
     workspace_rmse_bound,
 )
 from calib.baselines import BASELINES, BaselineOptions, run_method
-from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, prepare
+from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, fit_setup
 from calib.metrics import error_metrics
 from calib.models import (
     GROUP_PRIOR,
@@ -178,7 +178,7 @@ def short_of_optimum(model, x: np.ndarray, optimum: np.ndarray | None, method: s
 
 def select_measurements(model, n_select: int | None) -> MCSResult:
     """MCS at the setup fit: the identified table's observability, setup unknowns projected out."""
-    prep = prepare(model)
+    prep = fit_setup(model)
     _, jac = model.residuals_and_jacobian(prep.before.x)
     line = getattr(model.samples, "line", np.zeros(len(model.samples), int))
     return select_configurations(
@@ -270,13 +270,6 @@ def _model_samples(s: Samples) -> DrawstringSamples | PositionSamples:
     return DrawstringSamples(np.radians(s.q_deg), s.measured, s.dial_mm, s.line)
 
 
-def _row_errors(model, x) -> np.ndarray:
-    """The contract's per-row error [mm]: drawstring ``Y - Y_model``, position ``|m - p_model|``."""
-    if isinstance(model, PositionModel):
-        return model.position_error_mm(x)
-    return model.length_error_mm(x)
-
-
 def check_enough(samples: Samples, model) -> None:
     """Bad input unless there are at least as many samples as unknowns."""
     unknowns = len(model.names) - len(model.gauges())
@@ -294,9 +287,9 @@ def holdout_model(model, holdout: Samples | None):
 
 def metrics(model, hold_model, x) -> dict:
     """The contract's ``{"train": M, "holdout": M}`` of parameters ``x`` (holdout only with rows)."""
-    out = {"train": error_metrics(_row_errors(model, x))}
+    out = {"train": error_metrics(model.row_error_mm(x))}
     if hold_model is not None:
-        out["holdout"] = error_metrics(_row_errors(hold_model, x))
+        out["holdout"] = error_metrics(hold_model.row_error_mm(x))
     return out
 
 

@@ -37,7 +37,7 @@ def cell(tmp_path_factory):
 
 
 def holdout_rmse(hold, x) -> float:
-    return float(np.sqrt(np.mean(hold.length_error_mm(x) ** 2)))
+    return float(np.sqrt(np.mean(hold.row_error_mm(x) ** 2)))
 
 
 def test_half_widths_follow_names_and_units():
