@@ -24,6 +24,15 @@ GROUP_LENGTH, GROUP_LINE_DIAL, GROUP_LINE_ACROSS, GROUP_PRIOR = 0, 1, 2, 3
 dial's axis (dial noise) and across it (only the arm's own noise); prior rows."""
 
 
+@dataclass(frozen=True)
+class MeasurementAdvice:
+    """What to say when the rows fit well but cannot promise the workspace: what they ``cover``
+    (the object of "fits ... to 0.02 mm") and the ``next_measurement`` that would help."""
+
+    cover: str
+    next_measurement: str
+
+
 class SampleRows(Protocol):
     """A model's sample set: one row per robot configuration."""
 
@@ -95,12 +104,9 @@ class MeasurementModel(Protocol):
         configurations keeps some rows of every placement."""
         ...
 
-    def coverage(self) -> str:
-        """What the rows cover, as the object of "fits ... to 0.02 mm"."""
-        ...
-
-    def next_measurement(self, x: np.ndarray) -> str:
-        """What to measure next when the rows fit well but cannot promise the workspace."""
+    def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice | None:
+        """What to measure next when the rows fit well but cannot promise the workspace; None
+        where no further measurement of this kind would change that."""
         ...
 
 
@@ -331,18 +337,15 @@ class DrawstringLineModel:
         """The gauge line of each row (N,), -1 where none."""
         return self.samples.line
 
-    def coverage(self) -> str:
-        """The phrase "its own line" or "its own k lines"."""
+    def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice:
+        """Another line placement, least aligned with the lines fitted at ``x``."""
         k = len(self.line_ids)
-        return "its own line" if k == 1 else f"its own {k} lines"
-
-    def next_measurement(self, x: np.ndarray) -> str:
-        """A further line placement least aligned with the fitted lines at ``x``."""
-        directions = np.array([self.line(x, lid)[1] for lid in self.line_ids])
-        s = least_aligned_direction(directions)
-        return (
+        cover = "its own line" if k == 1 else f"its own {k} lines"
+        s = least_aligned_direction(np.array([self.line(x, lid)[1] for lid in self.line_ids]))
+        return MeasurementAdvice(
+            cover,
             f"add a line placement along [{s[0]:.2f}, {s[1]:.2f}, {s[2]:.2f}] (base frame), "
-            "elsewhere in the workspace and with varied tool orientations"
+            "elsewhere in the workspace and with varied tool orientations",
         )
 
     # -- residuals ---------------------------------------------------------------------------
