@@ -7,10 +7,11 @@ import json
 from pathlib import Path
 
 from calib.baselines import BaselineOptions
-from station.commands.calibrate import load_inputs
+from station.commands.calibrate import FLAGS, load_inputs
+from station.commands.flags import parameters_as_flags
 from station.formats.base import atomic_write, check_writable
-from station.jobs import compare as comparison
-from station.jobs.compare import COMPARED as METHODS
+from station.jobs import comparison
+from station.jobs.comparison import COMPARED as METHODS
 
 
 def register(sub) -> None:
@@ -36,15 +37,16 @@ def main(args) -> int:
         if path:
             check_writable(path, flag)
     inputs = load_inputs(args)
-    result = comparison.compare(
-        inputs.samples,
-        inputs.robot,
-        inputs.setup,
-        setup_where=inputs.setup_where,
-        holdout=inputs.holdout,
-        methods=args.methods,
-        options=BaselineOptions(seed=args.seed),
-    )
+    with parameters_as_flags(FLAGS):
+        result = comparison.compare(
+            inputs.samples,
+            inputs.robot,
+            inputs.setup,
+            setup_where=inputs.setup_where,
+            holdout=inputs.holdout,
+            methods=args.methods,
+            options=BaselineOptions(seed=args.seed),
+        )
     print(comparison.table(result.report))
     if args.report:
         atomic_write(args.report, json.dumps(result.report, indent=2) + "\n")
