@@ -58,9 +58,19 @@ class WithPrior:
 
 @dataclass(frozen=True, kw_only=True)
 class CalibrationOptions:
-    """``loss``: "linear", "huber" or "cauchy"; ``loss_threshold``: where the robust loss starts to
-    down-weight, in robust standard deviations; ``rank_rtol``: relative size below which a scaled
-    Jacobian column counts as produced by the others; ``lm``: solver options."""
+    """Options of the pipeline.
+
+    Attributes
+    ----------
+    loss : {"linear", "huber", "cauchy"}
+        Loss of the robust rounds.
+    loss_threshold : float
+        Where the robust loss starts to down-weight, in robust standard deviations of each group.
+    rank_rtol : float
+        Relative size below which a scaled Jacobian column counts as produced by the others.
+    lm : LMOptions
+        Solver options.
+    """
 
     loss: str = "cauchy"
     loss_threshold: float = 3.0

@@ -141,11 +141,25 @@ class DrawstringSamples:
 
 @dataclass(frozen=True)
 class DrawstringSetup:
-    """Station geometry and noise: rough ``anchor`` [mm] and ``length_offset`` [mm], reading noise
-    ``sigma_length`` [mm], line-contact noise ``sigma_line`` [mm], per line id the ``dial_axis``
-    (unit, base frame), else ``default_dial_axis`` (neither: the dial only gates captures), and
-    ``rho`` (line-term weight). ``anchor_tolerance``/``offset_tolerance`` [mm]: how far the rough
-    values may be off (taken as 2 sigma)."""
+    """Station geometry and noise, as the setup file states them.
+
+    Attributes
+    ----------
+    anchor : ndarray, shape (3,)
+        Rough drawstring anchor [mm], base frame.
+    length_offset : float
+        Rough reading offset [mm]: reading = distance - offset.
+    sigma_length, sigma_line : float
+        Drawstring reading noise and line-contact noise [mm].
+    dial_axis : dict of int to ndarray, shape (3,)
+        Per line id, the dial's unit axis in the base frame.
+    default_dial_axis : ndarray, shape (3,), optional
+        The axis on lines without their own; with neither, the dial only gates captures.
+    rho : float
+        Weight of the line terms.
+    anchor_tolerance, offset_tolerance : float
+        How far the rough values may be off [mm], taken as 2 sigma.
+    """
 
     anchor: np.ndarray
     length_offset: float

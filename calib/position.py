@@ -84,8 +84,17 @@ class TrackerSetupEstimate:
 
 @dataclass(frozen=True)
 class LinkMasses:
-    """Rigid-body masses for the gravity torques: ``mass_kg`` (6,), centre of mass of link i in D-H
-    frame i ``com_mm`` (6, 3), and the unit direction of gravity in the base frame."""
+    """Rigid-body masses for the gravity torques.
+
+    Attributes
+    ----------
+    mass_kg : ndarray, shape (6,)
+        Mass of each link [kg].
+    com_mm : ndarray, shape (6, 3)
+        Centre of mass of link i in D-H frame i [mm].
+    gravity : tuple of 3 float
+        Unit direction of gravity in the base frame.
+    """
 
     mass_kg: np.ndarray
     com_mm: np.ndarray

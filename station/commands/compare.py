@@ -11,7 +11,6 @@ from station.commands.calibrate import FLAGS, load_inputs
 from station.commands.flags import parameters_as_flags
 from station.formats.base import atomic_write, check_writable
 from station.jobs import comparison
-from station.jobs.comparison import COMPARED as METHODS
 
 
 def register(sub) -> None:
@@ -25,8 +24,8 @@ def register(sub) -> None:
     p.add_argument(
         "--methods",
         type=_methods,
-        default=METHODS,
-        help=f"comma-separated subset of {','.join(METHODS)} (default: all)",
+        default=comparison.COMPARED,
+        help=f"comma-separated subset of {','.join(comparison.COMPARED)} (default: all)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.set_defaults(func=main)
@@ -65,9 +64,9 @@ def _write_plot(report: dict, path: Path) -> None:
 
 def _methods(text: str) -> tuple[str, ...]:
     names = tuple(m.strip() for m in text.split(",") if m.strip())
-    unknown = [m for m in names if m not in METHODS]
+    unknown = [m for m in names if m not in comparison.COMPARED]
     if unknown or not names:
         raise argparse.ArgumentTypeError(
-            f"unknown method {unknown[0] if unknown else text!r}; choose from {METHODS}"
+            f"unknown method {unknown[0] if unknown else text!r}; choose from {comparison.COMPARED}"
         )
     return names

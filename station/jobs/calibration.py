@@ -286,8 +286,8 @@ def _report(
     cal = fit.calibration
     after = metrics(model, hold_model, cal.x)
     workspace = predicted_workspace(robot, cal)
-    warnings = workspace_warnings(model, cal.x, after.train, workspace)
-    warnings += short_of_optimum(model, cal.x, fit.optimum, method)
+    messages = workspace_warnings(model, cal.x, after.train, workspace)
+    messages += short_of_optimum(model, cal.x, fit.optimum, method)
     return CalibrationReport(
         kind=model.kind,
         method=method,
@@ -299,7 +299,7 @@ def _report(
         parameters=_parameters(cal),
         downweighted=tuple(int(r) for r in cal.downweighted),
         workspace=workspace,
-        warnings=tuple(warnings),
+        warnings=tuple(messages),
         iterations=int(cal.after.nit),
         time_s=round(elapsed, 4),
         selection=None if fit.selection is None else _selection(fit.selection),
