@@ -16,7 +16,7 @@ import numpy as np
 
 from calib import ik
 from calib.accuracy import workspace_error_modes
-from calib.calibrate import CalibrationOptions, covariance, prepare
+from calib.calibrate import CalibrationOptions, covariance, fit_setup
 from calib.kinematics import tcp_position
 from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 
@@ -83,7 +83,7 @@ def design_model(
 def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.ndarray:
     """Workspace error modes [mm^2] (``accuracy.workspace_error_modes``) that a calibration on
     ``model``'s configurations promises, with its identified parameters and the stated noise."""
-    prep = prepare(model, CalibrationOptions(loss="linear"))
+    prep = fit_setup(model, CalibrationOptions(loss="linear"))
     _, table_cov = covariance(prep.prior, prep.before.x, prep.free)
     return workspace_error_modes(prep.before.x[:N_DH].reshape(6, 4), model.tool, workspace_q, table_cov)
 
