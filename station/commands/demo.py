@@ -47,10 +47,10 @@ def register(sub) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--targets-per-line", type=int, default=70, help=argparse.SUPPRESS)
-    p.set_defaults(func=main)
+    p.set_defaults(func=run)
 
 
-def main(args) -> int:
+def run(args) -> int:
     out = args.out
     if (out / "session").exists():
         raise InputError(f"{out / 'session'}: exists already; choose another --out or remove it")
