@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import rtde_receive
-from pymodbus.client import ModbusTcpClient
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 from drivers.base import (
     DeviceReplyError,
@@ -219,6 +219,9 @@ class ModbusJointSource(ModbusRegisterDriver):
     what = "joint registers"
 
     def __init__(
-        self, client: ModbusTcpClient, registers: JointRegisterMap = JointRegisterMap(), name: str = "robot"
+        self,
+        client: ModbusTcpClient | ModbusSerialClient,
+        registers: JointRegisterMap = JointRegisterMap(),
+        name: str = "robot",
     ):
         super().__init__(client, registers, name)
