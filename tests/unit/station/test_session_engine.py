@@ -179,6 +179,13 @@ class Cell:
         return any(m.startswith(start) for m in self.messages)
 
 
+def stop_after_the_first_sample(cell: Cell) -> State:
+    """Run a session on ``cell`` whose first stored sample requests a stop (as Ctrl-C would)."""
+    session = cell.session()
+    cell.on_sample = lambda row: session.request_stop()
+    return session.run()
+
+
 def test_every_target_captured_once_with_its_readings(tmp_path, clock):
     cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
     assert cell.run() is State.DONE
@@ -205,9 +212,7 @@ def test_a_revisited_target_is_not_captured_twice(tmp_path, clock):
 
 def test_resumed_session_captures_only_the_unfinished_targets(tmp_path, clock):
     first = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
-    session = first.session()
-    first.on_sample = lambda row: session.request_stop()
-    assert session.run() is State.STOPPED
+    assert stop_after_the_first_sample(first) is State.STOPPED
     assert first.targets() == [0]
 
     clock.now = 0.0  # a new process: the robot walks the whole plan again
@@ -321,9 +326,7 @@ def test_a_jump_within_a_capture_rejects_it_and_the_target_is_captured_later(tmp
 
 def test_a_stop_request_ends_the_session_after_the_sample_in_flight(tmp_path, clock):
     cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
-    session = cell.session()
-    cell.on_sample = lambda row: session.request_stop()
-    assert session.run() is State.STOPPED
+    assert stop_after_the_first_sample(cell) is State.STOPPED
     assert cell.targets() == [0]
     assert len(cell.folder.raw_csv.read_text().splitlines()) == 1 + RULES.readings
     assert cell.messages[-1].startswith("stopped: stopped on request; 1 samples")
