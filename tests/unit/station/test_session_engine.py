@@ -158,7 +158,7 @@ class Cell:
     def length_from_pose(self, t: float) -> dict:
         return {"length_mm": ANCHOR_MM + self.robot.script(t)["q_deg"][0]}
 
-    def session(self, plan: Plan = PLAN, rules: Rules = RULES) -> Session:
+    def session(self) -> Session:
         drivers = {"robot": self.robot, "drawstring": self.drawstring, "dial": self.dial}
         devices = Devices(drivers, BACKOFF, sleep=self.clock.sleep)
 
@@ -167,10 +167,10 @@ class Cell:
             self.on_message(text)
 
         listener = Listener(lambda row, cap: self.on_sample(row), message)
-        return Session(self.folder, plan, devices, rules, listener, clock=self.clock, sleep=self.clock.sleep)
+        return Session(self.folder, PLAN, devices, RULES, listener, clock=self.clock, sleep=self.clock.sleep)
 
-    def run(self, **kwargs) -> State:
-        return self.session(**kwargs).run()
+    def run(self) -> State:
+        return self.session().run()
 
     def targets(self) -> list[int]:
         return [int(r["target"]) for r in self.folder.rows]
