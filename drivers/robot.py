@@ -1,4 +1,5 @@
-"""Robot joint angles: a UR controller over RTDE (``ur_rtde``), or joint registers over Modbus TCP.
+"""Robot joint angles: a UR controller over RTDE (``ur_rtde``), or joint registers over Modbus TCP
+(a device on :class:`drivers.modbus.ModbusRegisterDriver`).
 
 Both sources read joints in degrees (the controller sends radians over RTDE; Modbus controllers
 publish scaled integers or floats, declared once in :data:`JOINT_ENCODINGS`).
@@ -26,7 +27,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import rtde_receive
-from pymodbus.client import ModbusTcpClient
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 from drivers.base import (
     DeviceReplyError,
@@ -37,7 +38,7 @@ from drivers.base import (
     GarbledReply,
     Reading,
 )
-from drivers.drawstring import ModbusDrawstring
+from drivers.modbus import ModbusRegisterDriver
 from drivers.registers import DataType, Encoding, RegisterLayout
 
 RTDE_PORT = 30004
@@ -209,18 +210,18 @@ class JointRegisterMap(RegisterLayout):
 MODBUS_FIELDS = {"q_deg": Field("deg", (JOINTS,), "joint positions from the controller")}
 
 
-class ModbusJointSource(ModbusDrawstring):
-    """Joints read from a controller's Modbus registers; ``client`` is an unconnected pymodbus
-    ``ModbusTcpClient`` (best with ``retries=0``: :func:`drivers.base.call_with_reconnect` owns
-    retries). Transport, error classification and open/close are the Modbus drawstring's."""
+class ModbusJointSource(ModbusRegisterDriver):
+    """Joints read from a controller's Modbus registers (see
+    :class:`drivers.modbus.ModbusRegisterDriver` for ``client``): ``q_deg``, joint 1 first."""
 
     fields = MODBUS_FIELDS
+    field = "q_deg"
+    what = "joint registers"
 
     def __init__(
-        self, client: ModbusTcpClient, registers: JointRegisterMap = JointRegisterMap(), name: str = "robot"
+        self,
+        client: ModbusTcpClient | ModbusSerialClient,
+        registers: JointRegisterMap = JointRegisterMap(),
+        name: str = "robot",
     ):
         super().__init__(client, registers, name)
-
-    def read(self) -> Reading:
-        q_deg = self.registers.decode_deg(self._registers("joint registers"))
-        return Reading.now(self.name, {"q_deg": q_deg}, MODBUS_FIELDS)

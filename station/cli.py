@@ -8,7 +8,8 @@ import sys
 
 from errors import DeviceError, InputError
 
-# One module per command; each exposes ``register(subparsers)`` which sets ``func`` on its parser.
+# One module per command; each exposes ``register(subparsers)``, which adds its parser with
+# ``func`` set to the module's one entry ``run(args)`` (returns the exit code).
 COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare", "plan")
 
 

@@ -18,6 +18,8 @@ shared ``time_scale``):
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,13 +71,17 @@ class Suspend(Exception):
 class Devices:
     """The session's opened drivers by name (``robot``, ``drawstring``, optional ``dial``).
 
-    ``read(name)`` retries transient failures with a reconnect; a device that stays silent or
-    answers with an error code raises :class:`Suspend` naming it.
+    ``read(name)`` retries transient failures with a reconnect, waiting with ``sleep`` (s) between
+    attempts; a device that stays silent or answers with an error code raises :class:`Suspend`
+    naming it.
     """
 
-    def __init__(self, drivers: dict[str, Driver], backoff: Backoff):
+    def __init__(
+        self, drivers: dict[str, Driver], backoff: Backoff, sleep: Callable[[float], None] = time.sleep
+    ):
         self.drivers = drivers
         self.backoff = backoff
+        self.sleep = sleep
 
     def open(self) -> None:
         for driver in self.drivers.values():
@@ -88,7 +94,7 @@ class Devices:
     def read(self, name: str) -> Reading:
         driver = self.drivers[name]
         try:
-            return call_with_reconnect(driver, driver.read, self.backoff)
+            return call_with_reconnect(driver, driver.read, self.backoff, self.sleep)
         except DeviceReplyError as exc:
             if name == "dial":
                 raise Suspend(f"dial out of range ({exc.cause})") from exc

@@ -27,8 +27,9 @@ from station.view.live import LiveView
 
 
 @dataclass
-class Prepared:
-    """Everything a session run needs, validated."""
+class SessionInputs:
+    """Everything a session run needs, validated: its folder (new or reopened), the station
+    config, the plan, the robot table and the setup."""
 
     folder: SessionFolder
     cfg: StationConfig
@@ -59,7 +60,7 @@ def default_plan(cfg: StationConfig, config_path: Path) -> Path:
     return path
 
 
-def new_session(out: Path, config_path: Path, plan_path: Path | None) -> Prepared:
+def new_session(out: Path, config_path: Path, plan_path: Path | None) -> SessionInputs:
     """Validate the inputs, then create ``out`` with ``session.toml`` (fails before any sample)."""
     cfg = load_station_config(config_path)
     robot = load_robot(resolve(cfg.session.robot_model, config_path))
@@ -78,10 +79,10 @@ def new_session(out: Path, config_path: Path, plan_path: Path | None) -> Prepare
         "station": _plain(cfg),
         "plan": plan.rows(),
     }
-    return Prepared(SessionFolder.create(out, header), cfg, plan, robot, setup)
+    return SessionInputs(SessionFolder.create(out, header), cfg, plan, robot, setup)
 
 
-def resume_session(folder_path: Path, config_path: Path | None) -> Prepared:
+def resume_session(folder_path: Path, config_path: Path | None) -> SessionInputs:
     """Reopen a session folder; its embedded config serves unless ``config_path`` is given."""
     folder = SessionFolder.open(folder_path)
     where = str(folder.path / "session.toml")
@@ -92,7 +93,7 @@ def resume_session(folder_path: Path, config_path: Path | None) -> Prepared:
     cfg = load_station_config(config_path) if config_path else validate(StationConfig, h["station"], where)
     robot = validate(RobotFile, h["robot"], f"{where} [robot]")
     setup = validate(SetupFile, h["setup"], f"{where} [setup]")
-    return Prepared(folder, cfg, Plan.from_rows(h["plan"]), robot, setup)
+    return SessionInputs(folder, cfg, Plan.from_rows(h["plan"]), robot, setup)
 
 
 def open_devices(cfg: StationConfig) -> Devices:
@@ -115,30 +116,34 @@ def open_devices(cfg: StationConfig) -> Devices:
     return devices
 
 
-def run(prep: Prepared, *, viewer: bool = False, web: bool = False, stream=None) -> tuple[State, LiveView]:
+def run(
+    inputs: SessionInputs, *, viewer: bool = False, web: bool = False, stream=None
+) -> tuple[State, LiveView]:
     """Run the session to its end; the live view stays open for a calibration to log into (the
     caller closes it). Devices are opened first: an unreachable one fails before anything else."""
-    devices = open_devices(prep.cfg)
+    devices = open_devices(inputs.cfg)
     view = None
     try:
-        view = LiveView(prep.folder.rrd, viewer=viewer, web=web)
-        state = _run_session(prep, devices, view, stream)
+        view = LiveView(inputs.folder.rrd, viewer=viewer, web=web)
+        state = _run_session(inputs, devices, view, stream)
     except BaseException:
         if view is not None:
             view.close()
         raise
     finally:
         devices.close()
-    prep.folder.update_header(last_state=state.value, samples=len(prep.folder.rows))
+    inputs.folder.update_header(last_state=state.value, samples=len(inputs.folder.rows))
     return state, view
 
 
-def _run_session(prep: Prepared, devices: Devices, view: LiveView, stream) -> State:
+def _run_session(inputs: SessionInputs, devices: Devices, view: LiveView, stream) -> State:
     """The session with its live fit, live view and progress wired to it; Ctrl-C stops it."""
-    fit = LiveFit(prep.robot, prep.setup)
-    view.cell(prep.setup.drawstring.anchor_mm, line_segments(fit.tcp_mm(prep.plan.q_deg), prep.plan.line))
-    _replay(prep.folder, fit, view)
-    progress = Progress(len(prep.plan), len(prep.folder.rows), stream=stream)
+    fit = LiveFit(inputs.robot, inputs.setup)
+    view.cell(
+        inputs.setup.drawstring.anchor_mm, line_segments(fit.tcp_mm(inputs.plan.q_deg), inputs.plan.line)
+    )
+    _replay(inputs.folder, fit, view)
+    progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream=stream)
     for note in view.notes:
         progress.message(note)
 
@@ -151,8 +156,8 @@ def _run_session(prep: Prepared, devices: Devices, view: LiveView, stream) -> St
         progress.message(text)
         view.message(text)
 
-    rules = Rules.from_config(prep.cfg.session, prep.cfg.time_scale)
-    session = Session(prep.folder, prep.plan, devices, rules, Listener(on_sample, on_message))
+    rules = Rules.from_config(inputs.cfg.session, inputs.cfg.time_scale)
+    session = Session(inputs.folder, inputs.plan, devices, rules, Listener(on_sample, on_message))
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, lambda *_: session.request_stop()) if in_main else None
     try:

@@ -9,6 +9,9 @@ Checkpoints sit between captures and between polls: a stop request is honoured t
 sample in flight is always stored whole. A capture is assigned to the nearest target of the plan
 (joint space, max |dq| within ``match_deg``); if that target is finished already (the robot
 revisits it) nothing is captured, so a resumed session never duplicates a target.
+
+Time is read from the ``clock`` (s, monotonic) and waited with the ``sleep`` the session is given,
+so the engine runs on a simulated clock in the tests; the devices' readings carry their own stamps.
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ from station.acquire.capture import (
 from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
+SUSPENDED_POLL_S = 0.1  # re-check a suspending condition this often
+
 
 class State(enum.Enum):
     WAITING = "waiting"
@@ -55,7 +60,8 @@ class Listener:
 
 
 class Session:
-    """Run ``plan`` against ``devices`` into ``folder`` under the capture ``rules``."""
+    """Run ``plan`` against ``devices`` into ``folder`` under the capture ``rules``; ``clock()``
+    gives the time (s, monotonic) and ``sleep(s)`` waits."""
 
     def __init__(
         self,
@@ -64,9 +70,13 @@ class Session:
         devices: Devices,
         rules: Rules,
         listener: Listener | None = None,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
     ):
         self.folder, self.plan, self.devices, self.rules = folder, plan, devices, rules
         self.listener = listener or Listener()
+        self.clock, self.sleep = clock, sleep
         self.state = State.WAITING
         self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
         self.settle = Settle(rules)
@@ -80,23 +90,23 @@ class Session:
 
     def run(self) -> State:
         """Until every target is measured, a stop request, or the target timeout."""
-        last_progress = time.monotonic()
+        last_progress = self.clock()
         while self.pending:
             if self._stop:
                 return self._end(State.STOPPED, "stopped on request")
             try:
                 if self._step():
-                    last_progress = time.monotonic()
+                    last_progress = self.clock()
                     self.settle.ever = False
             except Suspend as why:
                 self._suspended(why)
                 self.settle.reset()
                 self.settle.ever = False
-                last_progress = time.monotonic()
+                last_progress = self.clock()
                 continue
-            if time.monotonic() - last_progress > self.rules.target_timeout_s:
+            if self.clock() - last_progress > self.rules.target_timeout_s:
                 return self._end(State.TIMED_OUT, self._timeout_message())
-            time.sleep(self.rules.poll_s)
+            self.sleep(self.rules.poll_s)
         return self._end(State.DONE, f"all {len(self.plan)} targets measured")
 
     def _step(self) -> bool:
@@ -150,20 +160,21 @@ class Session:
         self.listener.sample(row, cap)
 
     def _suspended(self, first: Suspend) -> None:
-        """Stay SUSPENDED, re-checking every 0.1 s, until the condition clears (or a stop request).
+        """Stay SUSPENDED, re-checking every ``SUSPENDED_POLL_S``, until the condition clears (or a
+        stop request).
         A device silent for longer than ``unreachable_s`` ends the session (DeviceError)."""
         self.state = State.SUSPENDED
         self.listener.message(f"suspended: {first}")
-        why, silent_since = first, time.monotonic()
+        why, silent_since = first, self.clock()
         while not self._stop:
-            time.sleep(0.1)
+            self.sleep(SUSPENDED_POLL_S)
             try:
                 self._check_cleared(why)
                 break
             except Suspend as still:
                 why = still
-                silent_since = silent_since if still.device else time.monotonic()
-                if time.monotonic() - silent_since > self.rules.unreachable_s:
+                silent_since = silent_since if still.device else self.clock()
+                if self.clock() - silent_since > self.rules.unreachable_s:
                     raise DeviceError(
                         f"{still} (silent for over {self.rules.unreachable_s:g} s; "
                         f"{len(self.folder.rows)} samples kept)"

@@ -34,10 +34,10 @@ def register(sub) -> None:
         help="mcs-lmlc: configurations to select (default: where O1 flattens)",
     )
     p.add_argument("--report", type=Path, help="report JSON to write")
-    p.set_defaults(func=main)
+    p.set_defaults(func=run)
 
 
-def main(args) -> int:
+def run(args) -> int:
     check_writable(args.out, "--out")
     if args.report:
         check_writable(args.report, "--report")

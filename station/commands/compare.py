@@ -28,10 +28,10 @@ def register(sub) -> None:
         help=f"comma-separated subset of {','.join(comparison.COMPARED)} (default: all)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
-    p.set_defaults(func=main)
+    p.set_defaults(func=run)
 
 
-def main(args) -> int:
+def run(args) -> int:
     for path, flag in ((args.report, "--report"), (args.plot, "--plot")):
         if path:
             check_writable(path, flag)

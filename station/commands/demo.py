@@ -23,7 +23,7 @@ from calib.kinematics import tcp_position
 from calib.metrics import aligned_errors
 from errors import DeviceError, InputError
 from sim_fixtures.station_sim import SimStation, make_cell
-from station.acquire import runner as sampling
+from station.acquire import runner
 from station.acquire.session import State
 from station.commands.calibrate import summary
 from station.config import StationConfig
@@ -48,10 +48,10 @@ def register(sub) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--targets-per-line", type=int, default=70, help=argparse.SUPPRESS)
-    p.set_defaults(func=main)
+    p.set_defaults(func=run)
 
 
-def main(args) -> int:
+def run(args) -> int:
     out = args.out
     if (out / "session").exists():
         raise InputError(f"{out / 'session'}: exists already; choose another --out or remove it")
@@ -70,18 +70,18 @@ def main(args) -> int:
     try:
         plan_path = out / "plan.csv"
         atomic_write(plan_path, Plan.of(sim.plan_deg, sim.plan_lines).csv_text())
-        prep = sampling.new_session(out / "session", config_path, plan_path)
+        inputs = runner.new_session(out / "session", config_path, plan_path)
         print(
-            f"session of {len(prep.plan)} targets on 3 gauge lines -> {prep.folder.path} "
+            f"session of {len(inputs.plan)} targets on 3 gauge lines -> {inputs.folder.path} "
             f"(simulated time x{TIME_SCALE:g})"
         )
-        state, view = sampling.run(prep, viewer=args.viewer)
+        state, view = runner.run(inputs, viewer=args.viewer)
     finally:
         sim.stop()
     try:
         if state is not State.DONE:
-            print(f"session {state.value}: calibrating the {len(prep.folder.rows)} samples taken")
-        return _calibrate(out, prep, view, args.seed, args.targets_per_line)
+            print(f"session {state.value}: calibrating the {len(inputs.folder.rows)} samples taken")
+        return _calibrate(out, inputs, view, args.seed, args.targets_per_line)
     finally:
         view.close()
 
@@ -137,17 +137,17 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _calibrate(out: Path, prep, view, seed: int, targets_per_line: int) -> int:
+def _calibrate(out: Path, inputs, view, seed: int, targets_per_line: int) -> int:
     world = make_cell(seed, targets_per_line).world
     holdout_path = out / "holdout.csv"
     world.sample_set(max(targets_per_line // 4, 2), np.random.default_rng([seed, 4])).to_csv(holdout_path)
-    samples, holdout = load_samples(prep.folder.samples_csv), load_samples(holdout_path)
-    where = str(prep.folder.path / "session.toml")
+    samples, holdout = load_samples(inputs.folder.samples_csv), load_samples(holdout_path)
+    where = str(inputs.folder.path / "session.toml")
     methods = [m for m in ("lmlc", "mcs-lmlc") if m in calibration.METHODS]
     outcomes = {}
     for method in methods:
         outcome = calibration.calibrate_samples(
-            samples, prep.robot, prep.setup, setup_where=where, holdout=holdout, method=method
+            samples, inputs.robot, inputs.setup, setup_where=where, holdout=holdout, method=method
         )
         outcomes[method] = outcome
         cal = outcome.calibration
@@ -160,14 +160,14 @@ def _calibrate(out: Path, prep, view, seed: int, targets_per_line: int) -> int:
         print(summary(outcome.report))
         print(truth_line(world, outcome))
     main_outcome = outcomes["lmlc"]
-    table = corrected_table(prep.robot, main_outcome.calibration, samples, "lmlc")
+    table = corrected_table(inputs.robot, main_outcome.calibration, samples, "lmlc")
     atomic_write(out / "corrected.toml", toml_text(table))
     atomic_write(out / "report.json", json.dumps(main_outcome.report.as_json(), indent=2) + "\n")
     for method, outcome in outcomes.items():
         if method != "lmlc":
             report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
             atomic_write(out / f"report-{method}.json", report)
-    print(f"wrote {out / 'corrected.toml'}, {out / 'report.json'} and {prep.folder.rrd}")
+    print(f"wrote {out / 'corrected.toml'}, {out / 'report.json'} and {inputs.folder.rrd}")
     return 0
 
 

@@ -31,10 +31,10 @@ def register(sub) -> None:
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
     p.add_argument("--plot", type=Path, help="PNG to write: O1 curve and line placements")
-    p.set_defaults(func=main)
+    p.set_defaults(func=run)
 
 
-def main(args) -> int:
+def run(args) -> int:
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
         if path:
             check_writable(path, flag)

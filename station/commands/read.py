@@ -22,7 +22,7 @@ def register(subparsers) -> None:
         default=str(configs.path("station.toml")),
         help="station config (default: the shipped one, simulated devices)",
     )
-    read.set_defaults(func=read_command)
+    read.set_defaults(func=run)
 
 
 def read_once(driver: Driver, backoff: Backoff) -> Reading:
@@ -50,7 +50,7 @@ def as_json(readings: dict[str, Reading]) -> dict:
     return out
 
 
-def read_command(args) -> int:
+def run(args) -> int:
     cfg = load_station_config(args.config)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # failures are raised, named
     backoff = cfg.reconnect.backoff()

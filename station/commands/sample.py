@@ -11,7 +11,7 @@ from pathlib import Path
 
 import configs
 from errors import InputError
-from station.acquire import runner as sampling
+from station.acquire import runner
 from station.acquire.session import State
 
 EXIT = {State.DONE: 0, State.STOPPED: 130, State.TIMED_OUT: 1}
@@ -21,28 +21,32 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("sample", help="a sampling session on the gauge-block lines")
     p.add_argument("--config", type=Path, help="station config (default: the shipped one, simulated devices)")
     p.add_argument(
-        "--plan", type=Path, help="plan CSV target,line,q1_deg..q6_deg (default: the simulated cell's)"
+        "--plan",
+        type=Path,
+        help="plan CSV target,line,q1_deg..q6_deg (default: the config's [session] plan, "
+        "where `station sim serve` publishes the plan its robot walks)",
     )
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--out", type=Path, help="new session folder")
     where.add_argument("--resume", type=Path, metavar="DIR", help="continue the session in DIR")
     p.add_argument("--viewer", action="store_true", help="stream to a native Rerun viewer")
     p.add_argument("--web", action="store_true", help="serve a Rerun web viewer")
-    p.set_defaults(func=main)
+    p.set_defaults(func=run)
 
 
-def main(args) -> int:
+def run(args) -> int:
     if args.resume:
         if args.plan:
             raise InputError("--plan: a resumed session keeps the plan embedded in its session.toml")
-        prep = sampling.resume_session(args.resume, args.config)
-        print(f"resuming {args.resume}: {len(prep.folder.rows)} of {len(prep.plan)} targets measured")
+        inputs = runner.resume_session(args.resume, args.config)
+        print(f"resuming {args.resume}: {len(inputs.folder.rows)} of {len(inputs.plan)} targets measured")
     else:
-        prep = sampling.new_session(args.out, args.config or configs.path("station.toml"), args.plan)
-    state, view = sampling.run(prep, viewer=args.viewer, web=args.web)
+        inputs = runner.new_session(args.out, args.config or configs.path("station.toml"), args.plan)
+    state, view = runner.run(inputs, viewer=args.viewer, web=args.web)
     view.close()
+    folder = inputs.folder
     print(
-        f"{state.value}: {len(prep.folder.rows)}/{len(prep.plan)} samples in {prep.folder.samples_csv}; "
-        f"recording {prep.folder.rrd}"
+        f"{state.value}: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "
+        f"recording {folder.rrd}"
     )
     return EXIT[state]

@@ -36,10 +36,10 @@ def register(subparsers) -> None:
     serve.add_argument(
         "--plan", type=Path, help="plan CSV (station plan) for the simulated robot to walk instead of its own"
     )
-    serve.set_defaults(func=serve_command)
+    serve.set_defaults(func=run)
 
 
-def serve_command(args) -> int:
+def run(args) -> int:
     cfg = load_station_config(args.config)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # faults are reported by drivers
     stop = threading.Event()

@@ -1,5 +1,6 @@
 """Robot joint sources against their simulated controllers, through the real client libraries
-(ur_rtde's RTDEReceiveInterface; pymodbus's ModbusTcpClient), faults included."""
+(ur_rtde's RTDEReceiveInterface; pymodbus's ModbusTcpClient), faults included; the joint registers'
+frames byte-exact on a pty."""
 
 import os
 import signal
@@ -9,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from pymodbus.client import ModbusTcpClient
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 from drivers.base import (
     Backoff,
@@ -22,6 +23,7 @@ from drivers.robot import JointRegisterMap, ModbusJointSource, RtdeJointSource
 from sim_fixtures.modbus_joints import ModbusJointServer, robot_joints
 from sim_fixtures.robot_program import IDLE, RUNNING, RobotFault, SimRobot
 from sim_fixtures.rtde_server import start_on_free_loopback
+from tests.system.serial_script import ScriptedSerial
 
 TARGETS = [[0.0, -50.0, -20.0, 0.0, -90.0, 0.0], [20.0, -40.0, -30.0, 5.0, -80.0, 10.0]]
 QUICK = Backoff(attempts=4, initial_s=0.05, max_s=0.2)
@@ -185,6 +187,22 @@ def test_joint_registers_round_trip(encoding, word_order):
     assert regs.decode_deg(regs.encode_deg(q)) == pytest.approx(q, abs=1e-3)
     with pytest.raises(ValueError, match="encoding"):
         JointRegisterMap(encoding="int16")
+
+
+def test_joint_registers_read_byte_exact_over_the_modbus_driver(tmp_path):
+    # The drawstring's Modbus driver, joints in its layout: 12 holding registers at 100 of device 3
+    # (RTU frames: id, function, data, CRC-16 low byte first), six INT32 millidegrees back.
+    request = bytes.fromhex("03 03 00 64 00 0c 05 f2")
+    reply = bytes.fromhex(
+        "03 03 18 00 00 05 dc ff ff f7 36 00 00 00 00 00 01 5f 90 ff fd 40 e0 00 00 00 01 ee ba"
+    )
+    client = ModbusSerialClient(str(tmp_path / "ctl"), baudrate=115200, timeout=0.3, retries=0)
+    with ScriptedSerial(tmp_path / "ctl", [(request, reply)]) as dev:
+        with ModbusJointSource(client, JointRegisterMap(address=100, device_id=3)) as source:
+            reading = source.read()
+    assert dev.received == [request]
+    assert reading.values["q_deg"] == pytest.approx((1.5, -2.25, 0.0, 90.0, -180.0, 0.001), abs=1e-9)
+    assert reading.units == {"q_deg": "deg"}
 
 
 def held_joint_server(port=0):

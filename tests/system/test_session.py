@@ -29,7 +29,7 @@ import configs
 from sim_fixtures.robot_program import RobotFault
 from sim_fixtures.station_sim import DIAL_SIGMA_MM, DRAWSTRING_SIGMA_MM, SimStation, make_cell
 from station import cli
-from station.acquire import runner as sampling
+from station.acquire import runner
 from station.acquire.session import State
 from station.commands.sim import publish_plan
 from station.config import StationConfig
@@ -37,7 +37,7 @@ from station.formats.plan import Plan
 from station.formats.samples import load_samples
 from station.formats.session_folder import load_session
 from station.formats.tables import load_robot, load_setup
-from station.jobs import planning as planner
+from station.jobs import planning
 
 ROOT = Path(__file__).resolve().parents[2]
 PER_LINE = 3
@@ -98,8 +98,8 @@ def finished(tmp_path_factory):
     config = write_config(tmp)
     messages = []
     with simulated(config):
-        prep = sampling.new_session(tmp / "sess", config, None)
-        state, view = sampling.run(prep, stream=_Sink(messages))
+        inputs = runner.new_session(tmp / "sess", config, None)
+        state, view = runner.run(inputs, stream=_Sink(messages))
         view.close()
     assert state is State.DONE
     return tmp / "sess", messages
@@ -145,14 +145,14 @@ def test_a_designed_plan_is_walked_and_measured_target_by_target(tmp_path):
         load_robot(configs.path("robots/hsr_jr680.toml")),
         load_setup(configs.path("setups/sim.toml")),
     )
-    plan = planner.design(robot, setup, per_line=14, n_select=36, suggest=False).plan
+    plan = planning.design(robot, setup, per_line=14, n_select=36, suggest=False).plan
     plan_path = tmp_path / "plan.csv"
     plan_path.write_text(plan.csv_text())
     config = write_config(tmp_path)
     with simulated(config, plan=(plan.q_deg, plan.line)):
-        prep = sampling.new_session(tmp_path / "sess", config, plan_path)
+        inputs = runner.new_session(tmp_path / "sess", config, plan_path)
         messages = []
-        state, view = sampling.run(prep, stream=_Sink(messages))
+        state, view = runner.run(inputs, stream=_Sink(messages))
         view.close()
     assert state is State.DONE, messages
     rows = rows_of(tmp_path / "sess")
@@ -213,9 +213,9 @@ def test_sigkill_mid_session_then_resume_without_torn_or_duplicate_rows(tmp_path
         assert 3 <= taken < N_TARGETS
         with (folder / "samples.csv").open("a") as fh:
             fh.write("99,7,2,1.0,2.0")  # a row torn by a power cut mid-write
-        prep = sampling.resume_session(folder, None)
-        assert len(prep.folder.rows) == taken
-        state, view = sampling.run(prep, stream=_Sink([]))
+        inputs = runner.resume_session(folder, None)
+        assert len(inputs.folder.rows) == taken
+        state, view = runner.run(inputs, stream=_Sink([]))
         view.close()
     assert state is State.DONE
     rows = rows_of(folder)
@@ -233,21 +233,21 @@ def test_unplugged_dial_suspends_the_session_which_continues_after_replug(tmp_pa
     config = write_config(tmp_path)
     messages: list[str] = []
     with simulated(config) as sim:
-        prep = sampling.new_session(tmp_path / "sess", config, None)
+        inputs = runner.new_session(tmp_path / "sess", config, None)
         result = {}
         worker = threading.Thread(
-            target=lambda: result.update(out=sampling.run(prep, stream=_Sink(messages)))
+            target=lambda: result.update(out=runner.run(inputs, stream=_Sink(messages)))
         )
         worker.start()
         deadline = time.monotonic() + 30
-        while len(prep.folder.rows) < 2 and time.monotonic() < deadline:
+        while len(inputs.folder.rows) < 2 and time.monotonic() < deadline:
             time.sleep(0.005)
         sim.devices["dial"].port.unplug()
         while not any("suspended: dial not answering" in m for m in messages) and time.monotonic() < deadline:
             time.sleep(0.01)
-        unplugged_rows = len(prep.folder.rows)
+        unplugged_rows = len(inputs.folder.rows)
         time.sleep(0.3)
-        assert len(prep.folder.rows) == unplugged_rows  # nothing recorded while the dial is gone
+        assert len(inputs.folder.rows) == unplugged_rows  # nothing recorded while the dial is gone
         sim.devices["dial"].replug()
         worker.join(30)
     state, view = result["out"]

@@ -1,6 +1,9 @@
 """End to end: ``station sim serve`` in a subprocess on non-contract addresses, then
-``station read`` against it through the real drivers; signals, unreachable devices, bad config."""
+``station read`` and ``station sample`` against it through the real drivers; signals, unreachable
+devices, bad config."""
 
+import contextlib
+import csv
 import importlib.util
 import json
 import queue
@@ -16,6 +19,7 @@ import numpy as np
 import pytest
 
 from sim_fixtures.station_sim import make_cell
+from station.formats.plan import load_plan
 
 # The real entry point, limited to the commands present on this branch (siblings such as
 # ``demo`` arrive with other branches).
@@ -86,13 +90,21 @@ def stop(proc) -> int:
 @pytest.fixture
 def served(tmp_path):
     """``sim serve --hold`` on a random loopback RTDE address and a free Modbus port."""
+    with serving(tmp_path, "--hold") as started:
+        yield started
+
+
+@contextlib.contextmanager
+def serving(tmp_path, *flags, extra_config=""):
+    """``sim serve`` with ``flags`` on a random loopback RTDE address and a free Modbus port, its
+    config ``CONFIG`` followed by ``extra_config``: (process, config path, printed addresses)."""
     for _ in range(3):
         host = f"127.0.0.{random.randint(2, 250)}"
         config = tmp_path / "station.toml"
-        config.write_text(CONFIG.format(host=host, port=free_port(), dial=tmp_path / "dial"))
+        config.write_text(CONFIG.format(host=host, port=free_port(), dial=tmp_path / "dial") + extra_config)
         with open(tmp_path / "serve.err", "w") as err:
             proc = subprocess.Popen(
-                [*CLI, "sim", "serve", "--config", str(config), "--hold"],
+                [*CLI, "sim", "serve", "--config", str(config), *flags],
                 stdout=subprocess.PIPE,
                 stderr=err,
                 text=True,
@@ -135,6 +147,37 @@ def test_sim_serve_prints_addresses_and_read_gets_every_device(served):
     for device in reading["devices"].values():
         assert before - 1 < device["t_wall"] < time.time() + 1
     assert reading["devices"]["drawstring"]["units"] == {"length_mm": "mm"}
+
+
+# A small fast cell: 3 targets on each of 3 lines, a quick robot, 20x simulated time.
+FAST_SESSION = """
+[session]
+plan = "{plan}"
+[sim]
+speed_deg_s = 120.0
+accel_deg_s2 = 480.0
+dwell_s = 2.0
+targets_per_line = 3
+plan_csv = "{plan}"
+"""
+
+
+def test_sample_without_plan_measures_the_plan_sim_serve_published(tmp_path):
+    plan_path = tmp_path / "published" / "plan.csv"
+    with serving(tmp_path, extra_config=FAST_SESSION.format(plan=plan_path)) as (_, config, _):
+        result = run_cli("sample", "--config", str(config), "--out", str(tmp_path / "sess"))
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.splitlines()[-1].startswith(f"done: 9/9 samples in {tmp_path / 'sess'}")
+    cell, plan = make_cell(0, 3), load_plan(plan_path)
+    np.testing.assert_allclose(plan.q_deg, cell.plan_deg, atol=1e-6)  # the cell's own plan
+    with (tmp_path / "sess" / "samples.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    targets = np.array([int(r["target"]) for r in rows])
+    assert sorted(targets) == list(range(9))
+    q = np.array([[float(r[f"q{i}_deg"]) for i in range(1, 7)] for r in rows])
+    # the simulated robot dwells exactly at each target; both files keep 6 decimals
+    assert np.abs(q - plan.q_deg[targets]).max() < 1e-5
+    assert f'plan_source = "{plan_path}"' in (tmp_path / "sess" / "session.toml").read_text()
 
 
 def test_sim_serve_stops_on_sigterm_and_removes_links(served):

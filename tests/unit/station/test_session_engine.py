@@ -1,0 +1,342 @@
+"""The session engine on a simulated clock against in-memory devices: settle, capture, target
+matching, suspend and resume, the target timeout, the unreachable limit, stop requests and resumed
+sessions without duplicates. The socket and pty versions are in ``tests/system/test_session.py``.
+
+Every device answers from a script of the (simulated) time; each read takes ``READ_S`` of it, and
+the engine's waits advance it, so a test of minutes of session time runs in milliseconds.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from drivers.base import Backoff, DeviceReplyError, DeviceTimeout, Driver, Field, Reading
+from errors import DeviceError
+from station.acquire.capture import RUNNING, Devices, Rules
+from station.acquire.session import SUSPENDED_POLL_S, Listener, Session, State
+from station.formats.plan import Plan
+from station.formats.session_folder import SessionFolder
+
+READ_S = 0.001  # simulated time one device read takes
+T0_WALL = 1.7e9  # wall clock (s since the epoch) at simulated time 0
+ANCHOR_MM = 1000.0  # the scripted drawstring reads ANCHOR_MM + q1 (deg): a truth per pose
+
+RULES = Rules(
+    settle_speed_deg_s=0.05,
+    settle_s=0.5,
+    readings=3,
+    window_s=0.5,
+    still_deg=0.005,
+    jump_mm=0.15,
+    dial_range_mm=(-2.0, 2.0),
+    dial_stable_mm=0.02,
+    length_range_mm=(50.0, 5000.0),
+    match_deg=2.0,
+    target_timeout_s=10.0,
+    unreachable_s=5.0,
+)
+BACKOFF = Backoff(attempts=2, initial_s=0.05)
+PLAN = Plan.of([[10.0 * i, -30.0, 40.0, 0.0, 20.0, 5.0] for i in range(3)], [0, 0, 1])
+
+
+class FakeClock:
+    """Simulated monotonic time (s): ``sleep`` advances it at once. A session still running after
+    ``LIMIT_S`` of it would never end: that fails the test rather than hanging it."""
+
+    LIMIT_S = 600.0
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += seconds
+        if self.now > self.LIMIT_S:
+            raise AssertionError(f"the session still runs after {self.LIMIT_S:g} s of simulated time")
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    """The simulated clock; the real one fails the test if the engine reads or waits on it."""
+
+    def real_clock(*_):
+        raise AssertionError("the session engine used the real clock")
+
+    monkeypatch.setattr(time, "monotonic", real_clock)
+    monkeypatch.setattr(time, "sleep", real_clock)
+    return FakeClock()
+
+
+Script = Callable[[float], "dict | Exception"]
+
+
+class ScriptedDriver(Driver):
+    """A device in memory: ``read()`` at simulated time t answers ``script(t)`` (a dict of values)
+    or raises it (a driver error); opens and closes are counted."""
+
+    def __init__(self, name: str, fields: dict[str, Field], script: Script, clock: FakeClock):
+        self.name, self.fields, self.script, self.clock = name, fields, script, clock
+        self.reads = self.opens = self.closes = 0
+
+    def open(self) -> None:
+        self.opens += 1
+
+    def close(self) -> None:
+        self.closes += 1
+
+    def read(self) -> Reading:
+        self.clock.sleep(READ_S)
+        self.reads += 1
+        t = self.clock()
+        answer = self.script(t)
+        if isinstance(answer, Exception):
+            raise answer
+        units = {name: self.fields[name].units for name in answer}
+        return Reading(self.name, answer, units, t_monotonic=t, t_wall=T0_WALL + t)
+
+
+ROBOT_FIELDS = {
+    "q_deg": Field("deg", (6,)),
+    "qd_deg_s": Field("deg/s", (6,)),
+    "robot_mode": Field(""),
+}
+
+
+def still(q, mode: int = RUNNING) -> dict:
+    return {"q_deg": tuple(q), "qd_deg_s": (0.0,) * 6, "robot_mode": mode}
+
+
+def moving(q) -> dict:
+    return {"q_deg": tuple(q), "qd_deg_s": (5.0,) * 6, "robot_mode": RUNNING}
+
+
+def timeline(*segments) -> Script:
+    """``(until_s, answer)`` segments in order; the last answer holds for ever after."""
+
+    def at(t: float):
+        for until, answer in segments:
+            if t < until:
+                return answer
+        return segments[-1][1]
+
+    return at
+
+
+def walk(targets, arrive_s: float = 0.5, dwell_s: float = 2.0, start_s: float = 0.0) -> list:
+    """Segments of a robot that, from ``start_s`` on, moves for ``arrive_s`` to each pose and
+    holds it ``dwell_s``."""
+    segments, t = [], start_s
+    for q in targets:
+        segments += [(t + arrive_s, moving(q)), (t + arrive_s + dwell_s, still(q))]
+        t += arrive_s + dwell_s
+    return segments
+
+
+class Cell:
+    """A robot on a script, a drawstring reading ``ANCHOR_MM + q1`` and a dial reading 0.25 mm,
+    each overridable; ``run()`` runs a session on them and keeps its messages."""
+
+    def __init__(self, tmp_path, clock: FakeClock, robot: Script, folder: SessionFolder | None = None):
+        self.clock = clock
+        self.robot = ScriptedDriver("robot", ROBOT_FIELDS, robot, clock)
+        self.drawstring = ScriptedDriver(
+            "drawstring", {"length_mm": Field("mm")}, self.length_from_pose, clock
+        )
+        self.dial = ScriptedDriver("dial", {"dial_mm": Field("mm")}, lambda t: {"dial_mm": 0.25}, clock)
+        header = {"start_wall_s": T0_WALL, "station": {"time_scale": 1.0}}
+        self.folder = folder or SessionFolder.create(tmp_path / "sess", header)
+        self.messages: list[str] = []
+        self.on_sample: Callable[[dict], None] = lambda row: None
+        self.on_message: Callable[[str], None] = lambda text: None
+
+    def length_from_pose(self, t: float) -> dict:
+        return {"length_mm": ANCHOR_MM + self.robot.script(t)["q_deg"][0]}
+
+    def session(self) -> Session:
+        drivers = {"robot": self.robot, "drawstring": self.drawstring, "dial": self.dial}
+        devices = Devices(drivers, BACKOFF, sleep=self.clock.sleep)
+
+        def message(text: str) -> None:
+            self.messages.append(text)
+            self.on_message(text)
+
+        listener = Listener(lambda row, cap: self.on_sample(row), message)
+        return Session(self.folder, PLAN, devices, RULES, listener, clock=self.clock, sleep=self.clock.sleep)
+
+    def run(self) -> State:
+        return self.session().run()
+
+    def targets(self) -> list[int]:
+        return [int(r["target"]) for r in self.folder.rows]
+
+    def said(self, start: str) -> bool:
+        return any(m.startswith(start) for m in self.messages)
+
+
+def stop_after_the_first_sample(cell: Cell) -> State:
+    """Run a session on ``cell`` whose first stored sample requests a stop (as Ctrl-C would)."""
+    session = cell.session()
+    cell.on_sample = lambda row: session.request_stop()
+    return session.run()
+
+
+def test_every_target_captured_once_with_its_readings(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    assert cell.run() is State.DONE
+    assert cell.targets() == [0, 1, 2]
+    assert [int(r["sample"]) for r in cell.folder.rows] == [0, 1, 2]
+    for row, q in zip(cell.folder.rows, PLAN.q_deg, strict=True):
+        assert float(row["length_mm"]) == pytest.approx(ANCHOR_MM + q[0])
+        assert float(row["dial_mm"]) == pytest.approx(0.25)
+        assert [float(row[f"q{i + 1}_deg"]) for i in range(6)] == pytest.approx(q)
+    raw = cell.folder.raw_csv.read_text().splitlines()
+    assert len(raw) == 1 + RULES.readings * len(PLAN)
+    # each capture comes settle_s after the robot arrives (2.5 s walk per target, 0.5 s moving)
+    late_s = np.array([float(r["t_s"]) for r in cell.folder.rows]) - [0.5, 3.0, 5.5] - RULES.settle_s
+    assert np.all((late_s >= 0) & (late_s < 3 * RULES.poll_s))
+    assert cell.messages[-1].startswith("done: all 3 targets measured; 3 samples")
+
+
+def test_a_revisited_target_is_not_captured_twice(tmp_path, clock):
+    q = PLAN.q_deg
+    cell = Cell(tmp_path, clock, timeline(*walk([q[0], q[1], q[0], q[1], q[2]])))
+    assert cell.run() is State.DONE
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_resumed_session_captures_only_the_unfinished_targets(tmp_path, clock):
+    first = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    assert stop_after_the_first_sample(first) is State.STOPPED
+    assert first.targets() == [0]
+
+    clock.now = 0.0  # a new process: the robot walks the whole plan again
+    resumed = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)), SessionFolder.open(tmp_path / "sess"))
+    assert resumed.run() is State.DONE
+    assert resumed.targets() == [0, 1, 2]
+    assert [int(r["sample"]) for r in SessionFolder.open(tmp_path / "sess").rows] == [0, 1, 2]
+
+
+def test_a_pose_away_from_every_target_is_not_matched(tmp_path, clock):
+    off = PLAN.q_deg[0] + [0, 0, 0, 0, 0, RULES.match_deg + 0.5]
+    cell = Cell(tmp_path, clock, timeline((0.5, moving(off)), (1e9, still(off))))
+    assert cell.run() is State.TIMED_OUT
+    assert cell.folder.rows == []
+    assert "settled only at finished targets or away from the plan" in cell.messages[-1]
+    assert clock() == pytest.approx(RULES.target_timeout_s, abs=3 * RULES.poll_s)
+
+
+def test_a_robot_that_never_settles_times_out_after_the_target_timeout(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline((1e9, moving(PLAN.q_deg[0]))))
+    assert cell.run() is State.TIMED_OUT
+    assert clock() == pytest.approx(RULES.target_timeout_s, abs=3 * RULES.poll_s)
+    assert cell.messages[-1].startswith("timed out: no capture for 10 s: the robot never settled")
+    assert cell.drawstring.reads == 0  # gates and captures wait for a settled robot
+
+
+def test_robot_not_running_suspends_and_the_session_resumes(tmp_path, clock):
+    q = PLAN.q_deg
+    # still at target 0 but not yet settled when the controller leaves RUNNING (0.8 s .. 3 s)
+    segments = [(0.5, moving(q[0])), (0.8, still(q[0])), (3.0, still(q[0], mode=5)), (5.0, still(q[0]))]
+    cell = Cell(tmp_path, clock, timeline(*segments, *walk(q[1:], start_s=5.0)))
+    assert cell.run() is State.DONE
+    assert cell.said("suspended: robot not running (robot mode 5, 7 = RUNNING)")
+    assert "resumed" in cell.messages
+    late_s = float(cell.folder.rows[0]["t_s"]) - 3.0 - RULES.settle_s
+    assert 0 <= late_s < SUSPENDED_POLL_S + 3 * RULES.poll_s
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_slack_cable_suspends_until_the_drawstring_is_back_in_its_gate(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    cell.drawstring.script = lambda t: {"length_mm": 10.0} if t < 2.0 else cell.length_from_pose(t)
+    assert cell.run() is State.DONE
+    assert cell.said("suspended: drawstring reads 10.000 mm, outside 50..5000 mm: cable slack or jump")
+    assert "resumed" in cell.messages
+    assert float(cell.folder.rows[0]["t_s"]) >= 2.0  # nothing stored from the slack cable
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_a_silent_dial_suspends_and_nothing_is_stored_until_it_answers(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    silent = DeviceTimeout("dial", "no reply within 0.2 s")
+    cell.dial.script = lambda t: silent if 5.0 <= t < 7.0 else {"dial_mm": 0.25}  # at target 1
+    assert cell.run() is State.DONE
+    assert cell.said("suspended: dial not answering: unreachable after 2 attempts (no reply within 0.2 s)")
+    assert "resumed" in cell.messages
+    assert cell.targets() == [0, 1, 2]
+    assert float(cell.folder.rows[1]["t_s"]) >= 7.0  # nothing stored while the dial was silent
+    assert cell.dial.closes > 0 and cell.dial.opens == cell.dial.closes  # reconnected on each retry
+
+
+def test_a_dial_silent_past_the_unreachable_limit_ends_the_session(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=1e9)))
+    cell.dial.script = lambda t: DeviceTimeout("dial", "no reply within 0.2 s")
+    with pytest.raises(DeviceError, match=r"dial not answering: .* \(silent for over 5 s; 0 samples kept\)"):
+        cell.run()
+    suspended_s = 0.5 + RULES.settle_s  # settled at target 0, the gate read the dial
+    silent_for = clock() - suspended_s
+    assert RULES.unreachable_s < silent_for < RULES.unreachable_s + SUSPENDED_POLL_S + 0.2
+
+
+def test_a_transient_failure_is_retried_without_suspending(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    glitch = iter([DeviceTimeout("drawstring", "no reply")])
+    cell.drawstring.script = lambda t: next(glitch, None) or cell.length_from_pose(t)
+    assert cell.run() is State.DONE
+    assert not cell.said("suspended")
+    assert cell.drawstring.closes == 1 and cell.drawstring.opens == 1  # one reconnect ...
+    late_s = float(cell.folder.rows[0]["t_s"]) - 0.5 - RULES.settle_s
+    assert late_s >= BACKOFF.initial_s  # ... after the backoff, waited on the session's clock
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_a_dial_out_of_range_suspends_as_a_gate(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    off_edge = DeviceReplyError("dial", "device error 'ERR3'", code="3")
+    cell.dial.script = lambda t: off_edge if t < 2.0 else {"dial_mm": 0.25}
+    assert cell.run() is State.DONE
+    assert cell.said("suspended: dial out of range (device error 'ERR3')")
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_a_jump_within_a_capture_rejects_it_and_the_target_is_captured_later(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    reads = iter(range(1_000_000))
+
+    def jumpy(t: float) -> dict:
+        value = cell.length_from_pose(t)
+        if next(reads) == 1:  # the first capture round (read 0 was the gate)
+            value["length_mm"] += 1.0
+        return value
+
+    cell.drawstring.script = jumpy
+    session = cell.session()
+    assert session.run() is State.DONE
+    assert cell.said("capture at target 0 rejected: drawstring jumped (1.000 mm within the capture)")
+    assert session.rejected == 1
+    assert cell.targets() == [0, 1, 2]
+    assert float(cell.folder.rows[0]["length_mm"]) == pytest.approx(ANCHOR_MM + PLAN.q_deg[0][0])
+
+
+def test_a_stop_request_ends_the_session_after_the_sample_in_flight(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    assert stop_after_the_first_sample(cell) is State.STOPPED
+    assert cell.targets() == [0]
+    assert len(cell.folder.raw_csv.read_text().splitlines()) == 1 + RULES.readings
+    assert cell.messages[-1].startswith("stopped: stopped on request; 1 samples")
+
+
+def test_a_stop_request_while_suspended_ends_the_session(tmp_path, clock):
+    q = PLAN.q_deg[0]
+    cell = Cell(tmp_path, clock, timeline((0.5, moving(q)), (1e9, still(q, mode=5))))
+    session = cell.session()
+    cell.on_message = lambda text: text.startswith("suspended") and session.request_stop()
+    assert session.run() is State.STOPPED
+    assert "resumed" not in cell.messages
+    assert cell.folder.rows == []
