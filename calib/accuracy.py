@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2
 
-from calib.kinematics import tcp_jacobian
+from calib.kinematics import N_DH, tcp_jacobian
 
 
 def rigid_fields(p: np.ndarray) -> np.ndarray:
@@ -83,10 +83,10 @@ def table_covariance(
     held table indices with prior sigma ``held_sigma`` (h,) in internal units.
     """
     free, held = np.asarray(free), np.asarray(held)
-    table = free < 24
-    sensitivity = np.zeros((24, held.size))
+    table = free < N_DH
+    sensitivity = np.zeros((N_DH, held.size))
     sensitivity[free[table]] = -(cov_free @ (jac_free.T @ jac_held))[table]
     sensitivity[held, np.arange(held.size)] += 1.0
-    cov = np.zeros((24, 24))
+    cov = np.zeros((N_DH, N_DH))
     cov[np.ix_(free[table], free[table])] = cov_free[np.ix_(table, table)]
     return cov + (sensitivity * held_sigma**2) @ sensitivity.T

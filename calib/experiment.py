@@ -17,8 +17,8 @@ import numpy as np
 from calib import ik
 from calib.accuracy import workspace_error_modes
 from calib.calibrate import CalibrationOptions, covariance, prepare
-from calib.kinematics import tcp_position
-from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.kinematics import dh_table, tcp_position
+from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 
 MIN_CONDITIONING = 0.04
 """Inverse condition number of the scaled geometric Jacobian below which a pose counts as near a
@@ -85,7 +85,7 @@ def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.nd
     ``model``'s configurations promises, with its identified parameters and the stated noise."""
     prep = prepare(model, CalibrationOptions(loss="linear"))
     _, table_cov = covariance(prep.prior, prep.before.x, prep.free)
-    return workspace_error_modes(prep.before.x[:N_DH].reshape(6, 4), model.tool, workspace_q, table_cov)
+    return workspace_error_modes(dh_table(prep.before.x), model.tool, workspace_q, table_cov)
 
 
 def _valid(dh, tool, limits, q, err, tol: float = 1e-3) -> np.ndarray:

@@ -14,6 +14,15 @@ import numpy as np
 
 DH_COLUMNS = ("theta", "d", "a", "alpha")
 THETA, D, A, ALPHA = range(4)
+N_JOINTS = 6
+N_DH = N_JOINTS * len(DH_COLUMNS)
+"""Number of D-H table parameters: they lead every parameter vector ``x`` (``dh_table(x)``)."""
+
+
+def dh_table(x: np.ndarray) -> np.ndarray:
+    """The D-H table (6, 4) that leads a parameter vector ``x`` (its first ``N_DH`` entries), in
+    internal units."""
+    return np.asarray(x)[:N_DH].reshape(N_JOINTS, len(DH_COLUMNS))
 
 
 def joint_transforms(dh: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -75,7 +84,7 @@ def tcp_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.nd
     jac[:, :, :, D] = z_prev.transpose(0, 2, 1)
     jac[:, :, :, A] = x_this.transpose(0, 2, 1)
     jac[:, :, :, ALPHA] = np.cross(x_this, p[:, None, :] - o_this).transpose(0, 2, 1)
-    return p, jac.reshape(p.shape[0], 3, 24)
+    return p, jac.reshape(p.shape[0], 3, N_DH)
 
 
 def parallel_axis_pairs(dh: np.ndarray, tol_rad: float = 1e-6) -> list[int]:

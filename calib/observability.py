@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.kinematics import N_DH
+
 INDICES = ("O1", "O2", "O3", "O4", "O5")
 
 
@@ -168,7 +170,7 @@ def select_configurations(
     *,
     n_select: int | None = None,
     index: str = "O1",
-    n_table: int = 24,
+    n_table: int = N_DH,
 ) -> MCSResult:
     """MCS over the configurations of a model: ``jac`` (m, n) whitened Jacobian at the setup fit,
     ``rows`` (m,) configuration of each residual, ``free`` (n,) fitted unknowns (the first

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.kinematics import DH_COLUMNS
+from calib.kinematics import DH_COLUMNS, N_JOINTS
 
 _UNIT = {"theta": "deg", "d": "mm", "a": "mm", "alpha": "deg"}
 
-DH_NAMES = tuple(f"J{j + 1}.{col}_{_UNIT[col]}" for j in range(6) for col in DH_COLUMNS)
+DH_NAMES = tuple(f"J{j + 1}.{col}_{_UNIT[col]}" for j in range(N_JOINTS) for col in DH_COLUMNS)
 """Parameter names as the report writes them: ``J1.theta_deg``, ``J1.d_mm``, ..."""
 
 

@@ -1,6 +1,6 @@
 import numpy as np
 
-from calib.kinematics import parallel_axis_pairs, tcp_jacobian, tcp_position
+from calib.kinematics import N_DH, parallel_axis_pairs, tcp_jacobian, tcp_position
 from calib.params import dh_from_degrees
 from sim_fixtures.world import NOMINAL_JR680, Robot
 
@@ -34,8 +34,8 @@ def test_jacobian_matches_finite_differences(rng):
     dh, q, tool = _random_dh(rng), rng.uniform(-np.pi, np.pi, (8, 6)), rng.uniform(-100, 100, 3)
     _, jac = tcp_jacobian(dh, q, tool)
     x, h = dh.ravel(), 1e-6
-    for k in range(24):
-        dx = np.zeros(24)
+    for k in range(N_DH):
+        dx = np.zeros(N_DH)
         dx[k] = h
         fd = (
             tcp_position((x + dx).reshape(6, 4), q, tool) - tcp_position((x - dx).reshape(6, 4), q, tool)

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from calib.kinematics import N_DH
 from calib.observability import anneal, configuration_information, indices, singular_values
 from errors import InputError
 from station.formats.samples import load_samples
@@ -15,7 +16,7 @@ def problem(one_line):
     )
     prep = calibration.prepare(model)
     _, jac = model.residuals_and_jacobian(prep.before.x)
-    return model, jac[:, prep.free], np.flatnonzero(prep.free) < 24
+    return model, jac[:, prep.free], np.flatnonzero(prep.free) < N_DH
 
 
 def test_schur_singular_values_match_projected_svd(problem, rng):

@@ -8,7 +8,7 @@ import pytest
 import tomllib
 
 from calib.calibrate import calibrate
-from calib.kinematics import base_from_frames, tcp_position
+from calib.kinematics import N_DH, base_from_frames, tcp_position
 from calib.metrics import error_metrics
 from calib.params import dh_from_degrees
 from calib.position import (
@@ -76,7 +76,7 @@ def test_jacobian_matches_finite_differences(compliant):
     comp = Compliance((1, 2, 3), LINKS) if compliant else None
     model = PositionModel(samples, ur10(), np.array([5.0, -3.0, 100.0]), compliance=comp)
     x = model.x0 + rng.normal(0, 0.01, model.x0.size)
-    x[24:27] = rng.normal(0, 0.3, 3)  # a rotation far from the reference, not only small ones
+    x[N_DH : N_DH + 3] = rng.normal(0, 0.3, 3)  # a rotation far from the reference, not only small ones
     r, jac = model.residuals_and_jacobian(x)
     np.testing.assert_allclose(r, model.residuals(x))
     fd = fd_jacobian(model.residuals, x)
