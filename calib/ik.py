@@ -37,6 +37,16 @@ def conditioning(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
     return s[:, -1] / s[:, 0]
 
 
+def pose_error(
+    dh: np.ndarray, tool: np.ndarray, q: np.ndarray, position: np.ndarray, rotation: np.ndarray
+) -> np.ndarray:
+    """Scaled error (N, 6) of configurations ``q`` (N, 6) [rad] from the targets: ``position - p``
+    [mm] and ``LENGTH_SCALE`` times the rotation vector ``w`` (first order) to ``rotation`` (N, 3, 3)."""
+    p, r = tool_frames(dh, q, tool)
+    w = 0.5 * np.cross(r.transpose(0, 2, 1), rotation.transpose(0, 2, 1)).sum(axis=1)
+    return np.concatenate([position - p, LENGTH_SCALE * w], axis=1)
+
+
 def solve(
     dh: np.ndarray,
     tool: np.ndarray,
@@ -45,18 +55,25 @@ def solve(
     q_seed: np.ndarray,
     iterations: int = 60,
     damping: float = 1e-2,
+    tol: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Configurations (N, 6) [rad] reaching ``position`` (N, 3) [mm] with ``rotation`` (N, 3, 3)
-    from ``q_seed`` (N, 6), and the remaining scaled error norm (N,) [mm]."""
+    from ``q_seed`` (N, 6), and the remaining scaled error norm (N,) [mm].
+
+    Each iteration takes the damped Newton step ``(J^T J + damping I)^-1 J^T e`` (``J`` the
+    ``geometric_jacobian``, ``e`` the ``pose_error``), cut to ``MAX_STEP`` in its largest joint. A
+    configuration whose error norm is below ``tol`` [mm] stops moving; the loop ends when all have
+    or after ``iterations``.
+    """
     q = np.array(q_seed, float)
+    err = pose_error(dh, tool, q, position, rotation)
     for _ in range(iterations):
-        p, r = tool_frames(dh, q, tool)
-        w = 0.5 * np.cross(r.transpose(0, 2, 1), rotation.transpose(0, 2, 1)).sum(axis=1)
-        err = np.concatenate([position - p, LENGTH_SCALE * w], axis=1)
-        jac = geometric_jacobian(dh, q, tool)
+        active = np.linalg.norm(err, axis=1) >= tol
+        if not active.any():
+            break
+        jac = geometric_jacobian(dh, q[active], tool)
         jt = jac.transpose(0, 2, 1)
-        step = np.linalg.solve(jt @ jac + damping * np.eye(6), (jt @ err[:, :, None]))[:, :, 0]
-        q += step / np.maximum(1.0, np.abs(step).max(axis=1, keepdims=True) / MAX_STEP)
-    p, r = tool_frames(dh, q, tool)
-    w = 0.5 * np.cross(r.transpose(0, 2, 1), rotation.transpose(0, 2, 1)).sum(axis=1)
-    return q, np.linalg.norm(np.concatenate([position - p, LENGTH_SCALE * w], axis=1), axis=1)
+        step = np.linalg.solve(jt @ jac + damping * np.eye(6), jt @ err[active, :, None])[:, :, 0]
+        q[active] += step / np.maximum(1.0, np.abs(step).max(axis=1, keepdims=True) / MAX_STEP)
+        err[active] = pose_error(dh, tool, q[active], position[active], rotation[active])
+    return q, np.linalg.norm(err, axis=1)

@@ -8,7 +8,10 @@ from calib.kinematics import DH_COLUMNS, N_JOINTS
 
 _UNIT = {"theta": "deg", "d": "mm", "a": "mm", "alpha": "deg"}
 
-DH_NAMES = tuple(f"J{j + 1}.{col}_{_UNIT[col]}" for j in range(N_JOINTS) for col in DH_COLUMNS)
+DH_KEYS = tuple(f"{col}_{_UNIT[col]}" for col in DH_COLUMNS)
+"""A joint's keys in the robot file (contract), in column order: theta_deg, d_mm, a_mm, alpha_deg."""
+
+DH_NAMES = tuple(f"J{j + 1}.{key}" for j in range(N_JOINTS) for key in DH_KEYS)
 """Parameter names as the report writes them: ``J1.theta_deg``, ``J1.d_mm``, ..."""
 
 
