@@ -32,6 +32,7 @@ import configs
 from calib import ik
 from calib.kinematics import tcp_position
 from calib.params import DH_KEYS, dh_from_degrees
+from sim_fixtures.sources import Instrument
 
 try:
     import tomllib
@@ -46,7 +47,9 @@ IK_DAMPING = 1e-6  # Newton's damping: only keeps a step finite at an exact sing
 
 @dataclass(frozen=True)
 class Noise:
-    """Instrument noise (1 sigma) and resolution, in mm and degrees."""
+    """The simulator's instruments, the one place their noise is stated: noise (1 sigma) and
+    resolution in mm and degrees, and the operator's placement off the edge (half width, mm).
+    ``configs/setups/sim.toml`` states the same noise for the user (a test holds them equal)."""
 
     length_mm: float = 0.02
     length_resolution_mm: float = 0.001
@@ -54,6 +57,14 @@ class Noise:
     dial_resolution_mm: float = 0.001
     q_deg: float = 0.0005
     placement_mm: float = 0.3
+
+    def drawstring(self, rng: np.random.Generator) -> Instrument:
+        """The drawstring as a live device reads (``sim serve``), noise drawn from ``rng``."""
+        return Instrument(self.length_mm, self.length_resolution_mm, rng)
+
+    def dial(self, rng: np.random.Generator) -> Instrument:
+        """The dial as a live device reads (``sim serve``), noise drawn from ``rng``."""
+        return Instrument(self.dial_mm, self.dial_resolution_mm, rng)
 
 
 @dataclass(frozen=True)

@@ -1,11 +1,15 @@
-"""The simulated cell: its nominal robot is the shipped file, its configurations touch the lines,
-and its inverse kinematics says when a pose is out of reach."""
+"""The simulated cell: its nominal robot is the shipped file, the shipped sim setup states its noise
+and lines, its configurations touch the lines, and its inverse kinematics says when a pose is out
+of reach."""
 
 import numpy as np
 import pytest
 
-from sim_fixtures.world import JR680_FILE, Robot, World
-from station.formats.tables import load_robot
+import configs
+from sim_fixtures.world import JR680_FILE, Noise, Robot, World
+from station.formats.tables import load_robot, load_setup
+
+SIM_SETUP = configs.path("setups/sim.toml")
 
 
 def test_nominal_robot_is_the_shipped_robot_file():
@@ -17,6 +21,25 @@ def test_nominal_robot_is_the_shipped_robot_file():
     np.testing.assert_array_equal(nominal.limits_deg, shipped.limits_deg())
     np.testing.assert_array_equal(nominal.tool, shipped.tool_mm)
     assert nominal.tcp([0, -50, -20, 0, -90, 0]) == pytest.approx([-1053.0, 0.0, 146.0], abs=1.0)
+
+
+def test_shipped_sim_setup_states_the_simulators_noise():
+    """What a user reads in configs/setups/sim.toml (and the calibration whitens by) is the noise
+    the simulated instruments add."""
+    setup = load_setup(SIM_SETUP)
+    assert setup.drawstring.sigma_mm == Noise().length_mm
+    assert setup.dial.sigma_mm == Noise().dial_mm
+
+
+def test_shipped_sim_setup_places_the_worlds_lines():
+    """``station plan --setup configs/setups/sim.toml`` plans on the lines the world has."""
+    stated = load_setup(SIM_SETUP).lines
+    for line, true in zip(stated, World.create(0).lines, strict=True):
+        assert line.id == true.id and line.length_mm == true.length_mm
+        np.testing.assert_allclose(line.point_mm, true.centre)
+        for given, unit in ((line.direction, true.direction), (line.approach, true.approach)):
+            np.testing.assert_allclose(given / np.linalg.norm(given), unit, atol=1e-12)
+        np.testing.assert_allclose(line.dial_axis, true.dial_axis, atol=1e-12)
 
 
 def test_line_configurations_touch_their_lines(rng):
