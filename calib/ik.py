@@ -21,12 +21,8 @@ def tool_frames(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.nda
 
     Parameters
     ----------
-    dh : ndarray, shape (6, 4)
-        D-H table, internal units.
-    q : ndarray, shape (N, 6)
-        Joint readings [rad].
-    tool : ndarray, shape (3,)
-        TCP in the flange frame [mm].
+    dh, q, tool
+        As for :func:`calib.kinematics.tcp_position`.
 
     Returns
     -------
@@ -46,12 +42,8 @@ def geometric_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> np.nd
 
     Parameters
     ----------
-    dh : ndarray, shape (6, 4)
-        D-H table, internal units.
-    q : ndarray, shape (N, 6)
-        Joint readings [rad].
-    tool : ndarray, shape (3,)
-        TCP in the flange frame [mm].
+    dh, q, tool
+        As for :func:`calib.kinematics.tcp_position`.
 
     Returns
     -------
@@ -70,8 +62,10 @@ def conditioning(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
+    Parameters
+    ----------
     dh, q, tool
-        As for :func:`geometric_jacobian`.
+        As for :func:`calib.kinematics.tcp_position`.
 
     Returns
     -------

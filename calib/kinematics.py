@@ -146,12 +146,8 @@ def tcp_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.nd
 
     Parameters
     ----------
-    dh : ndarray, shape (6, 4)
-        D-H table, internal units.
-    q : ndarray, shape (N, 6) or (6,)
-        Joint readings [rad].
-    tool : ndarray, shape (3,)
-        TCP in the flange frame [mm].
+    dh, q, tool
+        As for :func:`tcp_position`.
 
     Returns
     -------
