@@ -21,11 +21,11 @@ from pathlib import Path
 
 from scipy.optimize import least_squares
 
-from calib.calibrate import CalibrationOptions, prepare, robust_fit
+from calib.calibrate import CalibrationOptions, fit_setup, robust_fit
 from sim_fixtures.scenario import write_scenario
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
 
 
 def median_time(fn, repeats: int) -> float:
@@ -45,7 +45,7 @@ def main() -> None:
     sc = write_scenario(folder, seed=0, n_lines=1, n_per_line=200)
     files = load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup)
     model = calibration.build_model(*files, str(sc.setup))
-    prep = prepare(model)
+    prep = fit_setup(model)
     options = CalibrationOptions(loss="linear")
 
     def ours():
@@ -68,7 +68,7 @@ def main() -> None:
 
     t_ours, t_scipy = median_time(ours, args.repeats), median_time(scipy_lsq, args.repeats)
     cost_ours, cost_scipy = ours().cost, scipy_lsq().cost
-    t_run = median_time(lambda: calibration.run(*files), args.repeats)
+    t_run = median_time(lambda: calibration.calibrate_samples(*files), args.repeats)
     t_mcs = median_time(lambda: calibration.select_measurements(model, 72), args.repeats)
     print("200 samples on one gauge line (simulated HSR-JR680), 2-core machine, medians")
     print(f"| LMLC table solve, in-process | {t_ours * 1e3:.1f} ms | cost {cost_ours:.3f} |")

@@ -69,7 +69,7 @@ def held_out_errors(tests, dh, compliance=None, values=None) -> dict[str, np.nda
     for name, (samples, probe) in tests.items():
         comp = Compliance(COMPLIANT_JOINTS, UR10_LINKS) if compliance else None
         model, fit = register(PositionModel(samples, dh, probe, compliance=comp), dh, values)
-        out[name] = model.position_error_mm(fit.x)
+        out[name] = model.row_error_mm(fit.x)
     return out
 
 
@@ -131,9 +131,9 @@ def main(argv=None) -> int:
         "compliance": held_out_errors(tests, comp_model.dh(comp_cal.x), True, compliance),
     }
     train_err = {
-        "before": error_metrics(model.position_error_mm(cal.before.x)),
-        "after": error_metrics(model.position_error_mm(cal.x)),
-        "compliance": error_metrics(comp_model.position_error_mm(comp_cal.x)),
+        "before": error_metrics(model.row_error_mm(cal.before.x)),
+        "after": error_metrics(model.row_error_mm(cal.x)),
+        "compliance": error_metrics(comp_model.row_error_mm(comp_cal.x)),
     }
 
     print(f"UR10, IPA dataset: train {args.train} ({len(train)} rows), test {' '.join(args.test)}")

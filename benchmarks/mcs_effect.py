@@ -19,7 +19,7 @@ from calib.metrics import aligned_errors
 from sim_fixtures.scenario import write_scenario
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
 
 
 def workspace_rms(world, x) -> float:
@@ -43,9 +43,11 @@ def main() -> None:
             sc = write_scenario(tempfile.mkdtemp(), seed=100 + seed, n_lines=n_lines, n_per_line=per_line)
             files = load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup)
             for name, (method, n) in variants.items():
-                out = calibration.run(*files, holdout=load_samples(sc.holdout), method=method, select=n)
+                out = calibration.calibrate_samples(
+                    *files, holdout=load_samples(sc.holdout), method=method, select=n
+                )
                 results[name].append(
-                    (out.report["after"]["holdout"]["rmse_mm"], workspace_rms(sc.world, out.calibration.x))
+                    (out.report.after.holdout.rmse_mm, workspace_rms(sc.world, out.calibration.x))
                 )
         print(
             f"\n{n_lines} line(s), {n_lines * per_line} samples, {args.seeds} seeds: mean +- standard error"

@@ -3,7 +3,7 @@ paper could not measure.
 
 Per seed: a world with one gauge-block line (``World.create(seed, n_lines=1)``), 200 training and
 50 hold-out samples on that line, the rough setup a person would measure; every method of
-``calib.baselines`` from the common start (``station.jobs.compare.compare``, default budgets), then
+``calib.baselines`` from the common start (``station.jobs.comparison.compare``, default budgets), then
 the workspace error: distance between each method's and the true TCP over 1,000 random
 configurations within the joint limits, after re-registering the base (``aligned_errors``).
 Figures are means over the seeds with their standard errors.
@@ -30,7 +30,7 @@ from station.formats.tables import (
     load_robot,
     load_setup,  # noqa: E402
 )
-from station.jobs.compare import COMPARED, LABELS, compare  # noqa: E402
+from station.jobs.comparison import COMPARED, LABELS, compare  # noqa: E402
 
 # The paper's Table III (RMSE, MEAN, MAX [mm]) and Table IV (time [s], iterations): a real robot.
 PAPER = {

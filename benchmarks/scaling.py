@@ -1,7 +1,7 @@
 """Speed of each calibrator and how it grows with the number of samples and of gauge-block lines.
 
 Samples on simulated JR680 cells (``World.create(seed, n_lines)``), the common start of
-``station.jobs.compare`` (setup fit + identification), then each method timed alone:
+``station.jobs.comparison`` (setup fit + identification), then each method timed alone:
 
 - LMLC and Gauss-Newton at 200, 2,000 and 20,000 samples on one line (median of 3 runs below 20,000);
 - the filters (EKF, UKF, PF) at 200 and 2,000 (default budgets);
@@ -27,7 +27,7 @@ from calib.baselines import BaselineOptions, run_method  # noqa: E402
 from calib.calibrate import calibrate  # noqa: E402
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
 from sim_fixtures.world import World  # noqa: E402
-from station.jobs.compare import LABELS  # noqa: E402
+from station.jobs.comparison import LABELS  # noqa: E402
 
 GLOBAL_BUDGET = BaselineOptions(max_iter=30)
 PLAN = {

@@ -22,10 +22,20 @@ from calib.models import GROUP_PRIOR, MeasurementModel
 
 
 class WithPrior:
-    """A model plus Gaussian prior residuals ``(x_k - x_ref_k) / sigma_k`` for every unknown with a
-    finite prior sigma (the manufacturing tolerance of the table, the rough setup values): a
-    direction the data cannot see stays where the robot was built instead of wandering.
-    Prior rows carry group ``GROUP_PRIOR`` and row -1."""
+    """A model plus Gaussian prior residuals ``(x_k - x_ref_k) / sigma_k``.
+
+    One prior row for every unknown with a finite prior sigma (``model.prior_sigma()``: the
+    manufacturing tolerance of the table, the rough setup values): a direction the data cannot see
+    stays where the robot was built instead of wandering. Prior rows carry group ``GROUP_PRIOR`` and
+    row -1.
+
+    Parameters
+    ----------
+    model : MeasurementModel
+        The data's model.
+    x_ref : ndarray, shape (n,)
+        Where the prior centres each unknown, internal units.
+    """
 
     def __init__(self, model: MeasurementModel, x_ref: np.ndarray):
         self.model, self.x_ref = model, np.asarray(x_ref, float)
@@ -37,6 +47,7 @@ class WithPrior:
         self.rows = np.concatenate([model.rows, np.full(self._k.size, -1)])
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
+        """The model's whitened residuals and Jacobian at ``x`` (n,), the prior rows appended."""
         r, jac = self.model.residuals_and_jacobian(x, jacobian)
         r = np.concatenate([r, (x[self._k] - self.x_ref[self._k]) * self._inv])
         if jacobian:
@@ -48,9 +59,19 @@ class WithPrior:
 
 @dataclass(frozen=True, kw_only=True)
 class CalibrationOptions:
-    """``loss``: "linear", "huber" or "cauchy"; ``loss_threshold``: where the robust loss starts to
-    down-weight, in robust standard deviations; ``rank_rtol``: relative size below which a scaled
-    Jacobian column counts as produced by the others; ``lm``: solver options."""
+    """Options of the pipeline.
+
+    Attributes
+    ----------
+    loss : {"linear", "huber", "cauchy"}
+        Loss of the robust rounds.
+    loss_threshold : float
+        Where the robust loss starts to down-weight, in robust standard deviations of each group.
+    rank_rtol : float
+        Relative size below which a scaled Jacobian column counts as produced by the others.
+    lm : LMOptions
+        Solver options.
+    """
 
     loss: str = "cauchy"
     loss_threshold: float = 3.0
@@ -60,11 +81,29 @@ class CalibrationOptions:
 
 @dataclass
 class Calibration:
-    """Result: the ``before`` (setup-only) and ``after`` fits, the ``identified`` table/setup mask
-    (free in the final fit), ``held`` parameters with reasons, parameter ``sigma`` (internal units,
-    NaN where held), the fit's ``covariance`` of the free unknowns, the ``table_covariance``
-    (24, 24) with the held parameters' tolerances considered, the residual ``scale`` per group and
-    the ``downweighted`` sample rows."""
+    """The pipeline's result.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The model's unknowns (n).
+    before, after : LMResult
+        The setup-only fit with the nominal table, and the full fit.
+    identified : ndarray of bool, shape (n,)
+        Unknowns free in the final fit (identified table parameters and setup unknowns).
+    held : dict of str to str
+        Held parameters and why.
+    sigma : ndarray, shape (n,)
+        Standard deviation of each unknown, internal units; NaN where held.
+    covariance : ndarray, shape (k, k)
+        Covariance of the k free unknowns, internal units.
+    table_covariance : ndarray, shape (24, 24)
+        Covariance of the table with the held parameters considered at their tolerance.
+    scale : ndarray, shape (groups,)
+        Fitted noise scale per residual group, in units of the stated noise.
+    downweighted : ndarray of int
+        Sample rows the robust loss cut to below a quarter of their weight.
+    """
 
     names: tuple[str, ...]
     before: LMResult
@@ -79,6 +118,7 @@ class Calibration:
 
     @property
     def x(self) -> np.ndarray:
+        """The solution (n,), internal units."""
         return self.after.x
 
 
@@ -86,7 +126,28 @@ def robust_fit(
     model: MeasurementModel, x0: np.ndarray, free: np.ndarray, options: CalibrationOptions, callback=None
 ) -> tuple[LMResult, np.ndarray]:
     """Linear-loss LM, then (unless ``options.loss`` is linear) two robust rounds, each with the
-    loss scale re-estimated from the previous residuals. Returns the result and the scale used."""
+    loss scale re-estimated from the previous residuals (MAD per residual group).
+
+    Parameters
+    ----------
+    model : MeasurementModel or WithPrior
+        Residuals and Jacobian, ``groups`` per residual.
+    x0 : ndarray, shape (n,)
+        Start, internal units.
+    free : ndarray of bool, shape (n,)
+        Unknowns to fit; the others stay at ``x0``.
+    options : CalibrationOptions
+        Loss and solver options.
+    callback : callable, optional
+        Called by the solver after each trial step.
+
+    Returns
+    -------
+    result : LMResult
+        The last round's fit, with the history of every round.
+    scale : ndarray, shape (groups,)
+        Noise scale per residual group at the result.
+    """
     fun = model.residuals_and_jacobian
     lm = options.lm
     kw = dict(free=free, groups=model.groups, callback=callback)
@@ -109,7 +170,33 @@ def robust_fit(
 def identify(
     model: MeasurementModel, x: np.ndarray, free_setup: np.ndarray, gauges: dict[str, str], rtol: float
 ) -> tuple[np.ndarray, dict[str, str]]:
-    """Mask of the table parameters the data determines at ``x`` and the reasons for the others."""
+    """The table parameters the data determines at ``x``, and why the others are held.
+
+    Structural ``gauges`` are held first; a rank-revealing selection over the column-scaled
+    Jacobian (setup unknowns first, then the table joint by joint) holds what the data cannot tell
+    apart; then a parameter is held where the data pins it down no better than its manufacturing
+    tolerance.
+
+    Parameters
+    ----------
+    model : MeasurementModel
+        The data's model.
+    x : ndarray, shape (n,)
+        Where to linearise (the setup fit), internal units.
+    free_setup : ndarray of bool, shape (n,)
+        Setup unknowns that are fitted.
+    gauges : dict of str to str
+        Parameters held by structure, with reasons.
+    rtol : float
+        Relative column size below which a scaled column counts as produced by the others.
+
+    Returns
+    -------
+    table : ndarray of bool, shape (n,)
+        The identified table parameters.
+    held : dict of str to str
+        Every held parameter of ``model.names`` and why.
+    """
     _, jac = model.residuals_and_jacobian(x)
     names = model.names
     candidates = [k for k in range(N_DH) if names[k] not in gauges]
@@ -137,9 +224,20 @@ def identify(
 
 
 @dataclass
-class Prepared:
-    """The setup-only fit (``before``), the prior-augmented model it used, the identified mask
-    (``free``) and the ``held`` reasons: all a table fit starts from."""
+class SetupFit:
+    """Steps 1-2 of the pipeline, all a table fit starts from.
+
+    Attributes
+    ----------
+    prior : WithPrior
+        The prior-augmented model the fits use.
+    before : LMResult
+        The setup-only fit with the nominal table (the contract's "before").
+    free : ndarray of bool, shape (n,)
+        Unknowns to fit: the setup's not held and the identified table parameters.
+    held : dict of str to str
+        Held parameters and why.
+    """
 
     prior: WithPrior
     before: LMResult
@@ -147,36 +245,62 @@ class Prepared:
     held: dict[str, str]
 
 
-def prepare(model: MeasurementModel, options: CalibrationOptions = CalibrationOptions()) -> Prepared:
-    """Steps 1-2 of the pipeline: fit the setup unknowns with the nominal table, then identify."""
+def fit_setup(model: MeasurementModel, options: CalibrationOptions = CalibrationOptions()) -> SetupFit:
+    """Steps 1-2 of the pipeline: fit the setup unknowns with the nominal table, then identify.
+
+    Parameters
+    ----------
+    model : MeasurementModel
+        The data's model, started at the nominal table.
+    options : CalibrationOptions
+        Loss, rank tolerance and solver options.
+
+    Returns
+    -------
+    SetupFit
+    """
     gauges = model.gauges()
     free_setup = model.setup_mask & ~np.isin(model.names, list(gauges))
     prior = WithPrior(model, model.x0)
     before, _ = robust_fit(prior, model.x0, free_setup, options)
     table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol)
-    return Prepared(prior, before, free_setup | table, held)
+    return SetupFit(prior, before, free_setup | table, held)
 
 
 def calibrate(
     model: MeasurementModel, options: CalibrationOptions = CalibrationOptions(), callback=None
 ) -> Calibration:
-    """Run the whole pipeline on ``model`` (see the module docstring)."""
-    prep = prepare(model, options)
-    after, scale = robust_fit(prep.prior, prep.before.x, prep.free, options, callback)
-    sigma, cov, table_cov = _uncertainty(prep.prior, after, prep.free, scale)
+    """Run the whole pipeline on ``model`` (see the module docstring).
+
+    Parameters
+    ----------
+    model : MeasurementModel
+        The data's model, started at the nominal table.
+    options : CalibrationOptions
+        Loss, rank tolerance and solver options.
+    callback : callable, optional
+        Called by the solver after each trial step of the full fit.
+
+    Returns
+    -------
+    Calibration
+    """
+    start = fit_setup(model, options)
+    after, scale = robust_fit(start.prior, start.before.x, start.free, options, callback)
+    sigma, cov, table_cov = _uncertainty(start.prior, after, start.free, scale)
     full_sigma = np.full(len(model.names), np.nan)
-    full_sigma[prep.free] = sigma
+    full_sigma[start.free] = sigma
     return Calibration(
         names=model.names,
-        before=prep.before,
+        before=start.before,
         after=after,
-        identified=prep.free,
-        held=prep.held,
+        identified=start.free,
+        held=start.held,
         sigma=full_sigma,
         covariance=cov,
         table_covariance=table_cov,
         scale=scale,
-        downweighted=_downweighted_rows(prep.prior, after, scale, options),
+        downweighted=_downweighted_rows(start.prior, after, scale, options),
     )
 
 
@@ -199,10 +323,28 @@ def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np
 def covariance(
     model: WithPrior, x: np.ndarray, free: np.ndarray, row_weights: np.ndarray | float = 1.0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Covariance of the ``free`` unknowns at ``x`` and the (24, 24) table covariance with the held
-    table parameters considered at their tolerance. ``row_weights`` rescale the whitened data
-    rows (fitted against stated noise, robust weights); the prior rows keep theirs: what was known
-    before measuring does not shrink because the instruments read better than stated."""
+    """Covariance of the ``free`` unknowns and of the table, the held parameters considered.
+
+    Parameters
+    ----------
+    model : WithPrior
+        The prior-augmented model.
+    x : ndarray, shape (n,)
+        Where to linearise, internal units.
+    free : ndarray of bool, shape (n,)
+        The fitted unknowns (k of them).
+    row_weights : ndarray, shape (m,), or float
+        Factors on the whitened rows (fitted against stated noise, robust weights); the prior rows
+        keep theirs: what was known before measuring does not shrink because the instruments read
+        better than stated.
+
+    Returns
+    -------
+    covariance : ndarray, shape (k, k)
+        Of the free unknowns, internal units.
+    table_covariance : ndarray, shape (24, 24)
+        Of the table, with the held table parameters considered at their tolerance.
+    """
     _, jac = model.residuals_and_jacobian(x)
     jac = jac * np.broadcast_to(row_weights, model.groups.shape)[:, None]
     held = np.flatnonzero(~free[:N_DH])

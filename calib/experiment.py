@@ -16,7 +16,7 @@ import numpy as np
 
 from calib import ik
 from calib.accuracy import workspace_error_modes
-from calib.calibrate import CalibrationOptions, covariance, prepare
+from calib.calibrate import CalibrationOptions, covariance, fit_setup
 from calib.kinematics import dh_table, tcp_position
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 
@@ -142,7 +142,7 @@ def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.nd
     ndarray, shape (N_DH,)
         Workspace error mode variances [mm^2] (``accuracy.workspace_error_modes``).
     """
-    prep = prepare(model, CalibrationOptions(loss="linear"))
+    prep = fit_setup(model, CalibrationOptions(loss="linear"))
     _, table_cov = covariance(prep.prior, prep.before.x, prep.free)
     return workspace_error_modes(dh_table(prep.before.x), model.tool, workspace_q, table_cov)
 

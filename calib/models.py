@@ -1,21 +1,15 @@
 """Measurement models: what the solver minimises, without the solver looking inside.
 
 A model owns its data and maps a full parameter vector ``x`` to whitened residuals (each divided by
-its noise) and their Jacobian. It exposes, for the solver and the analyses around it:
-
-- ``names``: one name per entry of ``x``; the first 24 are the D-H table (``calib.params.DH_NAMES``),
-  internal units (rad, mm);
-- ``x0``: the starting vector;
-- ``setup_mask``: boolean mask of the setup unknowns (everything that is not the robot's table);
-- ``groups``: per residual, which instrument it comes from (robust scales are estimated per group);
-- ``rows``: per residual, the 0-based sample row it belongs to;
-- ``residuals(x)`` and ``residuals_and_jacobian(x)``.
+its noise) and their Jacobian. Everything the solver, the analyses around it and the station need
+is a member of the model (``MeasurementModel``), so nothing outside ``calib`` asks which kind of
+model it holds.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 
@@ -29,16 +23,59 @@ GROUP_LENGTH, GROUP_LINE_DIAL, GROUP_LINE_ACROSS, GROUP_PRIOR = 0, 1, 2, 3
 dial's axis (dial noise) and across it (only the arm's own noise); prior rows."""
 
 
+@dataclass(frozen=True)
+class MeasurementAdvice:
+    """What to say when the rows fit well but cannot promise the workspace: what they ``cover``
+    (the object of "fits ... to 0.02 mm") and the ``next_measurement`` that would help."""
+
+    cover: str
+    next_measurement: str
+
+
+class SampleRows(Protocol):
+    """A model's sample set: one row per robot configuration."""
+
+    def __len__(self) -> int: ...
+
+    def subset(self, rows: np.ndarray) -> SampleRows: ...
+
+
 class MeasurementModel(Protocol):
+    """What every measurement model provides.
+
+    Attributes
+    ----------
+    kind : str
+        The kind of measurement, as the report names it: ``"drawstring"`` or ``"position"``.
+    samples : SampleRows
+        The N sample rows the model was built on.
+    names : tuple of str
+        One name per entry of ``x``; the first ``N_DH`` are the D-H table (``calib.params.DH_NAMES``).
+    x0 : ndarray, shape (n,)
+        The starting vector, internal units (rad, mm).
+    setup_mask : ndarray of bool, shape (n,)
+        The setup unknowns: everything that is not the robot's table.
+    groups : ndarray of int, shape (m,)
+        Per residual, the instrument it comes from (robust scales are estimated per group).
+    rows : ndarray of int, shape (m,)
+        Per residual, the 0-based sample row it belongs to.
+    """
+
+    kind: str
+    samples: SampleRows
     names: tuple[str, ...]
     x0: np.ndarray
     setup_mask: np.ndarray
     groups: np.ndarray
     rows: np.ndarray
 
-    def residuals(self, x: np.ndarray) -> np.ndarray: ...
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """Whitened residuals, shape (m,), at ``x`` (n,)."""
+        ...
 
-    def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True) -> tuple: ...
+    def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True) -> tuple:
+        """Whitened residuals (m,) and their Jacobian (m, n) at ``x`` (None unless ``jacobian``)."""
+        ...
 
     def gauges(self) -> dict[str, str]:
         """Parameters that no data of this kind can determine, with the reason."""
@@ -48,11 +85,45 @@ class MeasurementModel(Protocol):
         """What is known of each unknown before measuring (1 sigma, internal units; inf: nothing)."""
         ...
 
+    def with_samples(self, samples) -> MeasurementModel:
+        """The same model (start, frame, noise) on other rows: a subset or a hold-out set."""
+        ...
+
+    def row_error_mm(self, x: np.ndarray) -> np.ndarray:
+        """The contract's error of each sample row [mm], shape (N,), at ``x``."""
+        ...
+
+    def setup_estimate(self, x: np.ndarray):
+        """The setup unknowns at ``x`` in display units, as a small dataclass whose field names are
+        the report's keys."""
+        ...
+
+    def placement_ids(self) -> np.ndarray:
+        """Per sample row (N,), the instrument placement it was measured at; a selection of
+        configurations keeps some rows of every placement."""
+        ...
+
+    def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice | None:
+        """What to measure next when the rows fit well but cannot promise the workspace; None
+        where no further measurement of this kind would change that."""
+        ...
+
 
 @dataclass(frozen=True)
 class DrawstringSamples:
-    """Drawstring samples: joints ``q`` (N, 6) [rad], readings ``length`` (N,) [mm],
-    ``dial`` (N,) [mm] (NaN where absent) and ``line`` (N,) ids (-1: no line constraint)."""
+    """Drawstring samples, one row per configuration.
+
+    Attributes
+    ----------
+    q : ndarray, shape (N, 6)
+        Joint readings [rad].
+    length : ndarray, shape (N,)
+        Drawstring readings [mm].
+    dial : ndarray, shape (N,)
+        Dial readings [mm], NaN where absent.
+    line : ndarray of int, shape (N,)
+        Gauge line id of each row, -1 for no line constraint.
+    """
 
     q: np.ndarray
     length: np.ndarray
@@ -63,16 +134,31 @@ class DrawstringSamples:
         return self.q.shape[0]
 
     def subset(self, rows: np.ndarray) -> DrawstringSamples:
+        """The samples of ``rows`` (indices or a boolean mask), in that order."""
         return DrawstringSamples(self.q[rows], self.length[rows], self.dial[rows], self.line[rows])
 
 
 @dataclass(frozen=True)
 class DrawstringSetup:
-    """Station geometry and noise: rough ``anchor`` [mm] and ``length_offset`` [mm], reading noise
-    ``sigma_length`` [mm], line-contact noise ``sigma_line`` [mm], per line id the ``dial_axis``
-    (unit, base frame), else ``default_dial_axis`` (neither: the dial only gates captures), and
-    ``rho`` (line-term weight). ``anchor_tolerance``/``offset_tolerance`` [mm]: how far the rough
-    values may be off (taken as 2 sigma)."""
+    """Station geometry and noise, as the setup file states them.
+
+    Attributes
+    ----------
+    anchor : ndarray, shape (3,)
+        Rough drawstring anchor [mm], base frame.
+    length_offset : float
+        Rough reading offset [mm]: reading = distance - offset.
+    sigma_length, sigma_line : float
+        Drawstring reading noise and line-contact noise [mm].
+    dial_axis : dict of int to ndarray, shape (3,)
+        Per line id, the dial's unit axis in the base frame.
+    default_dial_axis : ndarray, shape (3,), optional
+        The axis on lines without their own; with neither, the dial only gates captures.
+    rho : float
+        Weight of the line terms.
+    anchor_tolerance, offset_tolerance : float
+        How far the rough values may be off [mm], taken as 2 sigma.
+    """
 
     anchor: np.ndarray
     length_offset: float
@@ -85,6 +171,7 @@ class DrawstringSetup:
     offset_tolerance: float = 10.0
 
     def dial_axis_of(self, line_id: int) -> np.ndarray | None:
+        """The dial's unit axis (3,) on line ``line_id``, or None where the dial only gates."""
         return self.dial_axis.get(line_id, self.default_dial_axis)
 
 
@@ -98,10 +185,28 @@ class DrawstringFrame:
     anchor_basis: np.ndarray
 
     @classmethod
-    def from_nominal(cls, samples: DrawstringSamples, setup: DrawstringSetup, dh, tool):
-        """Lines fitted to the nominal TCPs of each line's samples; with a single line the anchor
+    def from_nominal(cls, samples: DrawstringSamples, setup: DrawstringSetup, dh, tool) -> DrawstringFrame:
+        """The frame of a training set.
+
+        Lines are fitted to the nominal TCPs of each line's samples; with a single line the anchor
         moves in (radial, along, tangential) coordinates so that its free rotation about the line
-        is one named unknown."""
+        is one named unknown.
+
+        Parameters
+        ----------
+        samples : DrawstringSamples
+            The training rows.
+        setup : DrawstringSetup
+            Rough anchor and dial axes.
+        dh : ndarray, shape (6, 4)
+            Nominal D-H table, internal units (rad, mm).
+        tool : array_like, shape (3,)
+            TCP in the flange frame [mm].
+
+        Returns
+        -------
+        DrawstringFrame
+        """
         p = tcp_position(dh, samples.q, tool)
         ids = sorted(int(i) for i in np.unique(samples.line) if i >= 0)
         lines = {i: fit_line(p[samples.line == i], setup.dial_axis_of(i)) for i in ids}
@@ -116,9 +221,38 @@ class DrawstringFrame:
         return cls(lines, anchor0, basis)
 
     def anchor_names(self) -> tuple[str, str, str]:
+        """Names of the anchor's three unknowns: base axes, or (radial, along, about) one line."""
         if np.allclose(self.anchor_basis, np.eye(3)):
             return ("anchor.x_mm", "anchor.y_mm", "anchor.z_mm")
         return ("anchor.radial_mm", "anchor.along_mm", "anchor.about_line_mm")
+
+
+@dataclass(frozen=True)
+class FittedLine:
+    """A gauge line as fitted: its ``id``, a point on it ``point_mm`` (3,) [mm] and its unit
+    ``direction`` (3,), base frame."""
+
+    id: int
+    point_mm: np.ndarray
+    direction: np.ndarray
+
+
+@dataclass(frozen=True)
+class DrawstringSetupEstimate:
+    """The drawstring setup at a solution: ``anchor_mm`` (3,) [mm] in the base frame, the reading's
+    ``length_offset_mm`` [mm] and the fitted ``lines``. Field names are the report's keys."""
+
+    anchor_mm: np.ndarray
+    length_offset_mm: float
+    lines: tuple[FittedLine, ...]
+
+
+def least_aligned_direction(directions: np.ndarray) -> np.ndarray:
+    """A unit direction (3,) least aligned with every row of ``directions`` (k, 3): perpendicular
+    to all of them while k < 3; the x axis when k = 0."""
+    if directions.size == 0:
+        return np.array([1.0, 0.0, 0.0])
+    return np.linalg.svd(directions)[2][-1]
 
 
 class DrawstringLineModel:
@@ -128,7 +262,22 @@ class DrawstringLineModel:
 
     - drawstring, every row: ``(|p - anchor| - length_offset - Y) / sigma_length``
     - line, two per row on a line: ``sqrt(rho) * offset(p - dial * dial_axis, line) / sigma_line``
+
+    Parameters
+    ----------
+    samples : DrawstringSamples
+        The N rows.
+    setup : DrawstringSetup
+        Rough geometry and noise.
+    frame : DrawstringFrame
+        Line references and anchor basis (``DrawstringFrame.from_nominal`` of the training rows).
+    dh0 : ndarray, shape (6, 4)
+        Starting table, internal units (rad, mm).
+    tool : array_like, shape (3,)
+        TCP in the flange frame [mm].
     """
+
+    kind: ClassVar[str] = "drawstring"
 
     def __init__(self, samples, setup: DrawstringSetup, frame: DrawstringFrame, dh0, tool):
         self.samples, self.setup_values, self.frame = samples, setup, frame
@@ -152,6 +301,8 @@ class DrawstringLineModel:
         self.groups = np.concatenate([np.full(n, GROUP_LENGTH), line_groups])
 
     def gauges(self) -> dict[str, str]:
+        """The table's structural gauges with a free anchor and free lines, and, on one line, the
+        anchor's turn about it."""
         held = structural_holds(self.x0[:N_DH].reshape(6, 4), self.tool, "anchor and the lines")
         if len(self.line_ids) == 1:
             held["anchor.about_line_mm"] = (
@@ -160,6 +311,8 @@ class DrawstringLineModel:
         return held
 
     def prior_sigma(self) -> np.ndarray:
+        """The table's manufacturing tolerance, the rough anchor's and offset's (half the stated
+        tolerances); the lines are free (inf)."""
         sigma = np.full(len(self.names), np.inf)
         sigma[:N_DH] = tolerance(self.names[:N_DH])
         sigma[N_DH : N_DH + 3] = self.setup_values.anchor_tolerance / 2
@@ -172,29 +325,66 @@ class DrawstringLineModel:
 
     # -- unpacking ---------------------------------------------------------------------------
     def dh(self, x: np.ndarray) -> np.ndarray:
+        """The D-H table (6, 4) in ``x``, internal units."""
         return x[:N_DH].reshape(6, 4)
 
     def anchor(self, x: np.ndarray) -> np.ndarray:
+        """The anchor (3,) [mm], base frame."""
         return self.frame.anchor0 + self.frame.anchor_basis @ x[N_DH : N_DH + 3]
 
     def length_offset(self, x: np.ndarray) -> float:
+        """The reading's offset [mm]: model length = distance - offset."""
         return float(x[N_DH + 3])
 
     def line(self, x: np.ndarray, lid: int) -> tuple[np.ndarray, np.ndarray]:
         """Line ``lid`` as (point [mm], unit direction)."""
         return self.frame.lines[lid].line(x[self._line_cols[lid]])
 
+    def setup_estimate(self, x: np.ndarray) -> DrawstringSetupEstimate:
+        """Anchor, offset and lines at ``x`` (see ``DrawstringSetupEstimate``)."""
+        lines = tuple(FittedLine(lid, *self.line(x, lid)) for lid in self.line_ids)
+        return DrawstringSetupEstimate(self.anchor(x), self.length_offset(x), lines)
+
+    # -- what the station asks ---------------------------------------------------------------
+    def placement_ids(self) -> np.ndarray:
+        """The gauge line of each row (N,), -1 where none."""
+        return self.samples.line
+
+    def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice:
+        """Another line placement, least aligned with the lines fitted at ``x``."""
+        k = len(self.line_ids)
+        cover = "its own line" if k == 1 else f"its own {k} lines"
+        s = least_aligned_direction(np.array([self.line(x, lid)[1] for lid in self.line_ids]))
+        return MeasurementAdvice(
+            cover,
+            f"add a line placement along [{s[0]:.2f}, {s[1]:.2f}, {s[2]:.2f}] (base frame), "
+            "elsewhere in the workspace and with varied tool orientations",
+        )
+
     # -- residuals ---------------------------------------------------------------------------
-    def length_error_mm(self, x: np.ndarray) -> np.ndarray:
-        """Drawstring residuals ``Y - Y_model`` [mm], one per row (the contract's metric)."""
+    def row_error_mm(self, x: np.ndarray) -> np.ndarray:
+        """Drawstring residuals ``Y - Y_model`` [mm], shape (N,) (the contract's metric).
+
+        Parameters
+        ----------
+        x : ndarray, shape (n,)
+            Full parameter vector, internal units.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Reading minus model length, ``Y - (|p - anchor| - length_offset)`` [mm].
+        """
         p = tcp_position(self.dh(x), self.samples.q, self.tool)
         model = np.linalg.norm(p - self.anchor(x), axis=1) - self.length_offset(x)
         return self.samples.length - model
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
+        """Whitened residuals (m,): N drawstring rows, then two per row on a line."""
         return self._evaluate(x, jacobian=False)[0]
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
+        """Whitened residuals (m,) and their analytic Jacobian (m, n), None unless ``jacobian``."""
         return self._evaluate(x, jacobian)
 
     def _evaluate(self, x, jacobian):

@@ -18,6 +18,7 @@ Residuals, three per row, whitened: ``(tracker_from_base (p_TCP(q + 1e-6 c tau))
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -41,8 +42,15 @@ ON_AXIS_MM = 1.0
 
 @dataclass(frozen=True)
 class PositionSamples:
-    """Joint readings ``q`` (N, 6) [rad] and measured positions ``position`` (N, 3) [mm] in the
-    instrument's frame."""
+    """Position samples, one row per configuration.
+
+    Attributes
+    ----------
+    q : ndarray, shape (N, 6)
+        Joint readings [rad].
+    position : ndarray, shape (N, 3)
+        Measured positions [mm] in the instrument's frame.
+    """
 
     q: np.ndarray
     position: np.ndarray
@@ -51,13 +59,41 @@ class PositionSamples:
         return self.q.shape[0]
 
     def subset(self, rows: np.ndarray) -> PositionSamples:
+        """The samples of ``rows`` (indices or a boolean mask), in that order."""
         return PositionSamples(self.q[rows], self.position[rows])
 
 
 @dataclass(frozen=True)
+class Transform:
+    """A rigid transform: ``rotation`` (3, 3) and ``translation_mm`` (3,) [mm]."""
+
+    rotation: np.ndarray
+    translation_mm: np.ndarray
+
+
+@dataclass(frozen=True)
+class TrackerSetupEstimate:
+    """The tracker setup at a solution: ``tracker_from_base`` (the base frame's pose in the tracker
+    frame) and ``probe_mm`` (3,) [mm], the measured point in the flange frame. Field names are the
+    report's keys."""
+
+    tracker_from_base: Transform
+    probe_mm: np.ndarray
+
+
+@dataclass(frozen=True)
 class LinkMasses:
-    """Rigid-body masses for the gravity torques: ``mass_kg`` (6,), centre of mass of link i in D-H
-    frame i ``com_mm`` (6, 3), and the unit direction of gravity in the base frame."""
+    """Rigid-body masses for the gravity torques.
+
+    Attributes
+    ----------
+    mass_kg : ndarray, shape (6,)
+        Mass of each link [kg].
+    com_mm : ndarray, shape (6, 3)
+        Centre of mass of link i in D-H frame i [mm].
+    gravity : tuple of 3 float
+        Unit direction of gravity in the base frame.
+    """
 
     mass_kg: np.ndarray
     com_mm: np.ndarray
@@ -73,7 +109,21 @@ class Compliance:
 
 
 def rotation_from_vector(w: np.ndarray) -> np.ndarray:
-    """Rodrigues: ``exp([w]x)`` for a rotation vector ``w`` (3,) [rad], series below 1e-6 rad."""
+    """Rodrigues' formula, the rotation of a rotation vector.
+
+    ``R = I + sin t / t [w]x + (1 - cos t) / t^2 [w]x^2``, ``t = |w|``, with the second-order series
+    below ``t = 1e-6``.
+
+    Parameters
+    ----------
+    w : ndarray, shape (3,)
+        Rotation vector [rad]: axis times angle.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        ``exp([w]x)``.
+    """
     theta = np.linalg.norm(w)
     k = _skew(w)
     if theta < 1e-6:
@@ -82,8 +132,21 @@ def rotation_from_vector(w: np.ndarray) -> np.ndarray:
 
 
 def left_jacobian(w: np.ndarray) -> np.ndarray:
-    """Left Jacobian of SO(3): ``d exp([w]x) v / dw = -[exp([w]x) v]x J_l(w)``, with
-    ``J_l = I + (1 - cos t) / t^2 [w]x + (t - sin t) / t^3 [w]x^2``, ``t = |w|`` (series below 1e-6)."""
+    """Left Jacobian of SO(3), for derivatives of a rotated vector by the rotation vector.
+
+    ``d exp([w]x) v / dw = -[exp([w]x) v]x J_l(w)``, with
+    ``J_l = I + (1 - cos t) / t^2 [w]x + (t - sin t) / t^3 [w]x^2``, ``t = |w|`` (series below 1e-6).
+
+    Parameters
+    ----------
+    w : ndarray, shape (3,)
+        Rotation vector [rad].
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        ``J_l(w)``.
+    """
     theta = np.linalg.norm(w)
     k = _skew(w)
     if theta < 1e-6:
@@ -96,9 +159,27 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 
 def gravity_torques(dh: np.ndarray, q: np.ndarray, links: LinkMasses, joints) -> np.ndarray:
-    """Gravity torque [N m] about each of ``joints`` (0-based), shape (N, len(joints)):
-    ``tau_j = z_j . sum_{k >= j} (c_k - o_j) x (m_k g)``, frames of the table ``dh`` at ``q`` [rad],
-    ``c_k`` the centre of mass of link k, ``z_j, o_j`` the axis and origin of D-H frame j."""
+    """Gravity torque about each joint of ``joints`` from the links beyond it.
+
+    ``tau_j = z_j . sum_{k >= j} (c_k - o_j) x (m_k g)``, with ``c_k`` the centre of mass of link k
+    and ``z_j, o_j`` the axis and origin of D-H frame j.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        D-H table, internal units (rad, mm).
+    q : ndarray, shape (N, 6)
+        Joint angles [rad].
+    links : LinkMasses
+        Masses [kg] and centres of mass [mm].
+    joints : sequence of int
+        0-based joints.
+
+    Returns
+    -------
+    ndarray, shape (N, len(joints))
+        Torques [N m].
+    """
     frames = base_from_frames(dh, q)
     com = np.einsum("nkij,kj->nki", frames[:, 1:, :3, :3], links.com_mm) + frames[:, 1:, :3, 3]
     force = links.mass_kg[:, None] * G_MS2 * np.asarray(links.gravity, float)  # (6, 3) [N]
@@ -120,8 +201,21 @@ class TrackerReference:
 
     @classmethod
     def kabsch(cls, samples: PositionSamples, dh: np.ndarray, probe: np.ndarray) -> TrackerReference:
-        """Initial registration: the rigid fit of the TCPs of table ``dh`` with ``probe`` [mm] to the
-        measured points."""
+        """Initial registration: the rigid fit of the modelled TCPs to the measured points.
+
+        Parameters
+        ----------
+        samples : PositionSamples
+            Joints and measured points.
+        dh : ndarray, shape (6, 4)
+            D-H table, internal units (rad, mm).
+        probe : ndarray, shape (3,)
+            Probe point in the flange frame [mm].
+
+        Returns
+        -------
+        TrackerReference
+        """
         rot, t = rigid_fit(tcp_position(dh, samples.q, probe), samples.position)
         return cls(rot, t)
 
@@ -132,12 +226,20 @@ class PositionModel:
     Parameters
     ----------
     samples : PositionSamples
-    dh0 : (6, 4) starting table, internal units
-    probe0 : (3,) starting probe offset in the flange frame [mm]
-    reference : the fixed base-to-tracker reference (default: Kabsch at ``dh0``, ``probe0``)
-    sigma_mm : position noise per axis [mm]
-    compliance : joints that yield under gravity, or None for a purely geometric model
+        The N rows.
+    dh0 : ndarray, shape (6, 4)
+        Starting table, internal units (rad, mm).
+    probe0 : ndarray, shape (3,)
+        Starting probe offset in the flange frame [mm].
+    reference : TrackerReference, optional
+        The fixed base-to-tracker reference (default: Kabsch at ``dh0``, ``probe0``).
+    sigma_mm : float
+        Position noise per axis [mm].
+    compliance : Compliance, optional
+        Joints that yield under gravity; None for a purely geometric model.
     """
+
+    kind: ClassVar[str] = "position"
 
     def __init__(
         self,
@@ -204,6 +306,7 @@ class PositionModel:
 
     # -- unpacking ---------------------------------------------------------------------------
     def dh(self, x: np.ndarray) -> np.ndarray:
+        """The D-H table (6, 4) in ``x``, internal units."""
         return x[:N_DH].reshape(6, 4)
 
     def tracker_from_base(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -212,7 +315,13 @@ class PositionModel:
         return rot, self.reference.translation + x[N_DH + 3 : N_DH + 6]
 
     def probe(self, x: np.ndarray) -> np.ndarray:
+        """The probe point (3,) [mm] in the flange frame."""
         return x[N_DH + 6 : N_DH + 9]
+
+    def setup_estimate(self, x: np.ndarray) -> TrackerSetupEstimate:
+        """Base-to-tracker transform and probe at ``x`` (see ``TrackerSetupEstimate``)."""
+        rot, t = self.tracker_from_base(x)
+        return TrackerSetupEstimate(Transform(rot, t), self.probe(x))
 
     def joints(self, x: np.ndarray) -> np.ndarray:
         """Joint angles the links take [rad]: readings plus the gravity deflection, (N, 6)."""
@@ -221,20 +330,45 @@ class PositionModel:
             q[:, list(self.compliance.joints)] += MICRO * self.torques * x[N_DH + 9 :]
         return q
 
+    # -- what the station asks ---------------------------------------------------------------
+    def placement_ids(self) -> np.ndarray:
+        """One tracker placement for every row: zeros (N,)."""
+        return np.zeros(len(self.samples), int)
+
+    def measurement_advice(self, x: np.ndarray) -> None:
+        """No advice: a position set's predicted workspace error keeps a floor from the held
+        parameters considered at their tolerance (J6's, which the free probe offset absorbs: about
+        1.5 mm on a UR10) that no further pose lowers, so "fits well, predicts badly" holds for
+        every good tracker set and says nothing about what to measure."""
+        return None
+
     # -- residuals ---------------------------------------------------------------------------
     def predicted_mm(self, x: np.ndarray) -> np.ndarray:
         """Model positions in the tracker frame [mm], (N, 3)."""
         rot, t = self.tracker_from_base(x)
         return tcp_position(self.dh(x), self.joints(x), self.probe(x)) @ rot.T + t
 
-    def position_error_mm(self, x: np.ndarray) -> np.ndarray:
-        """Distance between measured and model position [mm], one per row."""
+    def row_error_mm(self, x: np.ndarray) -> np.ndarray:
+        """Distance between measured and model position, ``|m - p_model|`` (the contract's metric).
+
+        Parameters
+        ----------
+        x : ndarray, shape (n,)
+            Full parameter vector, internal units.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Distances [mm].
+        """
         return np.linalg.norm(self.samples.position - self.predicted_mm(x), axis=1)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
+        """Whitened residuals (3N,): per row the x, y, z position error over ``sigma``."""
         return self._evaluate(x, jacobian=False)[0]
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
+        """Whitened residuals (3N,) and their analytic Jacobian (3N, n), None unless ``jacobian``."""
         return self._evaluate(x, jacobian)
 
     def _evaluate(self, x, jacobian):
@@ -274,10 +408,26 @@ def register(
     compliance: np.ndarray | None = None,
     options: CalibrationOptions | None = None,
 ) -> tuple[PositionModel, LMResult]:
-    """Fit a series' base-to-tracker transform and probe offset with table ``dh`` (and the joint
-    ``compliance`` values, if the model has that term) held. Returns the model started at ``dh``
-    (with its own Kabsch reference) and the fit; ``model.position_error_mm(result.x)`` are the
-    registered errors."""
+    """Fit a series' base-to-tracker transform and probe offset with the table held.
+
+    Parameters
+    ----------
+    model : PositionModel
+        The series' rows (its probe start and compliance joints are kept).
+    dh : ndarray, shape (6, 4)
+        The table to hold, internal units (rad, mm).
+    compliance : ndarray, shape (k,), optional
+        Joint compliances [urad / (N m)] to hold, if the model has that term.
+    options : CalibrationOptions, optional
+        Loss and solver options.
+
+    Returns
+    -------
+    model : PositionModel
+        The model started at ``dh``, with its own Kabsch reference.
+    result : LMResult
+        The fit; ``model.row_error_mm(result.x)`` are the registered errors [mm].
+    """
     started = model.with_start(dh, model.probe0)
     x0 = started.x0.copy()
     if compliance is not None:

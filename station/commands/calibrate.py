@@ -7,11 +7,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from errors import InputError
+from station.commands.flags import parameters_as_flags
 from station.formats.base import atomic_write, check_writable, toml_text
 from station.formats.samples import Samples, load_samples
 from station.formats.session_folder import load_robot_and_setup
 from station.formats.tables import RobotFile, SetupFile
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
+from station.jobs.report import CalibrationReport, corrected_table
+
+FLAGS = {"setup": "--setup", "method": "--method", "select": "--select"}
+"""The flag that sets each parameter of the calibration service."""
 
 
 def register(sub) -> None:
@@ -33,30 +38,27 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    outcome = calibrate_from_paths(args)
-    atomic_write(args.out, toml_text(outcome.table))
-    if args.report:
-        atomic_write(args.report, json.dumps(outcome.report, indent=2) + "\n")
-    print(summary(outcome.report))
-    print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
-    return 0
-
-
-def calibrate_from_paths(args) -> calibration.Outcome:
-    """Load and validate every input (and check the outputs are writable) before any maths."""
     check_writable(args.out, "--out")
     if args.report:
         check_writable(args.report, "--report")
     inputs = load_inputs(args)
-    return calibration.run(
-        inputs.samples,
-        inputs.robot,
-        inputs.setup,
-        setup_where=inputs.setup_where,
-        holdout=inputs.holdout,
-        method=args.method,
-        select=args.select,
-    )
+    with parameters_as_flags(FLAGS):
+        outcome = calibration.calibrate_samples(
+            inputs.samples,
+            inputs.robot,
+            inputs.setup,
+            setup_where=inputs.setup_where,
+            holdout=inputs.holdout,
+            method=args.method,
+            select=args.select,
+        )
+    table = corrected_table(inputs.robot, outcome.calibration, inputs.samples, args.method)
+    atomic_write(args.out, toml_text(table))
+    if args.report:
+        atomic_write(args.report, json.dumps(outcome.report.as_json(), indent=2) + "\n")
+    print(summary(outcome.report))
+    print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+    return 0
 
 
 @dataclass(frozen=True)
@@ -84,29 +86,27 @@ def load_inputs(args) -> Inputs:
     return Inputs(samples, robot, setup, setup_where, holdout)
 
 
-def summary(report: dict) -> str:
+def summary(report: CalibrationReport) -> str:
     """A short human summary: before -> after on training and hold-out, time, what was held."""
     lines = [
-        f"{report['kind']} calibration, method {report['method']}: "
-        f"{report['iterations']} iterations, {report['time_s']:.3f} s",
+        f"{report.kind} calibration, method {report.method}: "
+        f"{report.iterations} iterations, {report.time_s:.3f} s",
         f"{'':18}{'RMSE':>8}{'MEAN':>8}{'MAX':>8}  mm",
     ]
-    for part in ("train", "holdout"):
-        if part in report["before"]:
-            for when in ("before", "after"):
-                m = report[when][part]
-                lines.append(
-                    f"{part + ' ' + when:18}{m['rmse_mm']:8.3f}{m['mean_mm']:8.3f}{m['max_mm']:8.3f}"
-                )
-    held = ", ".join(h["param"] for h in report["held"])
-    lines.append(f"identified {len(report['identified'])} table parameters; held: {held}")
-    if report["downweighted"]:
-        lines.append(f"down-weighted rows: {report['downweighted']}")
-    if "workspace" in report:
-        ws = report["workspace"]
-        lines.append(
-            f"predicted workspace error: {ws['predicted_rmse_mm']:.3f} mm RMS "
-            f"(95 %: below {ws['predicted_rmse_95_mm']:.3f} mm)"
-        )
-    lines += [f"warning: {w}" for w in report["warnings"]]
+    parts = (("train", report.before.train, report.after.train),)
+    parts += (("holdout", report.before.holdout, report.after.holdout),)
+    for part, before, after in parts:
+        for when, m in (("before", before), ("after", after)):
+            if m is not None:
+                lines.append(f"{part + ' ' + when:18}{m.rmse_mm:8.3f}{m.mean_mm:8.3f}{m.max_mm:8.3f}")
+    held = ", ".join(h.param for h in report.held)
+    lines.append(f"identified {len(report.identified)} table parameters; held: {held}")
+    if report.downweighted:
+        lines.append(f"down-weighted rows: {list(report.downweighted)}")
+    ws = report.workspace
+    lines.append(
+        f"predicted workspace error: {ws.predicted_rmse_mm:.3f} mm RMS "
+        f"(95 %: below {ws.predicted_rmse_95_mm:.3f} mm)"
+    )
+    lines += [f"warning: {w}" for w in report.warnings]
     return "\n".join(lines)

@@ -7,10 +7,10 @@ import json
 from pathlib import Path
 
 from calib.baselines import BaselineOptions
-from station.commands.calibrate import load_inputs
+from station.commands.calibrate import FLAGS, load_inputs
+from station.commands.flags import parameters_as_flags
 from station.formats.base import atomic_write, check_writable
-from station.jobs import compare as comparison
-from station.jobs.compare import COMPARED as METHODS
+from station.jobs import comparison
 
 
 def register(sub) -> None:
@@ -24,8 +24,8 @@ def register(sub) -> None:
     p.add_argument(
         "--methods",
         type=_methods,
-        default=METHODS,
-        help=f"comma-separated subset of {','.join(METHODS)} (default: all)",
+        default=comparison.COMPARED,
+        help=f"comma-separated subset of {','.join(comparison.COMPARED)} (default: all)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.set_defaults(func=main)
@@ -36,15 +36,16 @@ def main(args) -> int:
         if path:
             check_writable(path, flag)
     inputs = load_inputs(args)
-    result = comparison.compare(
-        inputs.samples,
-        inputs.robot,
-        inputs.setup,
-        setup_where=inputs.setup_where,
-        holdout=inputs.holdout,
-        methods=args.methods,
-        options=BaselineOptions(seed=args.seed),
-    )
+    with parameters_as_flags(FLAGS):
+        result = comparison.compare(
+            inputs.samples,
+            inputs.robot,
+            inputs.setup,
+            setup_where=inputs.setup_where,
+            holdout=inputs.holdout,
+            methods=args.methods,
+            options=BaselineOptions(seed=args.seed),
+        )
     print(comparison.table(result.report))
     if args.report:
         atomic_write(args.report, json.dumps(result.report, indent=2) + "\n")
@@ -63,9 +64,9 @@ def _write_plot(report: dict, path: Path) -> None:
 
 def _methods(text: str) -> tuple[str, ...]:
     names = tuple(m.strip() for m in text.split(",") if m.strip())
-    unknown = [m for m in names if m not in METHODS]
+    unknown = [m for m in names if m not in comparison.COMPARED]
     if unknown or not names:
         raise argparse.ArgumentTypeError(
-            f"unknown method {unknown[0] if unknown else text!r}; choose from {METHODS}"
+            f"unknown method {unknown[0] if unknown else text!r}; choose from {comparison.COMPARED}"
         )
     return names

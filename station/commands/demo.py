@@ -30,7 +30,8 @@ from station.config import StationConfig
 from station.formats.base import atomic_write, check_writable, toml_text
 from station.formats.plan import Plan
 from station.formats.samples import load_samples
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
+from station.jobs.report import corrected_table
 
 TIME_SCALE = 40.0
 CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial": "/tmp/station-sim/dial"}
@@ -145,26 +146,27 @@ def _calibrate(out: Path, prep, view, seed: int, targets_per_line: int) -> int:
     methods = [m for m in ("lmlc", "mcs-lmlc") if m in calibration.METHODS]
     outcomes = {}
     for method in methods:
-        outcome = calibration.run(
+        outcome = calibration.calibrate_samples(
             samples, prep.robot, prep.setup, setup_where=where, holdout=holdout, method=method
         )
         outcomes[method] = outcome
-        model = calibration.build_model(samples, prep.robot, prep.setup, where)
         cal = outcome.calibration
         view.calibration(
             method,
-            model.length_error_mm(cal.before.x),
-            model.length_error_mm(cal.x),
+            outcome.model.row_error_mm(cal.before.x),
+            outcome.model.row_error_mm(cal.x),
             [it.cost for it in cal.after.history],
         )
         print(summary(outcome.report))
         print(truth_line(world, outcome))
     main_outcome = outcomes["lmlc"]
-    atomic_write(out / "corrected.toml", toml_text(main_outcome.table))
-    atomic_write(out / "report.json", json.dumps(main_outcome.report, indent=2) + "\n")
+    table = corrected_table(prep.robot, main_outcome.calibration, samples, "lmlc")
+    atomic_write(out / "corrected.toml", toml_text(table))
+    atomic_write(out / "report.json", json.dumps(main_outcome.report.as_json(), indent=2) + "\n")
     for method, outcome in outcomes.items():
         if method != "lmlc":
-            atomic_write(out / f"report-{method}.json", json.dumps(outcome.report, indent=2) + "\n")
+            report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
+            atomic_write(out / f"report-{method}.json", report)
     print(f"wrote {out / 'corrected.toml'}, {out / 'report.json'} and {prep.folder.rrd}")
     return 0
 

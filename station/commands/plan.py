@@ -8,9 +8,13 @@ import sys
 from pathlib import Path
 
 from errors import InputError
+from station.commands.flags import parameters_as_flags
 from station.formats.base import atomic_write, check_writable
 from station.formats.session_folder import load_robot_and_setup
-from station.jobs import planning as planner
+from station.jobs import planning
+
+FLAGS = {"per_line": "--per-line", "n_select": "--select"}
+"""The flag that sets each parameter of the plan design."""
 
 
 def register(sub) -> None:
@@ -35,16 +39,17 @@ def main(args) -> int:
         if path:
             check_writable(path, flag)
     robot, setup, where = _inputs(args)
-    design = planner.design(
-        robot,
-        setup,
-        where,
-        per_line=args.per_line,
-        n_select=args.select,
-        seed=args.seed,
-        suggest=not args.no_suggest,
-        progress=lambda message: print(f"... {message}", file=sys.stderr, flush=True),
-    )
+    with parameters_as_flags(FLAGS):
+        design = planning.design(
+            robot,
+            setup,
+            where,
+            per_line=args.per_line,
+            n_select=args.select,
+            seed=args.seed,
+            suggest=not args.no_suggest,
+            progress=lambda message: print(f"... {message}", file=sys.stderr, flush=True),
+        )
     atomic_write(args.out, design.plan.csv_text())
     if args.report:
         atomic_write(args.report, json.dumps(design.report, indent=2) + "\n")
@@ -52,7 +57,7 @@ def main(args) -> int:
         from station.view.plots import plan_figure, write_png
 
         write_png(plan_figure, design.report, args.plot)
-    print(planner.summary(design))
+    print(planning.summary(design))
     print("wrote " + ", ".join(str(p) for p in (args.out, args.report, args.plot) if p))
     return 0
 

@@ -17,13 +17,19 @@ from calib import ik
 from calib.accuracy import predicted_workspace_rmse, workspace_rmse_bound
 from calib.experiment import design_model, expected_modes, line_candidates
 from calib.params import dh_from_degrees
-from errors import InputError
+from errors import InputError, ParameterError
 from station.formats.plan import Plan
 from station.formats.tables import RobotFile, SetupFile
-from station.jobs.calibrate import WORKSPACE_POSES, drawstring_setup, select_measurements
+from station.jobs.calibration import WORKSPACE_POSES, drawstring_setup, select_measurements, unknowns
 
 NEXT_CONFIGURATIONS = 12
 """Random well-conditioned poses whose TCP and tool axis seed the candidate next placements."""
+
+PLAN_SIZE = (
+    "{n} reachable candidates for {unknowns} unknowns: the plan must lie between the two; "
+    "raise {per_line} or change {n_select}"
+)
+"""Too few candidates or a plan size out of range; ``{per_line}``, ``{n_select}`` are parameters."""
 
 
 @dataclass
@@ -88,13 +94,10 @@ def design(
     q_all = np.concatenate(list(q_line.values()))
     line_all = np.concatenate([np.full(len(q), lid) for lid, q in q_line.items()])
     model = design_model(dh, tool, ds_setup, q_all, line_all)
-    unknowns = len(model.names) - len(model.gauges())
-    if len(q_all) <= unknowns or (n_select is not None and not unknowns <= n_select <= len(q_all)):
-        asked = "" if n_select is None else f"--select {n_select}: "
-        raise InputError(
-            f"{asked}{len(q_all)} reachable candidates for {unknowns} unknowns: the plan must lie between "
-            "the two; raise --per-line or change --select"
-        )
+    needed = unknowns(model)
+    if len(q_all) <= needed or (n_select is not None and not needed <= n_select <= len(q_all)):
+        asked = "" if n_select is None else "{n_select} {value}: "
+        raise ParameterError(asked + PLAN_SIZE, value=n_select, n=len(q_all), unknowns=needed)
     progress("selecting configurations (MCS)")
     mcs = select_measurements(model, n_select)
     rows = np.sort(mcs.selection.rows)

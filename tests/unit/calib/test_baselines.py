@@ -18,7 +18,7 @@ from sim_fixtures.world import Noise
 from station.cli import main
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
 
 SIGMA = Noise().length_mm  # drawstring noise [mm] of the simulated world
 SMALL = BaselineOptions(max_iter=80, swarm=20, popsize=5, particles=60, max_steps=20, passes=2)
@@ -38,7 +38,7 @@ def cell(tmp_path_factory):
 
 
 def holdout_rmse(hold, x) -> float:
-    return float(np.sqrt(np.mean(hold.length_error_mm(x) ** 2)))
+    return float(np.sqrt(np.mean(hold.row_error_mm(x) ** 2)))
 
 
 def test_half_widths_follow_names_and_units():

@@ -1,4 +1,4 @@
-"""Recovery of the simulated truth by the whole pipeline (station.jobs.calibrate on contract files)."""
+"""Recovery of the simulated truth by the whole pipeline (station.jobs.calibration on contract files)."""
 
 import numpy as np
 import pytest
@@ -11,11 +11,11 @@ from calib.params import DH_NAMES, dh_from_degrees
 from sim_fixtures.scenario import write_scenario
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
 
 
 def _run(sc):
-    return calibration.run(
+    return calibration.calibrate_samples(
         load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup), holdout=load_samples(sc.holdout)
     )
 
@@ -44,8 +44,8 @@ def test_three_lines_reach_the_noise_floor_on_holdout(three):
     sc, out = three
     floor = _noise_floor(sc)
     # 150 rows, ~40 unknowns: parameter noise inflates the hold-out RMS by about sqrt(1 + p/n) ~ 1.13
-    assert out.report["after"]["holdout"]["rmse_mm"] < 1.3 * floor
-    assert out.report["before"]["holdout"]["rmse_mm"] > 5 * floor
+    assert out.report.after.holdout.rmse_mm < 1.3 * floor
+    assert out.report.before.holdout.rmse_mm > 5 * floor
 
 
 def test_three_lines_correct_the_whole_workspace(three):
@@ -57,21 +57,21 @@ def test_three_lines_correct_the_whole_workspace(three):
 
 def test_setup_unknowns_recovered(three):
     sc, out = three
-    assert np.linalg.norm(np.array(out.report["anchor_mm"]) - sc.world.anchor_mm) < 5.0  # from +-30 mm
-    assert abs(out.report["length_offset_mm"] - sc.world.length_offset_mm) < 2.0  # from +-8 mm
+    assert np.linalg.norm(np.array(out.report.setup.anchor_mm) - sc.world.anchor_mm) < 5.0  # from +-30 mm
+    assert abs(out.report.setup.length_offset_mm - sc.world.length_offset_mm) < 2.0  # from +-8 mm
 
 
 def test_one_line_reaches_the_noise_floor_on_its_line(one_line):
     out = _run(one_line)
-    assert out.report["after"]["holdout"]["rmse_mm"] < 1.3 * _noise_floor(one_line)
-    assert "anchor.about_line_mm" in {h["param"] for h in out.report["held"]}
+    assert out.report.after.holdout.rmse_mm < 1.3 * _noise_floor(one_line)
+    assert "anchor.about_line_mm" in {h.param for h in out.report.held}
 
 
 def test_structural_holds_agree_with_the_numbers(three):
     sc, out = three
     dh = dh_from_degrees(load_robot(sc.robot).table_deg())
     structural = structural_holds(dh, np.zeros(3), "anchor and the lines")
-    held = {h["param"] for h in out.report["held"]}
+    held = {h.param for h in out.report.held}
     assert set(structural) <= held
     assert {"J1.theta_deg", "J1.d_mm", "J3.d_mm", "J6.theta_deg", "J6.alpha_deg"} <= set(structural)
     # The numbers alone (no structural knowledge offered) must hold every structural case too.
@@ -86,17 +86,17 @@ def test_structural_holds_agree_with_the_numbers(three):
 def test_outliers_are_downweighted_and_do_not_drag_the_table(outliers, three):
     sc_clean, clean = three
     out = _run(outliers)
-    assert set(outliers.train.outliers) <= set(out.report["downweighted"])
-    assert len(out.report["downweighted"]) <= len(outliers.train.outliers) + 0.02 * len(outliers.train)
+    assert set(outliers.train.outliers) <= set(out.report.downweighted)
+    assert len(out.report.downweighted) <= len(outliers.train.outliers) + 0.02 * len(outliers.train)
     assert _workspace_rms(outliers, out.calibration.x) < 1.5 * _workspace_rms(sc_clean, clean.calibration.x)
 
 
 def test_predicted_workspace_error_matches_the_truth_within_2x(three):
     sc, out = three
-    predicted, true = out.report["workspace"]["predicted_rmse_mm"], _workspace_rms(sc, out.calibration.x)
+    predicted, true = out.report.workspace.predicted_rmse_mm, _workspace_rms(sc, out.calibration.x)
     assert true / 2 < predicted < 2 * true
-    assert true < out.report["workspace"]["predicted_rmse_95_mm"]
-    assert not out.report["warnings"]
+    assert true < out.report.workspace.predicted_rmse_95_mm
+    assert not out.report.warnings
 
 
 @pytest.fixture(scope="module")
@@ -115,14 +115,14 @@ def test_one_line_prediction_holds_over_seeds(one_line_worlds):
     # 95 % bound exceeded at most once in four (twice would happen 1.4 % of the time).
     above_bound = 0
     for sc, out in one_line_worlds:
-        ws, true = out.report["workspace"], _workspace_rms(sc, out.calibration.x)
-        assert true / 2 < ws["predicted_rmse_mm"] < 2 * true, sc.samples
-        above_bound += true > ws["predicted_rmse_95_mm"]
+        ws, true = out.report.workspace, _workspace_rms(sc, out.calibration.x)
+        assert true / 2 < ws.predicted_rmse_mm < 2 * true, sc.samples
+        above_bound += true > ws.predicted_rmse_95_mm
     assert above_bound <= 1
 
 
 def test_one_line_is_not_reported_as_perfect(one_line_worlds):
     # One line fits itself to the noise but cannot deliver the workspace: the report must say so.
     for _, out in one_line_worlds:
-        assert out.report["workspace"]["predicted_rmse_mm"] > 20 * out.report["after"]["train"]["rmse_mm"]
-        assert any("predicted workspace error" in w for w in out.report["warnings"])
+        assert out.report.workspace.predicted_rmse_mm > 20 * out.report.after.train.rmse_mm
+        assert any("predicted workspace error" in w for w in out.report.warnings)

@@ -1,12 +1,14 @@
 import numpy as np
 import pytest
 
+from calib.calibrate import fit_setup
 from calib.kinematics import N_DH
+from calib.metrics import error_metrics
 from calib.observability import anneal, configuration_information, indices, singular_values
-from errors import InputError
+from errors import ParameterError
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
 
 
 @pytest.fixture(scope="module")
@@ -14,7 +16,7 @@ def problem(one_line):
     model = calibration.build_model(
         load_samples(one_line.samples), load_robot(one_line.robot), load_setup(one_line.setup), "setup"
     )
-    prep = calibration.prepare(model)
+    prep = fit_setup(model)
     _, jac = model.residuals_and_jacobian(prep.before.x)
     return model, jac[:, prep.free], np.flatnonzero(prep.free) < N_DH
 
@@ -57,16 +59,19 @@ def test_annealing_beats_random_subsets_and_keeps_every_line(problem, rng):
 
 def test_mcs_lmlc_selects_and_stays_at_the_noise_floor(one_line):
     args = load_samples(one_line.samples), load_robot(one_line.robot), load_setup(one_line.setup)
-    out = calibration.run(*args, holdout=load_samples(one_line.holdout), method="mcs-lmlc", select=72)
-    assert len(out.report["selection"]["rows"]) == 72
-    assert len(out.report["after"]["train"]) == 3  # metrics over all training rows
-    lmlc = calibration.run(*args, holdout=load_samples(one_line.holdout))
-    assert out.report["after"]["holdout"]["rmse_mm"] < 1.5 * lmlc.report["after"]["holdout"]["rmse_mm"]
+    holdout = load_samples(one_line.holdout)
+    out = calibration.calibrate_samples(*args, holdout=holdout, method="mcs-lmlc", select=72)
+    assert len(out.report.selection.rows) == 72
+    # the training metrics cover all 200 rows, not only the 72 selected
+    every_row = error_metrics(out.model.row_error_mm(out.calibration.x))
+    assert len(out.model.samples) == 200 and out.report.after.train.rmse_mm == every_row["rmse_mm"]
+    lmlc = calibration.calibrate_samples(*args, holdout=holdout)
+    assert out.report.after.holdout.rmse_mm < 1.5 * lmlc.report.after.holdout.rmse_mm
 
 
-def test_select_out_of_range_is_bad_input(one_line):
+def test_select_out_of_range_is_bad_input_naming_the_parameter(one_line):
     args = load_samples(one_line.samples), load_robot(one_line.robot), load_setup(one_line.setup)
-    with pytest.raises(InputError, match="--select 5: must lie between"):
-        calibration.run(*args, method="mcs-lmlc", select=5)
-    with pytest.raises(InputError, match="needs --method mcs-lmlc"):
-        calibration.run(*args, select=72)
+    with pytest.raises(ParameterError, match="^select 5: must lie between the 2[0-9] unknowns and the 200"):
+        calibration.calibrate_samples(*args, method="mcs-lmlc", select=5)
+    with pytest.raises(ParameterError, match="^select 72: selecting configurations needs method mcs-lmlc"):
+        calibration.calibrate_samples(*args, select=72)

@@ -146,8 +146,8 @@ def test_recovers_a_simulated_ur10_to_the_noise_floor(simulated):
     _, before = register(model.with_samples(test), nominal)
     fitted, after = register(model.with_samples(test), model.dh(cal.x))
     floor = np.sqrt(3) * SIGMA_MM
-    held_out_before = error_metrics(fitted.with_start(nominal, start_probe).position_error_mm(before.x))
-    held_out_after = error_metrics(fitted.position_error_mm(after.x))
+    held_out_before = error_metrics(fitted.with_start(nominal, start_probe).row_error_mm(before.x))
+    held_out_after = error_metrics(fitted.row_error_mm(after.x))
     assert held_out_before["rmse_mm"] > 20 * floor
     assert held_out_after["rmse_mm"] < 1.15 * floor
     # J6 is held at nominal, so the probe takes up J6's error: the true probe seen through the

@@ -195,3 +195,20 @@ def test_a_baseline_that_stops_short_says_so(three_lines, tmp_path, capsys):
     # PSO within its default budget stays far from the optimum (benchmarks/RESULTS-compare.md).
     pso = _report(capsys, three_lines, tmp_path, "pso")
     assert any("stopped short of the least-squares optimum" in w for w in pso["warnings"])
+
+
+@pytest.mark.parametrize(
+    "with_setup, flags, message",
+    [
+        (True, ["--method", "mcs-lmlc", "--select", "5"], "--select 5: must lie between the 35 unknowns"),
+        (True, ["--select", "72"], "--select 72: selecting configurations needs --method mcs-lmlc"),
+        (False, [], "samples.csv: a drawstring set needs --setup"),
+    ],
+)
+def test_a_bad_parameter_is_named_by_its_flag(three_lines, tmp_path, capsys, with_setup, flags, message):
+    """The service names its parameters (select, method, setup); the user reads the flags."""
+    sc, out = three_lines, tmp_path / "o.toml"
+    setup = ["--setup", sc.setup] if with_setup else []
+    code, _, err = _cli(capsys, "calibrate", sc.samples, "--robot", sc.robot, *setup, "--out", out, *flags)
+    assert code == 2 and err.count("\n") == 1 and message in err
+    assert not out.exists()

@@ -16,6 +16,7 @@ from station.formats.samples import load_samples
 ROOT = Path(__file__).resolve().parents[3]
 DATA = Path(os.environ.get("STATION_IPA_DATA", ROOT / "../shared/datasets/ipa-robot-accuracy"))
 SERIES_D = DATA / "Series_D/measurements_iso_cubes.csv"
+SERIES_B = DATA / "Series_B/measurements_joint_configurations.csv"
 needs_data = pytest.mark.skipif(
     not SERIES_D.exists(), reason=f"IPA dataset not found at {DATA} (set STATION_IPA_DATA)"
 )
@@ -115,3 +116,21 @@ def test_station_calibrate_on_a_real_position_set(tmp_path):
     assert r["kind"] == "position"
     assert r["after"]["train"]["rmse_mm"] < 0.8 * r["before"]["train"]["rmse_mm"]
     assert {"J1.theta_deg", "J6.d_mm"} <= {h["param"] for h in r["held"]}
+
+
+@needs_data
+def test_station_calibrate_on_the_first_30_rows_of_series_b(tmp_path):
+    """Few rows of a real tracker set: a position report (this once ended in ``KeyError: 'lines'``:
+    the predicted workspace error is far above the fit, and the drawstring's warning was asked of
+    a position report)."""
+    full = tmp_path / "b.csv"
+    assert main(["import-ipa", str(SERIES_B), "--out", str(full)]) == 0
+    part = tmp_path / "b30.csv"
+    part.write_text("\n".join(full.read_text().splitlines()[:31]) + "\n")
+    report = tmp_path / "r.json"
+    robot = ROOT / "configs/robots/ur10.toml"
+    argv = ["calibrate", str(part), "--robot", str(robot), "--out", str(tmp_path / "t.toml")]
+    assert main(argv + ["--report", str(report)]) == 0
+    r = json.loads(report.read_text())
+    assert r["kind"] == "position" and "tracker_from_base" in r and "lines" not in r
+    assert r["workspace"]["predicted_rmse_mm"] > 10 * r["after"]["train"]["rmse_mm"]

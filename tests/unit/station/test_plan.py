@@ -20,7 +20,7 @@ from station.formats.base import read_toml
 from station.formats.plan import load_plan
 from station.formats.samples import Samples
 from station.formats.tables import SetupFile, load_robot, load_setup
-from station.jobs import calibrate as calibration
+from station.jobs import calibration
 
 ROBOT, SETUP = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.toml")
 
@@ -78,7 +78,7 @@ def test_the_plan_delivers_its_promise_on_the_simulated_world(planned):
         assert len(ids) >= 0.95 * len(plan)
         s = world.measure(q_true, ids, rng)
         samples = Samples("plan", "drawstring", s.q_deg, s.length_mm, s.dial_mm, s.line)
-        out = calibration.run(samples, robot, SetupFile.model_validate(setup_dict(world, rng)))
+        out = calibration.calibrate_samples(samples, robot, SetupFile.model_validate(setup_dict(world, rng)))
         q = world.random_configurations(1000, np.random.default_rng(99))
         p = tcp_position(dh_table(out.calibration.x), np.radians(q), np.zeros(3))
         true.append(np.sqrt(np.mean(aligned_errors(p, world.true_tcp_mm(q)) ** 2)))

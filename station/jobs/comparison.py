@@ -3,9 +3,9 @@
 One common start for M1-M8: the pipeline's setup-only fit of the nominal table (the contract's
 "before") and its identification of the free parameters (``calib.calibrate.calibrate``). Each
 method then runs from that point over those parameters on all samples; its ``time_s`` covers only
-its own search. M9 (``mcs-lmlc``) is the whole pipeline on the configurations MCS selects
-(``station.jobs.calibrate.select_measurements``): its time includes the selection and its own setup
-fit; its metrics, like everyone's, cover all training rows.
+its own search. M9 (``mcs-lmlc``) is the calibration service's MCS-LMLC
+(``station.jobs.calibration.mcs_lmlc``): its time includes the selection and its own setup fit; its
+metrics, like everyone's, cover all training rows.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from calib.baselines import METHODS, BaselineOptions, MethodResult, run_method
 from calib.calibrate import calibrate
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
-from station.jobs import calibrate as calibration
+from station.jobs.calibration import build_model, check_enough, holdout_model, mcs_lmlc, metrics
 
 LABELS = {
     "pso": "M1 PSO",
@@ -56,10 +56,10 @@ def compare(
 ) -> Comparison:
     """Run ``methods`` on ``samples`` from the common start; metrics on training and hold-out rows."""
     options = options or BaselineOptions()
-    model = calibration.build_model(samples, robot, setup, setup_where)
-    calibration.check_enough(samples, model)
+    model = build_model(samples, robot, setup, setup_where)
+    check_enough(model, samples.path)
     start = calibrate(model, options.calibration)
-    hold_model = calibration.holdout_model(model, holdout)
+    hold_model = holdout_model(model, holdout)
     results = [
         _mcs_lmlc(model, options)
         if m == "mcs-lmlc"
@@ -68,14 +68,14 @@ def compare(
     ]
     free = np.asarray(model.names)[start.identified]
     report = {
-        "kind": samples.kind,
+        "kind": model.kind,
         "seed": options.seed,
-        "before": calibration.metrics(model, hold_model, start.before.x),
+        "before": metrics(model, hold_model, start.before.x).as_json(),
         "free": free.tolist(),
         "methods": [
             {
                 "name": r.method,
-                **calibration.metrics(model, hold_model, r.x),
+                **metrics(model, hold_model, r.x).as_json(),
                 "time_s": round(r.time_s, 4),
                 "iterations": r.iterations,
                 "evaluations": r.nfev,
@@ -88,10 +88,9 @@ def compare(
 
 
 def _mcs_lmlc(model, options: BaselineOptions) -> MethodResult:
-    """M9: select configurations by MCS, then the whole LMLC pipeline on them."""
+    """M9 as one of the compared methods: the service's MCS-LMLC, timed as a whole."""
     t0 = time.perf_counter()
-    mcs = calibration.select_measurements(model, None)
-    cal = calibrate(model.with_samples(model.samples.subset(mcs.selection.rows)), options.calibration)
+    _, cal = mcs_lmlc(model, options.calibration)
     elapsed = time.perf_counter() - t0
     r = model.residuals(cal.x)
     history = [it.cost for it in cal.after.history if it.accepted]

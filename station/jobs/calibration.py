@@ -1,0 +1,382 @@
+"""The calibration service: validated files in, one calibration by any method out.
+
+Split as scipy's ``least_squares``: ``calibrate_samples`` builds the measurement model and validates
+once (``validate``), dispatches to one solver per method (``SOLVERS``), and returns one
+``CalibrationOutcome`` with a typed report (``station.jobs.report``). Messages come from tables:
+``MESSAGES`` for a bad parameter (a ``ParameterError`` naming it: a command maps the name to its
+flag), ``WARNINGS`` for the report. MCS-LMLC is written once (``mcs_lmlc``), shared with
+``station compare``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
+from calib.baselines import BASELINES, BaselineOptions, run_method
+from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, fit_setup
+from calib.metrics import error_metrics
+from calib.models import (
+    GROUP_PRIOR,
+    N_DH,
+    DrawstringFrame,
+    DrawstringLineModel,
+    DrawstringSamples,
+    DrawstringSetup,
+    MeasurementModel,
+)
+from calib.observability import MCSResult, select_configurations
+from calib.params import DH_NAMES, dh_from_degrees, display_factor
+from calib.position import PositionModel, PositionSamples
+from errors import InputError, ParameterError
+from station.formats.samples import Samples
+from station.formats.tables import RobotFile, SetupFile
+from station.jobs.report import (
+    CalibrationReport,
+    ErrorMetrics,
+    Estimate,
+    FitMetrics,
+    HeldParameter,
+    Selection,
+    WorkspacePrediction,
+)
+
+METHODS = BASELINES + ("lmlc", "mcs-lmlc")
+WORKSPACE_POSES = 1000
+WORKSPACE_WARNING_RATIO, WORKSPACE_WARNING_FLOOR_MM = 10.0, 0.5
+"""Warn when the predicted workspace error exceeds both this many times the training fit and this."""
+SHORT_OF_OPTIMUM_RATIO = 1.5
+"""Warn when a method's whitened residual RMS exceeds LMLC's by this factor."""
+
+MESSAGES = {
+    "method": "{method} {value!r}: must be one of {choices}",
+    "needs_setup": "{samples}: a drawstring set needs {setup}",
+    "select_needs_mcs": "{select} {value}: selecting configurations needs {method} mcs-lmlc",
+    "select_range": "{select} {value}: must lie between the {unknowns} unknowns and the {n} samples",
+}
+"""Bad parameters; ``{method}``, ``{setup}``, ``{select}`` are parameter names (see ParameterError)."""
+
+WARNINGS = {
+    "workspace": (
+        "fits {cover} to {fit:.3f} mm; predicted workspace error {predicted:.2f} mm "
+        "(up to {bound:.2f} mm, 95 %); {next_measurement}"
+    ),
+    "short_of_optimum": (
+        "{method} stopped short of the least-squares optimum (whitened residual RMS {rms:.2f} against "
+        "{best:.2f} for lmlc): its table is worse than the data allows and the predicted workspace "
+        "error does not apply to it"
+    ),
+}
+
+
+@dataclass(frozen=True)
+class CalibrationOutcome:
+    """A finished calibration: the typed ``report``, ``calib``'s ``calibration`` (fits, covariance)
+    and the training ``model`` it ran on."""
+
+    report: CalibrationReport
+    calibration: Calibration
+    model: MeasurementModel
+
+
+@dataclass(frozen=True)
+class MethodFit:
+    """What a solver returns: the ``calibration`` (its ``downweighted`` rows numbered in the training
+    set), the MCS ``selection`` (mcs-lmlc) and the least-squares ``optimum`` a baseline is judged
+    against."""
+
+    calibration: Calibration
+    selection: MCSResult | None = None
+    optimum: np.ndarray | None = None
+
+
+def calibrate_samples(
+    samples: Samples,
+    robot: RobotFile,
+    setup: SetupFile | None,
+    *,
+    setup_where: str = "setup",
+    holdout: Samples | None = None,
+    method: str = "lmlc",
+    select: int | None = None,
+) -> CalibrationOutcome:
+    """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows.
+
+    ``method`` is one of ``METHODS``; ``mcs-lmlc`` first selects ``select`` configurations (default:
+    where O1 flattens). Raises ``InputError`` for too few samples and ``ParameterError`` for a bad
+    ``method``, ``select`` or a missing ``setup``.
+    """
+    t0 = time.perf_counter()
+    model = build_model(samples, robot, setup, setup_where)
+    validate(model, samples.path, method, select)
+    fit = SOLVERS[method](model, method, select)
+    elapsed = time.perf_counter() - t0
+    report = _report(model, holdout_model(model, holdout), robot, method, fit, elapsed)
+    return CalibrationOutcome(report, fit.calibration, model)
+
+
+# -- the model and its validation ---------------------------------------------------------------
+def drawstring_setup(setup: SetupFile, where: str) -> DrawstringSetup:
+    """The maths' view of a setup file; a drawstring set needs its ``[drawstring]`` table."""
+    if setup.drawstring is None:
+        raise InputError(f"{where}: missing table [drawstring] (anchor_mm, length_offset_mm)")
+    default_axis = setup.dial.axis if setup.dial else None
+    return DrawstringSetup(
+        anchor=np.array(setup.drawstring.anchor_mm),
+        length_offset=setup.drawstring.length_offset_mm,
+        sigma_length=setup.drawstring.sigma_mm,
+        sigma_line=setup.line_sigma_mm,
+        dial_axis={ln.id: _unit(ln.dial_axis) for ln in setup.lines if ln.dial_axis is not None},
+        default_dial_axis=None if default_axis is None else _unit(default_axis),
+        rho=setup.rho,
+    )
+
+
+def build_model(
+    samples: Samples, robot: RobotFile, setup: SetupFile | None, setup_where: str
+) -> MeasurementModel:
+    """The measurement model of a training set, by the set's kind: a position set (tracker) starts
+    its probe offset at the robot file's ``tool_mm``; a drawstring set needs the setup file."""
+    return _MODEL_OF_KIND[samples.kind](samples, robot, setup, setup_where)
+
+
+def _position_model(samples: Samples, robot: RobotFile, setup, setup_where: str) -> PositionModel:
+    dh0 = dh_from_degrees(robot.table_deg())
+    return PositionModel(model_samples(samples), dh0, np.array(robot.tool_mm))
+
+
+def _drawstring_model(
+    samples: Samples, robot: RobotFile, setup: SetupFile | None, setup_where: str
+) -> DrawstringLineModel:
+    if setup is None:
+        raise ParameterError(MESSAGES["needs_setup"], samples=samples.path)
+    dh0 = dh_from_degrees(robot.table_deg())
+    ds_setup = drawstring_setup(setup, setup_where)
+    data = model_samples(samples)
+    frame = DrawstringFrame.from_nominal(data, ds_setup, dh0, robot.tool_mm)
+    return DrawstringLineModel(data, ds_setup, frame, dh0, robot.tool_mm)
+
+
+_MODEL_OF_KIND = {"position": _position_model, "drawstring": _drawstring_model}
+_ROWS_OF_KIND = {
+    "position": lambda s: PositionSamples(np.radians(s.q_deg), s.measured),
+    "drawstring": lambda s: DrawstringSamples(np.radians(s.q_deg), s.measured, s.dial_mm, s.line),
+}
+
+
+def model_samples(samples: Samples) -> DrawstringSamples | PositionSamples:
+    """A sample file's rows as the maths takes them (joints in rad)."""
+    return _ROWS_OF_KIND[samples.kind](samples)
+
+
+def holdout_model(model: MeasurementModel, holdout: Samples | None) -> MeasurementModel | None:
+    """The training ``model`` (its frame and setup) on the hold-out rows; None without them."""
+    return model.with_samples(model_samples(holdout)) if holdout is not None else None
+
+
+def unknowns(model: MeasurementModel) -> int:
+    """How many unknowns (table and setup) the data must determine: all but the model's gauges."""
+    return len(model.names) - len(model.gauges())
+
+
+def check_enough(model: MeasurementModel, where: str) -> None:
+    """Bad input unless there are at least as many samples as unknowns."""
+    n, needed = len(model.samples), unknowns(model)
+    if n < needed:
+        raise InputError(
+            f"{where}: {n} samples cannot determine {needed} unknowns (table and setup): "
+            f"measure at least {needed}"
+        )
+
+
+def validate(model: MeasurementModel, where: str, method: str, select: int | None) -> None:
+    """Everything the solvers trust: a known method, enough samples, ``select`` only for mcs-lmlc
+    and between the unknowns and the samples."""
+    if method not in METHODS:
+        raise ParameterError(MESSAGES["method"], value=method, choices=", ".join(METHODS))
+    check_enough(model, where)
+    if select is None:
+        return
+    if method != "mcs-lmlc":
+        raise ParameterError(MESSAGES["select_needs_mcs"], value=select)
+    n, needed = len(model.samples), unknowns(model)
+    if not needed <= select <= n:
+        raise ParameterError(MESSAGES["select_range"], value=select, unknowns=needed, n=n)
+
+
+# -- the solvers --------------------------------------------------------------------------------
+def _lmlc(model: MeasurementModel, method: str, select: int | None) -> MethodFit:
+    return MethodFit(calibrate(model, CalibrationOptions()))
+
+
+def _mcs_lmlc(model: MeasurementModel, method: str, select: int | None) -> MethodFit:
+    mcs, cal = mcs_lmlc(model, CalibrationOptions(), select)
+    return MethodFit(cal, selection=mcs)
+
+
+def _baseline(model: MeasurementModel, method: str, select: int | None) -> MethodFit:
+    cal, optimum = baseline(model, method)
+    return MethodFit(cal, optimum=optimum)
+
+
+SOLVERS = {"lmlc": _lmlc, "mcs-lmlc": _mcs_lmlc, **dict.fromkeys(BASELINES, _baseline)}
+"""One solver per method: ``(model, method, select) -> MethodFit``; they trust ``validate``."""
+
+
+def mcs_lmlc(
+    model: MeasurementModel, options: CalibrationOptions, n_select: int | None = None
+) -> tuple[MCSResult, Calibration]:
+    """M9: select ``n_select`` configurations by MCS (default: where O1 flattens), then the whole
+    LMLC pipeline on them; the calibration's ``downweighted`` rows are numbered in ``model``'s rows."""
+    mcs = select_measurements(model, n_select)
+    rows = mcs.selection.rows
+    cal = calibrate(model.with_samples(model.samples.subset(rows)), options)
+    return mcs, dataclasses.replace(cal, downweighted=rows[cal.downweighted])
+
+
+def select_measurements(model: MeasurementModel, n_select: int | None) -> MCSResult:
+    """MCS at the setup fit: the identified table's observability, setup unknowns projected out,
+    some rows kept of every placement."""
+    start = fit_setup(model)
+    _, jac = model.residuals_and_jacobian(start.before.x)
+    return select_configurations(
+        jac, model.rows, start.free, model.placement_ids(), np.random.default_rng(0), n_select=n_select
+    )
+
+
+def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndarray]:
+    """One of the paper's other calibrators (``calib.baselines``) from the pipeline's common start
+    and identified parameters; its uncertainty from the Jacobian at its own solution, with the
+    noise LMLC fitted. Nothing is down-weighted: these methods have no robust loss. Also returns
+    LMLC's solution, the optimum it is judged against."""
+    start = calibrate(model, CalibrationOptions())
+    found = run_method(method, model, start.before.x, start.identified, BaselineOptions())
+    prior = WithPrior(model, model.x0)
+    noise = np.where(prior.groups == GROUP_PRIOR, 1.0, start.scale[prior.groups])
+    cov, table_cov = covariance(prior, found.x, start.identified, 1.0 / noise)
+    sigma = np.full(len(model.names), np.nan)
+    sigma[start.identified] = np.sqrt(np.diag(cov))
+    after = dataclasses.replace(
+        start.after, x=found.x, cost=found.cost, nit=found.iterations, nfev=found.nfev
+    )
+    cal = dataclasses.replace(
+        start,
+        after=after,
+        sigma=sigma,
+        covariance=cov,
+        table_covariance=table_cov,
+        downweighted=np.array([], int),
+    )
+    return cal, start.x
+
+
+# -- the report ---------------------------------------------------------------------------------
+def _report(
+    model: MeasurementModel,
+    hold_model: MeasurementModel | None,
+    robot: RobotFile,
+    method: str,
+    fit: MethodFit,
+    elapsed: float,
+) -> CalibrationReport:
+    cal = fit.calibration
+    after = metrics(model, hold_model, cal.x)
+    workspace = predicted_workspace(robot, cal)
+    messages = workspace_warnings(model, cal.x, after.train, workspace)
+    messages += short_of_optimum(model, cal.x, fit.optimum, method)
+    return CalibrationReport(
+        kind=model.kind,
+        method=method,
+        before=metrics(model, hold_model, cal.before.x),
+        after=after,
+        setup=model.setup_estimate(cal.x),
+        identified=tuple(n for k, n in enumerate(DH_NAMES) if cal.identified[k]),
+        held=tuple(HeldParameter(p, r) for p, r in cal.held.items()),
+        parameters=_parameters(cal),
+        downweighted=tuple(int(r) for r in cal.downweighted),
+        workspace=workspace,
+        warnings=tuple(messages),
+        iterations=int(cal.after.nit),
+        time_s=round(elapsed, 4),
+        selection=None if fit.selection is None else _selection(fit.selection),
+    )
+
+
+def metrics(model: MeasurementModel, hold_model: MeasurementModel | None, x: np.ndarray) -> FitMetrics:
+    """The contract's ``{"train": M, "holdout": M}`` of parameters ``x`` (holdout only with rows)."""
+    holdout = None if hold_model is None else _errors(hold_model, x)
+    return FitMetrics(_errors(model, x), holdout)
+
+
+def _errors(model: MeasurementModel, x: np.ndarray) -> ErrorMetrics:
+    return ErrorMetrics(**error_metrics(model.row_error_mm(x)))
+
+
+def predicted_workspace(robot: RobotFile, cal: Calibration) -> WorkspacePrediction:
+    """Expected RMS TCP error [mm] over random configurations within the joint limits, and the RMS
+    one calibration stays below with 95 % probability."""
+    limits = np.radians(robot.limits_deg())
+    q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    dh = cal.x[:N_DH].reshape(6, 4)
+    modes = workspace_error_modes(dh, np.asarray(robot.tool_mm), q, cal.table_covariance)
+    return WorkspacePrediction(
+        predicted_workspace_rmse(modes), workspace_rmse_bound(modes, 0.95), WORKSPACE_POSES
+    )
+
+
+def workspace_warnings(
+    model: MeasurementModel, x: np.ndarray, fit: ErrorMetrics, workspace: WorkspacePrediction
+) -> list[str]:
+    """Say when the samples fit well but cannot deliver that accuracy over the workspace, and what
+    to measure next: the model knows, and says nothing where no measurement of its kind helps."""
+    predicted = workspace.predicted_rmse_mm
+    if predicted <= max(WORKSPACE_WARNING_RATIO * fit.rmse_mm, WORKSPACE_WARNING_FLOOR_MM):
+        return []
+    advice = model.measurement_advice(x)
+    if advice is None:
+        return []
+    return [
+        WARNINGS["workspace"].format(
+            cover=advice.cover,
+            fit=fit.rmse_mm,
+            predicted=predicted,
+            bound=workspace.predicted_rmse_95_mm,
+            next_measurement=advice.next_measurement,
+        )
+    ]
+
+
+def short_of_optimum(
+    model: MeasurementModel, x: np.ndarray, optimum: np.ndarray | None, method: str
+) -> list[str]:
+    """A warning when a method stopped well short of the least-squares optimum: its sigmas and
+    predicted workspace error describe the optimum, not where it stopped."""
+    if optimum is None:
+        return []
+    rms, best = (float(np.sqrt(np.mean(model.residuals(v) ** 2))) for v in (x, optimum))
+    if rms <= SHORT_OF_OPTIMUM_RATIO * best:
+        return []
+    return [WARNINGS["short_of_optimum"].format(method=method, rms=rms, best=best)]
+
+
+def _selection(mcs: MCSResult) -> Selection:
+    rows = tuple(int(r) for r in mcs.selection.rows)
+    return Selection(rows, int(mcs.n_select), "O1", mcs.selection.value)
+
+
+def _parameters(cal: Calibration) -> dict[str, Estimate]:
+    factor = display_factor(cal.names)
+    return {
+        name: Estimate(float(cal.x[k] * factor[k]), float(cal.sigma[k] * factor[k]))
+        for k, name in enumerate(cal.names[:N_DH])
+        if cal.identified[k]
+    }
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)

@@ -1,0 +1,77 @@
+"""What the station asks of a measurement model, answered by both kinds against a noise-free truth:
+the contract's row errors, the setup estimate, hold-out rows, the next measurement to advise."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomllib
+
+from calib.experiment import design_model
+from calib.kinematics import tcp_position
+from calib.models import DrawstringSetup, least_aligned_direction
+from calib.params import dh_from_degrees
+from calib.position import PositionModel, PositionSamples, rotation_from_vector
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def nominal(robot: str) -> np.ndarray:
+    with open(ROOT / f"configs/robots/{robot}.toml", "rb") as f:
+        joints = tomllib.load(f)["joints"]
+    return dh_from_degrees(np.array([[j["theta_deg"], j["d_mm"], j["a_mm"], j["alpha_deg"]] for j in joints]))
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_the_least_aligned_direction(rng, k):
+    directions = rng.normal(size=(k, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    s = least_aligned_direction(directions)
+    assert np.linalg.norm(s) == pytest.approx(1.0)
+    if k < 3:
+        np.testing.assert_allclose(directions @ s, 0.0, atol=1e-12)
+    else:  # no unit vector has a smaller sum of squared alignments
+        other = rng.normal(size=(500, 3))
+        other /= np.linalg.norm(other, axis=1)[:, None]
+        assert np.sum((directions @ s) ** 2) <= np.sum((other @ directions.T) ** 2, axis=1).min()
+
+
+@pytest.fixture(scope="module")
+def drawstring():
+    """Drawstring readings the nominal JR680 gives from a known anchor, rows on two line ids."""
+    dh, tool = nominal("hsr_jr680"), np.zeros(3)
+    rng = np.random.default_rng(0)
+    q = np.radians(rng.uniform(-40, 40, (40, 6)) + [0, -30, 20, 0, -60, 0])
+    setup = DrawstringSetup(anchor=np.array([-800.0, 600.0, -600.0]), length_offset=200.0)
+    return design_model(dh, tool, setup, q, np.repeat([0, 1], 20))
+
+
+def test_a_drawstring_model_answers_the_station(drawstring):
+    model = drawstring
+    assert model.kind == "drawstring"
+    np.testing.assert_allclose(model.row_error_mm(model.x0), 0.0, atol=1e-9)
+    estimate = model.setup_estimate(model.x0)
+    np.testing.assert_allclose(estimate.anchor_mm, [-800.0, 600.0, -600.0])
+    assert estimate.length_offset_mm == 200.0 and [ln.id for ln in estimate.lines] == [0, 1]
+    np.testing.assert_array_equal(model.placement_ids(), np.repeat([0, 1], 20))
+    advice = model.measurement_advice(model.x0)
+    assert advice.cover == "its own 2 lines" and "add a line placement along" in advice.next_measurement
+    held_out = model.with_samples(model.samples.subset(np.arange(5, 15)))
+    assert held_out.kind == "drawstring" and held_out.row_error_mm(model.x0).shape == (10,)
+
+
+def test_a_position_model_answers_the_station():
+    dh, probe = nominal("ur10"), np.array([0.0, 0.0, 100.0])
+    q = np.random.default_rng(1).uniform(-np.pi, np.pi, (30, 6))
+    rot, shift = rotation_from_vector(np.array([0.1, -0.2, 2.5])), np.array([2500.0, -1000.0, 200.0])
+    model = PositionModel(PositionSamples(q, tcp_position(dh, q, probe) @ rot.T + shift), dh, probe)
+    assert model.kind == "position"
+    np.testing.assert_allclose(model.row_error_mm(model.x0), 0.0, atol=1e-6)
+    estimate = model.setup_estimate(model.x0)
+    np.testing.assert_allclose(estimate.tracker_from_base.rotation, rot, atol=1e-9)
+    np.testing.assert_allclose(estimate.tracker_from_base.translation_mm, shift, atol=1e-6)
+    np.testing.assert_array_equal(estimate.probe_mm, probe)
+    np.testing.assert_array_equal(model.placement_ids(), np.zeros(30))
+    assert model.measurement_advice(model.x0) is None
+    held_out = model.with_samples(model.samples.subset(np.arange(10)))
+    assert held_out.row_error_mm(model.x0).shape == (10,)

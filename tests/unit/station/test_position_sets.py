@@ -1,0 +1,80 @@
+"""Position (tracker) sets with few rows through ``station calibrate``, as a user meets them: a
+position report, or one line and exit 2; never a traceback (a 30-row set once ended in
+``KeyError: 'lines'``, the drawstring warning asked of a position report)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib.kinematics import tcp_position
+from calib.params import dh_from_degrees
+from calib.position import rotation_from_vector
+from station.cli import main
+from station.formats.tables import load_robot
+
+ROBOT = Path(__file__).resolve().parents[3] / "configs/robots/ur10.toml"
+SIGMA_MM = 0.02  # tracker noise per axis
+
+
+def write_position_set(path: Path, n: int, seed: int = 5) -> None:
+    """``n`` random poses within the joint limits of a UR10 with machining errors (0.15 deg,
+    0.75 mm), its probe 100 mm out on the flange axis, seen by a tracker at an arbitrary pose."""
+    rng = np.random.default_rng(seed)
+    robot = load_robot(ROBOT)
+    true = dh_from_degrees(robot.table_deg()) + np.column_stack(
+        [np.radians(rng.normal(0, 0.15, 6)), rng.normal(0, 0.75, (6, 2)), np.radians(rng.normal(0, 0.15, 6))]
+    )
+    limits = np.radians(robot.limits_deg())
+    q = rng.uniform(limits[:, 0], limits[:, 1], (n, 6))
+    tracker = rotation_from_vector(np.array([0.1, -0.2, 2.5]))
+    p = tcp_position(true, q, np.array([0.0, 0.0, 100.0])) @ tracker.T + [2500.0, -1000.0, 200.0]
+    p += rng.normal(0, SIGMA_MM, p.shape)
+    rows = ["sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"]
+    rows += [",".join(map(str, [k, *np.degrees(q[k]), *p[k]])) for k in range(n)]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def calibrate(tmp_path, samples: Path) -> tuple[int, str, Path, Path]:
+    out, report = tmp_path / "t.toml", tmp_path / "r.json"
+    argv = ["calibrate", str(samples), "--robot", str(ROBOT), "--out", str(out), "--report", str(report)]
+    return main(argv), out, report
+
+
+def test_a_set_with_fewer_rows_than_unknowns_is_one_line(tmp_path, capsys):
+    samples = tmp_path / "p10.csv"
+    write_position_set(samples, 10)
+    code, out, report = calibrate(tmp_path, samples)
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert f"{samples}: 10 samples cannot determine" in err
+    assert not out.exists() and not report.exists()
+
+
+def test_a_set_just_above_the_unknowns_calibrates_to_a_position_report(tmp_path, capsys):
+    samples = tmp_path / "p30.csv"
+    write_position_set(samples, 30)
+    code, out, report = calibrate(tmp_path, samples)
+    assert code == 0 and out.exists()
+    r = json.loads(report.read_text())
+    assert r["kind"] == "position" and {"tracker_from_base", "probe_mm"} <= set(r)
+    assert not {"anchor_mm", "length_offset_mm", "lines"} & set(r)
+    # fitted to the tracker's noise: |e| of 3-D Gaussian noise has RMS sqrt(3) sigma, less the
+    # share the ~30 fitted unknowns absorb (90 residuals: about 0.8 of it)
+    assert r["after"]["train"]["rmse_mm"] < np.sqrt(3) * SIGMA_MM
+    # where the crash was: the predicted workspace error far above the fit asks the model for
+    # advice, and a position model has none to give (see PositionModel.measurement_advice)
+    assert r["workspace"]["predicted_rmse_mm"] > max(10 * r["after"]["train"]["rmse_mm"], 0.5)
+    assert r["warnings"] == []
+    assert "predicted workspace error" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("n, code", [(22, 2), (23, 0)])
+def test_the_edge_of_enough_rows(tmp_path, capsys, n, code):
+    """23 unknowns: the 24 table parameters and 9 of the tracker setup, less 10 gauges."""
+    samples = tmp_path / f"p{n}.csv"
+    write_position_set(samples, n, seed=n)
+    assert calibrate(tmp_path, samples)[0] == code
+    err = capsys.readouterr().err
+    assert err == "" if code == 0 else f"{n} samples cannot determine 23 unknowns" in err
