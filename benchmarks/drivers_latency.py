@@ -30,7 +30,7 @@ from drivers.dial import DialIndicator  # noqa: E402
 from drivers.drawstring import AsciiDrawstring, ModbusDrawstring, RegisterMap  # noqa: E402
 from sim_fixtures.modbus_device import ModbusDevice  # noqa: E402
 from sim_fixtures.serial_device import SerialAsciiDevice  # noqa: E402
-from sim_fixtures.sources import Instrument  # noqa: E402
+from sim_fixtures.world import Noise  # noqa: E402
 
 TIMEOUT_S = 0.5
 
@@ -47,8 +47,7 @@ def wire_ms(frame_bytes: int, baudrate: int) -> float:
 def setups(tmp: Path, stack: ExitStack):
     """(name, driver, wire_ms) for each driver, its simulated device started on ``stack``."""
     rng = np.random.default_rng(0)
-    length = Instrument(0.02, 0.001, rng)
-    dial = Instrument(0.002, 0.001, rng)
+    length, dial = Noise().drawstring(rng), Noise().dial(rng)
     regs = RegisterMap()
     for dialect in ("sylvac", "mitutoyo"):
         link = tmp / f"dial-{dialect}"

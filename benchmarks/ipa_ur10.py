@@ -29,10 +29,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calib.calibrate import calibrate  # noqa: E402
+from calib.kinematics import N_DH  # noqa: E402
 from calib.metrics import error_metrics  # noqa: E402
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
 from calib.params import dh_from_degrees  # noqa: E402
-from calib.position import N_DH, Compliance, LinkMasses, PositionModel, PositionSamples, register  # noqa: E402
+from calib.position import Compliance, LinkMasses, PositionModel, PositionSamples, register  # noqa: E402
+from sim_fixtures.world import Noise  # noqa: E402
 from station.formats.ipa import probe_file_for, read_probe_mm, read_series  # noqa: E402
 from station.formats.tables import load_robot  # noqa: E402
 
@@ -52,7 +54,7 @@ UR10_LINKS = LinkMasses(
 # 0-based: joints 2 and 3 carry the arm against gravity. Adding joint 4 (wrist torques are small)
 # fitted 589 urad/(N m), helped C and hurt D: overfitting, so it is left out.
 COMPLIANT_JOINTS = (1, 2)
-DRAWSTRING_SIGMA_MM = 0.02  # a good draw-wire encoder's reading noise (the contract's default)
+DRAWSTRING_SIGMA_MM = Noise().length_mm  # the simulated drawstring's reading noise
 ANCHOR_OFFSET_MM = np.array([500.0, 300.0, -1200.0])  # anchor below and beside the workspace centre
 
 

@@ -14,7 +14,7 @@ import tempfile
 
 import numpy as np
 
-from calib.kinematics import tcp_position
+from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
 from sim_fixtures.scenario import write_scenario
 from station.formats.samples import load_samples
@@ -24,7 +24,7 @@ from station.jobs import calibration
 
 def workspace_rms(world, x) -> float:
     q = world.random_configurations(1000, np.random.default_rng(99))
-    p = tcp_position(x[:24].reshape(6, 4), np.radians(q), np.zeros(3))
+    p = tcp_position(dh_table(x), np.radians(q), np.zeros(3))
     return float(np.sqrt(np.mean(aligned_errors(p, world.true_tcp_mm(q)) ** 2)))
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from calib.kinematics import tcp_position  # noqa: E402
+from calib.kinematics import dh_table, tcp_position  # noqa: E402
 from calib.metrics import aligned_errors  # noqa: E402
 from sim_fixtures.scenario import write_scenario  # noqa: E402
 from station.formats.samples import load_samples
@@ -64,7 +64,7 @@ def one_seed(seed: int, folder: Path, methods: tuple[str, ...]) -> dict[str, dic
     tool = np.asarray(robot.tool_mm, float)
 
     def workspace(x):
-        err = aligned_errors(tcp_position(x[:24].reshape(6, 4), np.radians(q_deg), tool), p_true)
+        err = aligned_errors(tcp_position(dh_table(x), np.radians(q_deg), tool), p_true)
         return float(np.sqrt(np.mean(err**2))), float(err.max())
 
     rows = [("before", comp.report["before"], comp.x0)]

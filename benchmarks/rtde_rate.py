@@ -40,7 +40,7 @@ from sim_fixtures.modbus_device import ModbusDevice  # noqa: E402
 from sim_fixtures.robot_program import SimRobot  # noqa: E402
 from sim_fixtures.rtde_server import start_on_free_loopback  # noqa: E402
 from sim_fixtures.serial_device import SerialAsciiDevice  # noqa: E402
-from sim_fixtures.sources import Instrument  # noqa: E402
+from sim_fixtures.world import Noise  # noqa: E402
 
 PLAN_DEG = [[0.0, -50.0, -20.0, 0.0, -90.0, 0.0], [20.0, -40.0, -30.0, 5.0, -80.0, 10.0]]
 
@@ -64,8 +64,7 @@ def dropped(stamps_s: list[float], frequency_hz: float) -> tuple[int, int]:
 @contextlib.contextmanager
 def polled_instruments(tmp: Path, rng: np.random.Generator):
     """Simulated drawstring (Modbus TCP) and dial (Sylvac on a pty) with drivers open on them."""
-    drawstring_noise = Instrument(0.02, 0.001, rng)
-    dial_noise = Instrument(0.002, 0.001, rng)
+    drawstring_noise, dial_noise = Noise().drawstring(rng), Noise().dial(rng)
     regs = RegisterMap()
     with (
         ModbusDevice(regs, lambda: drawstring_noise.measure(1234.5), tcp=("127.0.0.1", 0)) as ds_dev,

@@ -26,7 +26,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calib.baselines import BaselineOptions, run_method  # noqa: E402
 from calib.calibrate import calibrate  # noqa: E402
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
-from calib.params import dh_from_degrees  # noqa: E402
 from sim_fixtures.world import World  # noqa: E402
 from station.jobs.comparison import LABELS  # noqa: E402
 
@@ -53,7 +52,7 @@ def cell(n_lines: int, n_per_line: int, seed: int = 0):
         rough["anchor_mm"], rough["length_offset_mm"], rough["sigma_mm"], dial_axis=rough["dial_axes"]
     )
     data = DrawstringSamples(np.radians(s.q_deg), s.length_mm, s.dial_mm, s.line)
-    dh0 = dh_from_degrees(world.nominal.table[:, [3, 2, 1, 0]])  # world rows: alpha, a, d, theta
+    dh0 = world.nominal.dh
     frame = DrawstringFrame.from_nominal(data, setup, dh0, np.zeros(3))
     model = DrawstringLineModel(data, setup, frame, dh0, np.zeros(3))
     start = calibrate(model)

@@ -21,12 +21,23 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2
 
-from calib.kinematics import tcp_jacobian
+from calib.kinematics import N_DH, tcp_jacobian
 
 
 def rigid_fields(p: np.ndarray) -> np.ndarray:
-    """Displacements (3N, 6) of points ``p`` (N, 3) under unit translations and small rotations
-    about their centroid."""
+    """Displacement fields of a rigid motion at points: unit translations and small rotations about
+    the points' centroid ``c`` (``w x (p - c)`` for unit ``w``).
+
+    Parameters
+    ----------
+    p : ndarray, shape (N, 3)
+        Points [mm].
+
+    Returns
+    -------
+    ndarray, shape (3N, 6)
+        Columns: translation along x, y, z [mm/mm], rotation about x, y, z [mm/rad]; rows point-major.
+    """
     rel = p - p.mean(axis=0)
     fields = np.zeros((p.shape[0], 3, 6))
     fields[:, :, :3] = np.eye(3)
@@ -36,9 +47,25 @@ def rigid_fields(p: np.ndarray) -> np.ndarray:
 
 
 def workspace_error_modes(dh: np.ndarray, tool: np.ndarray, q: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """Variances [mm^2] (descending) of the independent modes of the TCP error field over
-    configurations ``q`` (N, 6) [rad], after a rigid re-fit of the base, for a table covariance
-    ``cov`` (24, 24) in internal units. Their sum is the expected squared RMS error."""
+    """Variances of the independent modes of the TCP error field after a rigid re-fit of the base:
+    the eigenvalues of ``C^1/2 J_perp^T J_perp C^1/2 / N`` (module docstring).
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        D-H table, internal units.
+    tool : ndarray, shape (3,)
+        TCP in the flange frame [mm].
+    q : ndarray, shape (N, 6)
+        Configurations over which the error is averaged [rad].
+    cov : ndarray, shape (N_DH, N_DH)
+        Covariance of the table's error, internal units (rad, mm).
+
+    Returns
+    -------
+    ndarray, shape (N_DH,)
+        Mode variances [mm^2], descending, >= 0; their sum is the expected squared RMS error.
+    """
     p, jac = tcp_jacobian(dh, q, tool)
     a = jac.reshape(-1, jac.shape[2])
     q_rigid = np.linalg.qr(rigid_fields(p))[0]
@@ -50,13 +77,38 @@ def workspace_error_modes(dh: np.ndarray, tool: np.ndarray, q: np.ndarray, cov: 
 
 
 def predicted_workspace_rmse(modes: np.ndarray) -> float:
-    """Expected RMS TCP error [mm]: the root of the summed mode variances."""
+    """Expected RMS TCP error: the root of the summed mode variances.
+
+    Parameters
+    ----------
+    modes : ndarray, shape (k,)
+        Mode variances [mm^2] (``workspace_error_modes``).
+
+    Returns
+    -------
+    float
+        RMS error [mm].
+    """
     return float(np.sqrt(modes.sum()))
 
 
 def workspace_rmse_bound(modes: np.ndarray, probability: float = 0.95) -> float:
-    """RMS TCP error [mm] that one calibration stays below with ``probability``: the quantile of
-    ``sum lambda_i z_i^2`` as a chi-square with ``(sum lambda)^2 / sum lambda^2`` degrees of freedom."""
+    """RMS TCP error that one calibration stays below with ``probability``: the quantile of
+    ``sum lambda_i z_i^2`` as a scaled chi-square with ``(sum lambda)^2 / sum lambda^2`` degrees of
+    freedom and the same mean.
+
+    Parameters
+    ----------
+    modes : ndarray, shape (k,)
+        Mode variances ``lambda_i`` [mm^2] (``workspace_error_modes``).
+    probability : float
+        In (0, 1).
+
+    Returns
+    -------
+    float
+        The bound [mm]; 0 when every mode is 0.
+    """
     total = modes.sum()
     if total <= 0.0:
         return 0.0
@@ -72,21 +124,40 @@ def table_covariance(
     held: np.ndarray,
     held_sigma: np.ndarray,
 ) -> np.ndarray:
-    """The (24, 24) table covariance with the held table parameters as "consider" parameters
-    (Schmidt): each held one may be off by its tolerance, which moves the TCP itself and shifts the
-    fitted ones by ``-cov_free J_free^T J_held`` per unit.
+    """The table covariance with the held table parameters as "consider" parameters (Schmidt):
+    each held one may be off by its tolerance, which moves the TCP itself and shifts the fitted
+    ones by ``-cov_free J_free^T J_held`` per unit::
+
+        S = [-cov_free J_free^T J_held]_table + E_held,     C = C_free + S diag(held_sigma^2) S^T
 
     An exact redundancy (joints 2-3's d) cancels in the TCP; a near one does not: on one gauge line
     a few micrometres of unmodelled effect move the weakly determined directions by millimetres.
-    ``cov_free`` (n, n) is the fit's covariance of the ``free`` unknowns (indices, table first),
-    ``jac_free`` (m, n) / ``jac_held`` (m, h) their whitened, weighted Jacobians, ``held`` (h,) the
-    held table indices with prior sigma ``held_sigma`` (h,) in internal units.
+
+    Parameters
+    ----------
+    cov_free : ndarray, shape (n, n)
+        The fit's covariance of the free unknowns, internal units.
+    jac_free : ndarray, shape (m, n)
+        Whitened, weighted Jacobian of the free unknowns.
+    jac_held : ndarray, shape (m, h)
+        Same for the held table parameters.
+    free : ndarray of int, shape (n,)
+        Indices of the free unknowns in the parameter vector (table first: ``< N_DH``).
+    held : ndarray of int, shape (h,)
+        Indices of the held table parameters.
+    held_sigma : ndarray, shape (h,)
+        Their tolerance (1 sigma), internal units.
+
+    Returns
+    -------
+    ndarray, shape (N_DH, N_DH)
+        Covariance of the table's error, internal units.
     """
     free, held = np.asarray(free), np.asarray(held)
-    table = free < 24
-    sensitivity = np.zeros((24, held.size))
+    table = free < N_DH
+    sensitivity = np.zeros((N_DH, held.size))
     sensitivity[free[table]] = -(cov_free @ (jac_free.T @ jac_held))[table]
     sensitivity[held, np.arange(held.size)] += 1.0
-    cov = np.zeros((24, 24))
+    cov = np.zeros((N_DH, N_DH))
     cov[np.ix_(free[table], free[table])] = cov_free[np.ix_(table, table)]
     return cov + (sensitivity * held_sigma**2) @ sensitivity.T

@@ -62,7 +62,23 @@ METHODS = BASELINES + ("lmlc",)
 
 
 def search_half_widths(names) -> np.ndarray:
-    """Half width of the search box for each parameter name, in internal units (rad, mm)."""
+    """Half width of the search box for each parameter (``HALF_WIDTH_RULES``).
+
+    Parameters
+    ----------
+    names : sequence of str, length n
+        Parameter names (table, setup, lines).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Half widths in internal units (rad, mm).
+
+    Raises
+    ------
+    ValueError
+        A name no rule covers.
+    """
     widths = []
     for name in names:
         rule = next(
@@ -364,7 +380,31 @@ def run_method(
     free: np.ndarray,
     options: BaselineOptions | None = None,
 ) -> MethodResult:
-    """Run one of ``METHODS`` on ``model`` from ``x0`` over the ``free`` parameters (boolean mask)."""
+    """Run one calibrator on a model.
+
+    Parameters
+    ----------
+    method : str
+        One of ``METHODS``.
+    model : MeasurementModel
+        What is minimised (its whitened residuals).
+    x0 : ndarray, shape (n,)
+        Common start.
+    free : ndarray of bool, shape (n,)
+        The parameters every method moves.
+    options : BaselineOptions, optional
+        Budgets and seed.
+
+    Returns
+    -------
+    MethodResult
+        Solution, cost ``|r|^2 / 2``, iterations, cost history, evaluations and wall time.
+
+    Raises
+    ------
+    ValueError
+        ``method`` is not one of ``METHODS``.
+    """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     options = options or BaselineOptions()

@@ -16,8 +16,9 @@ import numpy as np
 
 from calib.accuracy import table_covariance
 from calib.identifiability import redundancy_partners, select_columns, tolerance, weakly_determined
+from calib.kinematics import N_DH
 from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
-from calib.models import GROUP_PRIOR, N_DH, MeasurementModel
+from calib.models import GROUP_PRIOR, MeasurementModel
 
 
 class WithPrior:

@@ -17,8 +17,8 @@ import numpy as np
 from calib import ik
 from calib.accuracy import workspace_error_modes
 from calib.calibrate import CalibrationOptions, covariance, fit_setup
-from calib.kinematics import tcp_position
-from calib.models import N_DH, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.kinematics import dh_table, tcp_position
+from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 
 MIN_CONDITIONING = 0.04
 """Inverse condition number of the scaled geometric Jacobian below which a pose counts as near a
@@ -37,11 +37,39 @@ def line_candidates(
     max_roll_deg: float = 60.0,
     restarts: int = 64,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Configurations (n, 6) [rad] touching ``line`` = (point [mm], unit direction, usable length
-    [mm], unit tool approach) at ``n`` evenly spaced points, and the mask of those reached within
-    the joint ``limits`` (6, 2) [rad] away from singularities. The tool is tilted up to
-    ``max_tilt_deg`` from the approach and rolled up to ``max_roll_deg`` from the start pose: the
-    best-conditioned of ``restarts`` solutions at the line's centre."""
+    """Candidate configurations touching a gauge line at evenly spaced points.
+
+    The start pose is the best-conditioned of ``restarts`` IK solutions at the line's centre; each
+    candidate's tool is tilted up to ``max_tilt_deg`` from the approach and rolled up to
+    ``max_roll_deg`` from the start pose, and solved from the start pose.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        Nominal D-H table, internal units.
+    tool : ndarray, shape (3,)
+        TCP in the flange frame [mm].
+    limits : ndarray, shape (6, 2)
+        Joint limits [rad].
+    line : tuple
+        ``(point [mm] (3,), unit direction (3,), usable length [mm], unit tool approach (3,))``.
+    n : int
+        Number of candidates.
+    rng : numpy.random.Generator
+        Draws restarts, tilts and rolls.
+    max_tilt_deg, max_roll_deg : float
+        Largest tilt and roll [deg].
+    restarts : int
+        IK starts at the line's centre.
+
+    Returns
+    -------
+    q : ndarray, shape (n, 6)
+        Configurations [rad], wrapped towards the middle of the limits (zeros if the centre is out
+        of reach).
+    valid : ndarray of bool, shape (n,)
+        Reached (IK error < 1e-3 mm), inside the limits and conditioning > ``MIN_CONDITIONING``.
+    """
     point, direction, length, approach = line
     centre_rot = _orientation(approach, _perpendiculars(approach)[0])
     seeds = rng.uniform(limits[:, 0], limits[:, 1], (restarts, 6))
@@ -71,8 +99,26 @@ def line_candidates(
 def design_model(
     dh: np.ndarray, tool: np.ndarray, setup: DrawstringSetup, q: np.ndarray, line: np.ndarray
 ) -> DrawstringLineModel:
-    """The measurement model of configurations ``q`` (N, 6) [rad] on gauge ``line`` ids (N,), with
-    the readings the nominal robot would give: an experiment before it is run."""
+    """The measurement model of a planned experiment, before it is run.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        Nominal D-H table, internal units.
+    tool : ndarray, shape (3,)
+        TCP in the flange frame [mm].
+    setup : DrawstringSetup
+        Anchor, offset, noise and dial axes.
+    q : ndarray, shape (N, 6)
+        Planned configurations [rad].
+    line : ndarray of int, shape (N,)
+        Gauge line of each.
+
+    Returns
+    -------
+    DrawstringLineModel
+        With the readings the nominal robot would give (dial 0).
+    """
     p = tcp_position(dh, q, tool)
     length = np.linalg.norm(p - setup.anchor, axis=1) - setup.length_offset
     samples = DrawstringSamples(q, length, np.zeros(len(q)), np.asarray(line))
@@ -81,11 +127,24 @@ def design_model(
 
 
 def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.ndarray:
-    """Workspace error modes [mm^2] (``accuracy.workspace_error_modes``) that a calibration on
-    ``model``'s configurations promises, with its identified parameters and the stated noise."""
+    """What a calibration on a model's configurations promises over the workspace, from the stated
+    noise and the parameters it would identify.
+
+    Parameters
+    ----------
+    model : DrawstringLineModel
+        The planned experiment (``design_model``).
+    workspace_q : ndarray, shape (K, 6)
+        Configurations the promise is averaged over [rad].
+
+    Returns
+    -------
+    ndarray, shape (N_DH,)
+        Workspace error mode variances [mm^2] (``accuracy.workspace_error_modes``).
+    """
     prep = fit_setup(model, CalibrationOptions(loss="linear"))
     _, table_cov = covariance(prep.prior, prep.before.x, prep.free)
-    return workspace_error_modes(prep.before.x[:N_DH].reshape(6, 4), model.tool, workspace_q, table_cov)
+    return workspace_error_modes(dh_table(prep.before.x), model.tool, workspace_q, table_cov)
 
 
 def _valid(dh, tool, limits, q, err, tol: float = 1e-3) -> np.ndarray:

@@ -22,7 +22,18 @@ TOLERANCE_DEG, TOLERANCE_MM = 0.2, 1.0
 
 
 def tolerance(names) -> np.ndarray:
-    """Manufacturing tolerance of each table parameter in internal units (rad, mm)."""
+    """Manufacturing tolerance of table parameters.
+
+    Parameters
+    ----------
+    names : sequence of str, length k
+        Parameter names (``calib.params.DH_NAMES``): ``*_deg`` angles, else lengths.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        ``TOLERANCE_DEG`` in rad for an angle, ``TOLERANCE_MM`` for a length.
+    """
     return np.array([np.radians(TOLERANCE_DEG) if n.endswith("_deg") else TOLERANCE_MM for n in names])
 
 
@@ -33,9 +44,24 @@ BASE_GAUGE = {
 
 
 def structural_holds(dh: np.ndarray, tool: np.ndarray, frame: str, tol: float = 1e-6) -> dict[str, str]:
-    """Table parameters no position measurement can determine, with the reason, for table ``dh``
-    (6, 4) internal units, TCP ``tool`` [mm] in the flange frame, and ``frame`` naming the unknowns
-    that absorb the base gauge (e.g. "anchor and the lines")."""
+    """Table parameters no position measurement can determine, with the reason.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        D-H table, internal units.
+    tool : ndarray, shape (3,)
+        TCP in the flange frame [mm].
+    frame : str
+        The unknowns that absorb the base gauge, for the reason (e.g. "anchor and the lines").
+    tol : float
+        How close to parallel / on-axis counts as exactly so (rad, mm).
+
+    Returns
+    -------
+    dict of str to str
+        Parameter name (``DH_NAMES``) to why it is held.
+    """
     held = {name: why.format(frame=frame) for name, why in BASE_GAUGE.items()}
     for i in parallel_axis_pairs(dh, tol):
         held[f"J{i + 2}.d_mm"] = (
@@ -53,11 +79,25 @@ def structural_holds(dh: np.ndarray, tool: np.ndarray, frame: str, tol: float = 
 
 
 def select_columns(jac: np.ndarray, order: np.ndarray, rtol: float = 1e-6) -> np.ndarray:
-    """Columns of ``jac`` (m, n) that are linearly independent, taken greedily in ``order``.
+    """Columns that are linearly independent, taken greedily in a priority order.
 
     A column enters when its component orthogonal to the span of the columns already kept is more
     than ``rtol`` of its norm. Columns below 1e-9 of the largest norm are zero up to round-off and
-    never enter. Returns a boolean mask over the n columns.
+    never enter.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (m, n)
+        Jacobian (any column scaling: each column is normalised).
+    order : ndarray of int, shape (k,)
+        The candidate columns, first priority first.
+    rtol : float
+        Relative size of the new part below which a column counts as produced by the others.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        The columns kept.
     """
     keep = np.zeros(jac.shape[1], bool)
     basis = np.empty((jac.shape[0], 0))
@@ -76,7 +116,27 @@ def select_columns(jac: np.ndarray, order: np.ndarray, rtol: float = 1e-6) -> np
 
 
 def redundancy_partners(jac: np.ndarray, k: int, kept: np.ndarray, names, top: int = 3) -> list[str]:
-    """Names of the kept parameters that best reproduce column ``k`` (largest scaled coefficients)."""
+    """The kept parameters that best reproduce a column, for a message.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (m, n)
+        Jacobian.
+    k : int
+        The column to explain.
+    kept : ndarray of bool, shape (n,)
+        Columns that may explain it (``select_columns``).
+    names : sequence of str, length n
+        Parameter names.
+    top : int
+        Most names returned.
+
+    Returns
+    -------
+    list of str
+        Names by decreasing coefficient of ``k``'s least-squares reproduction from the normalised
+        kept columns (coefficients below 1e-3 of the largest left out).
+    """
     cols = np.flatnonzero(kept)
     scaled = jac[:, cols] / np.maximum(np.linalg.norm(jac[:, cols], axis=0), 1e-300)
     coef = np.linalg.solve(scaled.T @ scaled, scaled.T @ jac[:, k])
@@ -85,11 +145,24 @@ def redundancy_partners(jac: np.ndarray, k: int, kept: np.ndarray, names, top: i
 
 
 def weakly_determined(jac: np.ndarray, cols: np.ndarray, candidates, tol: np.ndarray) -> dict[int, float]:
-    """Candidates whose standard deviation exceeds ``tol`` (their prior knowledge), found one at a
-    time (worst ratio first) since holding one sharpens the others.
+    """Candidates whose standard deviation exceeds their tolerance (what is known before
+    measuring), found one at a time (worst ratio first) since holding one sharpens the others.
 
-    ``jac`` (m, n) whitened; ``cols``: every column in the fit; ``candidates``: those that may be
-    held; ``tol`` (n,) tolerances (only candidates' entries are read). Returns {column: sigma}.
+    Parameters
+    ----------
+    jac : ndarray, shape (m, n)
+        Whitened Jacobian (unit noise).
+    cols : sequence of int
+        Every column in the fit.
+    candidates : set of int
+        The columns that may be held.
+    tol : ndarray, shape (n,)
+        Tolerances, internal units (only the candidates' entries are read).
+
+    Returns
+    -------
+    dict of int to float
+        Held column to its standard deviation in the fit it was dropped from, internal units.
     """
     cols, held = list(cols), {}
     while True:

@@ -4,8 +4,10 @@ Convention (contract): joint i contributes ``A_i = Rz(theta_i + q_i) Tz(d_i) Tx(
 ``base_from_flange = A_1 ... A_6`` and the TCP is ``base_from_flange @ [tool, 1]``.
 
 A D-H table is an array ``dh`` of shape (6, 4) whose columns are ``DH_COLUMNS``: theta [rad],
-d [mm], a [mm], alpha [rad]. Joint readings ``q`` are (N, 6) in radians. The 24 table parameters
-are flattened joint-major (``dh.ravel()``): J1.theta, J1.d, J1.a, J1.alpha, J2.theta, ...
+d [mm], a [mm], alpha [rad]. Joint readings ``q`` are (N, 6) in radians. The ``N_DH`` = 24 table
+parameters are flattened joint-major (``dh.ravel()``): J1.theta, J1.d, J1.a, J1.alpha, J2.theta, ...
+This is the project's one D-H implementation (the simulator computes with it too); the tests
+check it against a second formulation and finite differences.
 """
 
 from __future__ import annotations
@@ -14,10 +16,42 @@ import numpy as np
 
 DH_COLUMNS = ("theta", "d", "a", "alpha")
 THETA, D, A, ALPHA = range(4)
+N_JOINTS = 6
+N_DH = N_JOINTS * len(DH_COLUMNS)
+"""Number of D-H table parameters: they lead every parameter vector ``x`` (``dh_table(x)``)."""
+
+
+def dh_table(x: np.ndarray) -> np.ndarray:
+    """The D-H table at the head of a parameter vector.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,), n >= N_DH
+        Parameter vector whose first ``N_DH`` entries are the table, joint-major.
+
+    Returns
+    -------
+    ndarray, shape (6, 4)
+        The table (columns ``DH_COLUMNS``, internal units); a view of ``x`` where ``x`` is an array.
+    """
+    return np.asarray(x)[:N_DH].reshape(N_JOINTS, len(DH_COLUMNS))
 
 
 def joint_transforms(dh: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Link transforms ``A_i`` for every sample, shape (N, 6, 4, 4)."""
+    """Link transforms ``A_i = Rz(theta_i + q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (k, 4)
+        D-H rows (theta [rad], d [mm], a [mm], alpha [rad]); k = 6 for a whole arm.
+    q : ndarray, shape (N, k) or (k,)
+        Joint readings [rad].
+
+    Returns
+    -------
+    ndarray, shape (N, k, 4, 4)
+        Frame i-1 from frame i for every configuration and joint, translations in mm.
+    """
     q = np.atleast_2d(q)
     theta = dh[:, THETA] + q
     ct, st = np.cos(theta), np.sin(theta)
@@ -40,23 +74,68 @@ def joint_transforms(dh: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def base_from_frames(dh: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Poses of D-H frames 0..6 in the base frame, shape (N, 7, 4, 4); frame 0 is the identity."""
+    """Poses of the D-H frames 0..6 in the base frame: ``A_1 ... A_i``.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        D-H table, internal units.
+    q : ndarray, shape (N, 6) or (6,)
+        Joint readings [rad].
+
+    Returns
+    -------
+    ndarray, shape (N, 7, 4, 4)
+        ``base_from_frame_i``, translations in mm; frame 0 is the identity, frame 6 the flange.
+    """
     links = joint_transforms(dh, q)
-    frames = np.empty((links.shape[0], 7, 4, 4))
+    frames = np.empty((links.shape[0], N_JOINTS + 1, 4, 4))
     frames[:, 0] = np.eye(4)
-    for i in range(6):
+    for i in range(N_JOINTS):
         frames[:, i + 1] = frames[:, i] @ links[:, i]
     return frames
 
 
+def tool_point(base_from_flange: np.ndarray, tool: np.ndarray) -> np.ndarray:
+    """The TCP ``base_from_flange @ [tool, 1]``.
+
+    Parameters
+    ----------
+    base_from_flange : ndarray, shape (N, 4, 4)
+        Flange poses, translations in mm.
+    tool : ndarray, shape (3,)
+        TCP in the flange frame [mm].
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        TCP positions in the base frame [mm].
+    """
+    return base_from_flange[:, :3, :3] @ np.asarray(tool, float) + base_from_flange[:, :3, 3]
+
+
 def tcp_position(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
-    """TCP positions in the base frame [mm], shape (N, 3)."""
-    flange = base_from_frames(dh, q)[:, 6]
-    return flange[:, :3, :3] @ np.asarray(tool, float) + flange[:, :3, 3]
+    """TCP positions in the base frame.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        D-H table, internal units.
+    q : ndarray, shape (N, 6) or (6,)
+        Joint readings [rad].
+    tool : ndarray, shape (3,)
+        TCP in the flange frame [mm].
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        TCP positions [mm].
+    """
+    return tool_point(base_from_frames(dh, q)[:, N_JOINTS], tool)
 
 
 def tcp_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """TCP positions (N, 3) and their derivatives with respect to ``dh.ravel()``, (N, 3, 24).
+    """TCP positions and their derivatives by the table parameters ``dh.ravel()``.
 
     Each parameter moves the TCP as a rigid screw of the links after it:
 
@@ -64,20 +143,44 @@ def tcp_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.nd
     - d_i: translation along ``z_{i-1}``: ``z_{i-1}``
     - a_i: translation along ``x_i``: ``x_i``
     - alpha_i: rotation about ``x_i`` through ``o_i``: ``x_i x (p - o_i)``
+
+    Parameters
+    ----------
+    dh, q, tool
+        As for :func:`tcp_position`.
+
+    Returns
+    -------
+    p : ndarray, shape (N, 3)
+        TCP positions [mm].
+    jac : ndarray, shape (N, 3, N_DH)
+        ``dp / d dh.ravel()``: mm/rad for the angles, mm/mm for the lengths.
     """
     frames = base_from_frames(dh, q)
-    flange = frames[:, 6]
-    p = flange[:, :3, :3] @ np.asarray(tool, float) + flange[:, :3, 3]
-    z_prev, o_prev = frames[:, :6, :3, 2], frames[:, :6, :3, 3]  # (N, 6, 3)
+    p = tool_point(frames[:, N_JOINTS], tool)
+    z_prev, o_prev = frames[:, :N_JOINTS, :3, 2], frames[:, :N_JOINTS, :3, 3]  # (N, 6, 3)
     x_this, o_this = frames[:, 1:, :3, 0], frames[:, 1:, :3, 3]
-    jac = np.empty((p.shape[0], 3, 6, 4))
+    jac = np.empty((p.shape[0], 3, N_JOINTS, len(DH_COLUMNS)))
     jac[:, :, :, THETA] = np.cross(z_prev, p[:, None, :] - o_prev).transpose(0, 2, 1)
     jac[:, :, :, D] = z_prev.transpose(0, 2, 1)
     jac[:, :, :, A] = x_this.transpose(0, 2, 1)
     jac[:, :, :, ALPHA] = np.cross(x_this, p[:, None, :] - o_this).transpose(0, 2, 1)
-    return p, jac.reshape(p.shape[0], 3, 24)
+    return p, jac.reshape(p.shape[0], 3, N_DH)
 
 
 def parallel_axis_pairs(dh: np.ndarray, tol_rad: float = 1e-6) -> list[int]:
-    """Joints ``i`` (0-based) whose axis is parallel to the next one's (alpha_i = 0 or pi)."""
-    return [i for i in range(5) if abs(np.sin(dh[i, ALPHA])) < tol_rad]
+    """Joints whose axis is parallel to the next one's: ``|sin(alpha_i)| < tol_rad``.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        D-H table, internal units.
+    tol_rad : float
+        How close to 0 or pi ``alpha_i`` must be [rad].
+
+    Returns
+    -------
+    list of int
+        0-based indices ``i`` (0..4) of the joints whose axis is parallel to joint ``i + 1``'s.
+    """
+    return [i for i in range(N_JOINTS - 1) if abs(np.sin(dh[i, ALPHA])) < tol_rad]

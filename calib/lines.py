@@ -28,7 +28,17 @@ N_LINE_PARAMS = 4
 
 @dataclass(frozen=True)
 class LineReference:
-    """Fixed frame of one line: a point [mm], unit direction, and two unit normals ``e1, e2``."""
+    """Fixed frame of one line (module docstring).
+
+    Attributes
+    ----------
+    point : ndarray, shape (3,)
+        A point on the line [mm].
+    direction : ndarray, shape (3,)
+        Unit direction.
+    e1, e2 : ndarray, shape (3,)
+        Unit normals, ``(direction, e1, e2)`` right-handed and orthonormal.
+    """
 
     point: np.ndarray
     direction: np.ndarray
@@ -37,7 +47,21 @@ class LineReference:
 
     @classmethod
     def from_point_direction(cls, point, direction, normal=None) -> LineReference:
-        """``e1`` along ``normal`` (e.g. the dial's axis) made perpendicular to the line, if given."""
+        """The frame of a line, ``e1`` along ``normal`` made perpendicular to it.
+
+        Parameters
+        ----------
+        point : array_like, shape (3,)
+            A point on the line [mm].
+        direction : array_like, shape (3,)
+            Its direction (any length).
+        normal : array_like, shape (3,), optional
+            Wanted ``e1`` (e.g. the dial's axis); absent or along the line: any perpendicular.
+
+        Returns
+        -------
+        LineReference
+        """
         u = np.asarray(direction, float)
         u = u / np.linalg.norm(u)
         e1 = None if normal is None else np.asarray(normal, float) - (np.asarray(normal, float) @ u) * u
@@ -47,7 +71,20 @@ class LineReference:
         return cls(np.asarray(point, float), u, e1, np.cross(u, e1))
 
     def line(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The line ``(point [mm], unit direction)`` for the unknowns ``params = (c1, c2, b1, b2)``."""
+        """The line for the unknowns ``params``.
+
+        Parameters
+        ----------
+        params : ndarray, shape (4,)
+            ``(c1, c2, b1, b2)`` [mm, mm, mm/mm, mm/mm].
+
+        Returns
+        -------
+        point : ndarray, shape (3,)
+            ``point + c1 e1 + c2 e2`` [mm].
+        direction : ndarray, shape (3,)
+            ``direction + b1 e1 + b2 e2``, normalised.
+        """
         c1, c2, b1, b2 = params
         u = self.direction + b1 * self.e1 + b2 * self.e2
         point = self.point + c1 * self.e1 + c2 * self.e2
@@ -55,8 +92,20 @@ class LineReference:
 
 
 def fit_line(points: np.ndarray, normal=None) -> LineReference:
-    """Least-squares line through ``points`` (N, 3) [mm], N >= 2, centred on their mean; ``e1``
-    along ``normal`` where given."""
+    """Least-squares line through points, centred on their mean.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3), N >= 2
+        Points [mm].
+    normal : array_like, shape (3,), optional
+        Wanted ``e1`` of the frame (``LineReference.from_point_direction``).
+
+    Returns
+    -------
+    LineReference
+        Through the mean, along the first principal direction.
+    """
     centre = points.mean(axis=0)
     _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
     return LineReference.from_point_direction(centre, vt[0], normal)
@@ -65,9 +114,25 @@ def fit_line(points: np.ndarray, normal=None) -> LineReference:
 def line_residual(
     ref: LineReference, params: np.ndarray, p: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Offsets of positions ``p`` (N, 3) from the line, their derivatives by ``p`` and by ``params``.
+    """Offsets of positions from a line and their derivatives (module docstring's ``r_k``).
 
-    Returns ``r`` (N, 2) [mm], ``dr_dp`` (N, 2, 3) and ``dr_dparams`` (N, 2, 4).
+    Parameters
+    ----------
+    ref : LineReference
+        The line's fixed frame.
+    params : ndarray, shape (4,)
+        Its unknowns ``(c1, c2, b1, b2)``.
+    p : ndarray, shape (N, 3)
+        Positions [mm].
+
+    Returns
+    -------
+    r : ndarray, shape (N, 2)
+        Offsets along ``e1``, ``e2`` [mm].
+    dr_dp : ndarray, shape (N, 2, 3)
+        Their derivatives by ``p`` [mm/mm].
+    dr_dparams : ndarray, shape (N, 2, 4)
+        Their derivatives by ``params`` [mm/mm, mm per mm/mm].
     """
     c1, c2, b1, b2 = params
     rel = p - ref.point

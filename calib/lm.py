@@ -9,17 +9,22 @@ problem (weights ``w_i = sqrt(rho'(z_i))``)::
 
     (J^T W^2 J + mu D^2) dx = -J^T W^2 r,     D = diag(max column norms of W J seen so far)
 
-by a Cholesky factorisation, and updates the damping ``mu`` by
-the gain ratio (Nielsen's rule): ``mu *= max(1/3, 1 - (2 gain - 1)^3)`` on success, else ``mu *= nu``,
-``nu *= 2``.
+by a Cholesky factorisation, and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
+``damping_update``: Nielsen's rule): ``mu *= max(1/3, 1 - (2 gain - 1)^3)`` on success, else
+``mu *= nu``, ``nu *= 2``.
 
-Stops (``status``) when, after an accepted step:
+Stops (``status``) when
 
-1. ``max |D^-1 J^T W^2 r| < gtol`` (scaled gradient),
-2. ``F_old - F_new < ftol F_old``,
-3. ``|D dx| < xtol (|D x| + xtol)``,
+1. ``max |D^-1 J^T W^2 r| < gtol`` (scaled gradient, before a step),
+2. ``F_old - F_new < ftol F_old`` (after an accepted step, ``check_termination``),
+3. ``|D dx| < xtol (|D x| + xtol)`` (likewise),
 
-or 0 when ``max_iter`` iterations ran, -1 when no step could reduce ``F`` any more.
+or 0 when ``max_iter`` iterations ran, -1 when the damping passed ``MAX_DAMPING`` without a step
+that reduces ``F``.
+
+``levenberg_marquardt`` checks its inputs once, at entry, and raises ``ValueError`` naming the
+argument (``loss``, ``loss_scale``, ``groups``, ``free``, ``x0``, an option, or ``fun_jac(x0)``
+when the start's residuals or Jacobian are not finite); the iteration behind it trusts them.
 """
 
 from __future__ import annotations
@@ -39,11 +44,28 @@ TERMINATION_MESSAGES = {
 }
 
 LOSSES = ("linear", "huber", "cauchy")
+MAX_DAMPING = 1e16
+"""Damping beyond which no step can reduce the cost any more (status -1)."""
 
 
 @dataclass(frozen=True, kw_only=True)
 class LMOptions:
-    """Solver options. ``loss_scale`` holds one scale per residual group (whitened units)."""
+    """Solver options.
+
+    Attributes
+    ----------
+    max_iter : int
+        Jacobian evaluations (outer iterations), >= 1.
+    ftol, xtol, gtol : float
+        Stopping tolerances (module docstring), >= 0.
+    damping : float
+        Initial damping ``mu`` of the column-scaled normal equations, > 0.
+    loss : {"linear", "huber", "cauchy"}
+        ``rho`` of the cost.
+    loss_scale : ndarray, shape (n_groups,), optional
+        Where the robust loss starts to down-weight, one per residual group, in whitened units
+        (positive); required unless ``loss`` is linear.
+    """
 
     max_iter: int = 100
     ftol: float = 1e-9
@@ -66,9 +88,29 @@ class Iteration:
 
 @dataclass
 class LMResult:
-    """Solution ``x`` (full vector), final ``cost``, whitened ``residuals``, the Jacobian of the free
-    columns at ``x``, robust ``weights`` (1 for the linear loss), ``status``/``message`` and the
-    per-trial ``history``."""
+    """What ``levenberg_marquardt`` returns.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Solution, the full vector (entries not ``free`` as given).
+    cost : float
+        ``F(x)`` (module docstring).
+    residuals : ndarray, shape (m,)
+        Whitened residuals at ``x``.
+    jacobian : ndarray, shape (m, n_free)
+        Their Jacobian by the free entries at ``x``.
+    weights : ndarray, shape (m,)
+        Robust IRLS weights ``sqrt(rho')`` (1 for the linear loss).
+    free : ndarray of bool, shape (n,)
+        The fitted entries.
+    status, message : int, str
+        Why it stopped (``TERMINATION_MESSAGES``); ``success`` when ``status > 0``.
+    nit, nfev : int
+        Jacobian evaluations (iterations) and residual evaluations.
+    history : list of Iteration
+        Every trial step, accepted or not.
+    """
 
     x: np.ndarray
     cost: float
@@ -88,7 +130,31 @@ class LMResult:
 
 
 def loss_terms(r: np.ndarray, scale: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
-    """Per-residual cost contributions ``s^2 rho(z) / 2`` and IRLS weights ``sqrt(rho'(z))``."""
+    """Per-residual cost contributions and IRLS weights.
+
+    With ``z = (r / s)^2``: linear ``rho(z) = z``; Huber ``rho(z) = z`` for ``z <= 1``, else
+    ``2 sqrt(z) - 1``; Cauchy ``rho(z) = log(1 + z)``.
+
+    Parameters
+    ----------
+    r : ndarray, shape (m,)
+        Whitened residuals.
+    scale : ndarray, shape (m,), or float
+        Loss scale ``s`` of each residual (ignored by the linear loss).
+    loss : {"linear", "huber", "cauchy"}
+
+    Returns
+    -------
+    terms : ndarray, shape (m,)
+        ``s^2 rho(z) / 2`` (``r^2 / 2`` for the linear loss); their sum is the cost.
+    weights : ndarray, shape (m,)
+        ``sqrt(rho'(z))``: 1 for the linear loss and inside Huber's threshold.
+
+    Raises
+    ------
+    ValueError
+        ``loss`` is not one of ``LOSSES``.
+    """
     if loss == "linear":
         return 0.5 * r**2, np.ones_like(r)
     z = (r / scale) ** 2
@@ -99,12 +165,25 @@ def loss_terms(r: np.ndarray, scale: np.ndarray, loss: str) -> tuple[np.ndarray,
     elif loss == "cauchy":
         rho, drho = np.log1p(z), 1.0 / (1.0 + z)
     else:
-        raise ValueError(f"loss must be one of {LOSSES}, got {loss!r}")
+        _check_loss(loss)
     return 0.5 * scale**2 * rho, np.sqrt(drho)
 
 
 def robust_scale(r: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """Per-group noise scale by the median absolute deviation (1.4826 MAD), indexed by group id."""
+    """Per-group noise scale by the median absolute deviation: ``1.4826 median|r - median r|``.
+
+    Parameters
+    ----------
+    r : ndarray, shape (m,)
+        Residuals (whitened units).
+    groups : ndarray of int, shape (m,)
+        Group id of each residual, >= 0.
+
+    Returns
+    -------
+    ndarray, shape (max(groups) + 1,)
+        Scale of each group id, at least 1e-12; 1 for an id no residual carries.
+    """
     n_groups = int(groups.max()) + 1
     scale = np.ones(n_groups)
     for g in range(n_groups):
@@ -112,6 +191,37 @@ def robust_scale(r: np.ndarray, groups: np.ndarray) -> np.ndarray:
         if rg.size:
             scale[g] = max(1.4826 * np.median(np.abs(rg - np.median(rg))), 1e-12)
     return scale
+
+
+def damping_update(mu: float, nu: float, gain: float) -> tuple[float, float]:
+    """Nielsen's rule: the damping ``mu`` and its growth factor ``nu`` after a trial step whose
+    gain ratio (actual over predicted cost reduction) is ``gain``.
+
+    Accepted (``gain > 0``): ``mu * max(1/3, 1 - (2 gain - 1)^3)`` and ``nu = 2``; rejected:
+    ``mu * nu`` and ``2 nu``.
+    """
+    if gain > 0:
+        return mu * max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), 2.0
+    return mu * nu, 2.0 * nu
+
+
+def gain_ratio(actual: float, predicted: float) -> float:
+    """Actual over predicted cost reduction of a step; -1 where the model predicts none
+    (``predicted <= 0``), so that the step counts as failed."""
+    return actual / predicted if predicted > 0 else -1.0
+
+
+def check_termination(
+    cost: float, cost_new: float, step_norm: float, x_norm: float, ftol: float, xtol: float
+) -> int:
+    """Status after an accepted step from cost ``F_old`` to ``F_new`` with scaled step length
+    ``|D dx|`` at scaled parameters ``|D x|``: 2 when ``F_old - F_new < ftol F_old``, else 3 when
+    ``|D dx| < xtol (|D x| + xtol)``, else 0 (go on)."""
+    if cost - cost_new < ftol * cost:
+        return 2
+    if step_norm < xtol * (x_norm + xtol):
+        return 3
+    return 0
 
 
 def levenberg_marquardt(
@@ -123,16 +233,50 @@ def levenberg_marquardt(
     options: LMOptions = LMOptions(),
     callback: Callable[[Iteration], None] | None = None,
 ) -> LMResult:
-    """Minimise the (robust) cost of ``fun_jac(x, jacobian=True) -> (r (m,), J (m, n) or None)``
-    over ``x[free]``.
+    """Minimise the (robust) cost ``F`` of the module docstring over ``x[free]``.
 
-    ``groups`` (m,) labels each residual for ``options.loss_scale``; ``callback`` sees every trial.
+    Parameters
+    ----------
+    fun_jac : callable
+        ``fun_jac(x, jacobian=True) -> (r, J)``: whitened residuals ``r`` (m,) and their Jacobian
+        ``J`` (m, n) by every entry of ``x``; with ``jacobian=False`` ``J`` may be None.
+    x0 : ndarray, shape (n,)
+        Start, finite; the entries not ``free`` keep their value.
+    free : ndarray of bool, shape (n,), optional
+        Which entries are fitted (at least one); default all.
+    groups : ndarray of int, shape (m,), optional
+        Residual group of each residual (index into ``options.loss_scale``); default all 0.
+    options : LMOptions
+        Loss, its scale per group (required, positive, for a robust loss), tolerances, damping.
+    callback : callable, optional
+        Called with every trial step's :class:`Iteration`.
+
+    Returns
+    -------
+    LMResult
+        The solution (full vector), cost, residuals, Jacobian of the free columns, robust weights,
+        ``status`` (see the module docstring) with its message, and the history of trials.
+
+    Raises
+    ------
+    ValueError
+        An input that cannot be solved as given, naming the argument: an unknown ``loss``, a robust
+        loss without a positive scale for every group, ``groups`` or ``free`` of the wrong shape or
+        type, options out of range, or a start whose residuals or Jacobian are not finite.
     """
-    x = np.array(x0, float)
-    free = np.ones(x.size, bool) if free is None else np.asarray(free, bool)
+    _check_options(options)
+    x = _checked_start(x0)
+    free = _checked_free(free, x.size)
     r, jac = fun_jac(x)
-    groups = np.zeros(r.size, int) if groups is None else groups
-    scale = 1.0 if options.loss == "linear" else np.asarray(options.loss_scale)[groups]
+    _check_start_evaluation(r, jac, x.size, free)
+    groups = _checked_groups(groups, r.size)
+    scale = 1.0 if options.loss == "linear" else _checked_loss_scale(options, groups)[groups]
+    return _solve(fun_jac, x, r, jac, free, scale, options, callback)
+
+
+def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMResult:
+    """The iteration on checked inputs (the module docstring's), from residuals ``r`` and
+    Jacobian ``jac`` at ``x``."""
     terms, w = loss_terms(r, scale, options.loss)
     cost, nfev = terms.sum(), 1
     mu, nu = options.damping, 2.0
@@ -158,25 +302,22 @@ def levenberg_marquardt(
             terms_new, w_new = loss_terms(r_new, scale, options.loss)
             cost_new = terms_new.sum()
             predicted = 0.5 * (wr @ wr - np.sum((wr + wj @ step) ** 2))
-            gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+            gain = gain_ratio(cost - cost_new, predicted)
             step_norm = float(np.linalg.norm(d * step))
             history.append(Iteration(float(min(cost, cost_new)), float(mu), step_norm, gain > 0))
             if callback is not None:
                 callback(history[-1])
+            mu, nu = damping_update(mu, nu, gain)
             if gain > 0:
-                mu *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
-                nu = 2.0
                 break
-            mu, nu = mu * nu, nu * 2.0
-            if mu > 1e16:
+            if mu > MAX_DAMPING:
                 status = -1
                 break
         if status == -1:
             break
-        if cost - cost_new < options.ftol * cost:
-            status = 2
-        elif step_norm < options.xtol * (np.linalg.norm(d * x[free]) + options.xtol):
-            status = 3
+        status = check_termination(
+            cost, cost_new, step_norm, float(np.linalg.norm(d * x[free])), options.ftol, options.xtol
+        )
         x, w, cost = x_new, w_new, cost_new
         r, jac = fun_jac(x)
     return LMResult(
@@ -199,3 +340,103 @@ def _damped_step(hess: np.ndarray, grad: np.ndarray, mu: float) -> np.ndarray:
     n = hess.shape[0]
     factor = cho_factor(hess + mu * np.eye(n) + 1e-12 * np.trace(hess) / n * np.eye(n))
     return -cho_solve(factor, grad)
+
+
+# -- input checks: once, at entry; the solver trusts what passes -----------------------------------
+def _check_loss(loss: str) -> None:
+    if loss not in LOSSES:
+        raise ValueError(f"`loss` must be one of {LOSSES}, got {loss!r}")
+
+
+def _check_options(options: LMOptions) -> None:
+    _check_loss(options.loss)
+    if isinstance(options.max_iter, bool) or not isinstance(options.max_iter, (int, np.integer)):
+        raise ValueError(f"`max_iter` must be an integer, got {options.max_iter!r}")
+    if options.max_iter < 1:
+        raise ValueError(f"`max_iter` must be at least 1, got {options.max_iter}")
+    for name in ("ftol", "xtol", "gtol"):
+        value = getattr(options, name)
+        if not (np.isfinite(value) and value >= 0):
+            raise ValueError(f"`{name}` must be finite and >= 0, got {value!r}")
+    if not (np.isfinite(options.damping) and options.damping > 0):
+        raise ValueError(f"`damping` must be finite and > 0, got {options.damping!r}")
+
+
+def _checked_start(x0) -> np.ndarray:
+    x = np.array(x0, float)
+    if x.ndim != 1 or x.size == 0:
+        raise ValueError(f"`x0` must be a non-empty 1-D array, got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"`x0` must be finite, not at entries {_where(~np.isfinite(x))}")
+    return x
+
+
+def _checked_free(free, n: int) -> np.ndarray:
+    if free is None:
+        return np.ones(n, bool)
+    free = np.asarray(free)
+    if free.dtype != bool or free.shape != (n,):
+        raise ValueError(
+            f"`free` must be a boolean mask of shape ({n},) like `x0`, got {free.dtype} of shape {free.shape}"
+        )
+    if not free.any():
+        raise ValueError("`free` must select at least one parameter")
+    return free
+
+
+def _check_start_evaluation(r, jac, n: int, free: np.ndarray) -> None:
+    """Shapes and finiteness of what ``fun_jac`` returned at the start."""
+    if np.ndim(r) != 1 or np.shape(jac) != (np.size(r), n):
+        raise ValueError(
+            f"`fun_jac(x0)` must return residuals (m,) and a Jacobian (m, {n}), "
+            f"got shapes {np.shape(r)} and {np.shape(jac)}"
+        )
+    bad_r = ~np.isfinite(r)
+    if bad_r.any():
+        raise ValueError(f"`fun_jac(x0)` returned non-finite residuals at rows {_where(bad_r)}")
+    bad_j = ~np.isfinite(jac[:, free])
+    if bad_j.any():
+        entries = np.flatnonzero(free)[bad_j.any(axis=0)]
+        raise ValueError(
+            f"`fun_jac(x0)` returned a non-finite Jacobian at rows {_where(bad_j.any(axis=1))}, "
+            f"columns of x entries {_where(np.isin(np.arange(free.size), entries))}"
+        )
+
+
+def _checked_groups(groups, m: int) -> np.ndarray:
+    if groups is None:
+        return np.zeros(m, int)
+    groups = np.asarray(groups)
+    if groups.shape != (m,) or not np.issubdtype(groups.dtype, np.integer):
+        raise ValueError(
+            f"`groups` must be integers of shape ({m},), one per residual, "
+            f"got {groups.dtype} of shape {groups.shape}"
+        )
+    if m and groups.min() < 0:
+        raise ValueError(f"`groups` must be >= 0, got {groups.min()}")
+    return groups
+
+
+def _checked_loss_scale(options: LMOptions, groups: np.ndarray) -> np.ndarray:
+    need = int(groups.max()) + 1 if groups.size else 1
+    if options.loss_scale is None:
+        raise ValueError(
+            f"`loss_scale` is required with loss={options.loss!r}: one positive scale per residual "
+            f"group ({need})"
+        )
+    scale = np.asarray(options.loss_scale, float)
+    if scale.ndim != 1 or scale.size < need:
+        raise ValueError(
+            f"`loss_scale` must be 1-D with one scale per residual group ({need}, `groups` goes up "
+            f"to {need - 1}), got shape {scale.shape}"
+        )
+    if not np.all(np.isfinite(scale) & (scale > 0)):
+        raise ValueError(f"`loss_scale` must be positive and finite, got {scale.tolist()}")
+    return scale
+
+
+def _where(mask: np.ndarray, most: int = 5) -> str:
+    """The first indices where ``mask`` holds, for a message."""
+    idx = np.flatnonzero(mask)
+    shown = ", ".join(str(i) for i in idx[:most])
+    return shown + (f" and {idx.size - most} more" if idx.size > most else "")

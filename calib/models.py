@@ -14,11 +14,10 @@ from typing import ClassVar, Protocol
 import numpy as np
 
 from calib.identifiability import structural_holds, tolerance
-from calib.kinematics import tcp_jacobian, tcp_position
+from calib.kinematics import N_DH, tcp_jacobian, tcp_position
 from calib.lines import N_LINE_PARAMS, LineReference, fit_line, line_residual
 from calib.params import DH_NAMES
 
-N_DH = 24
 GROUP_LENGTH, GROUP_LINE_DIAL, GROUP_LINE_ACROSS, GROUP_PRIOR = 0, 1, 2, 3
 """Residual groups, each with its own fitted noise scale: the drawstring; a line contact along the
 dial's axis (dial noise) and across it (only the arm's own noise); prior rows."""

@@ -20,15 +20,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.kinematics import N_DH
+
 INDICES = ("O1", "O2", "O3", "O4", "O5")
 
 
 def configuration_information(
     jac: np.ndarray, rows: np.ndarray, n_rows: int, table: np.ndarray
 ) -> np.ndarray:
-    """Per-configuration information matrices (n_rows, n, n) of the column-normalised ``jac``
-    (m, n), columns reordered so the ``table`` ones (boolean mask) come first; ``rows`` (m,) maps
-    each residual to its configuration (rows < 0 are ignored)."""
+    """Per-configuration information matrices ``M_i = J_i^T J_i`` of the column-normalised Jacobian.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (m, n)
+        Whitened Jacobian of the fitted unknowns.
+    rows : ndarray of int, shape (m,)
+        Configuration of each residual; rows < 0 (prior rows) are ignored.
+    n_rows : int
+        Number of configurations.
+    table : ndarray of bool, shape (n,)
+        Which columns are table parameters; they come first in the result.
+
+    Returns
+    -------
+    ndarray, shape (n_rows, n, n)
+        ``M_i`` with columns reordered table first, each column scaled by its norm over all rows.
+    """
     order = np.concatenate([np.flatnonzero(table), np.flatnonzero(~table)])
     jac = jac[:, order]
     scaled = jac / np.maximum(np.linalg.norm(jac[rows >= 0], axis=0), 1e-300)
@@ -40,8 +57,21 @@ def configuration_information(
 
 
 def singular_values(info: np.ndarray, n_table: int) -> np.ndarray:
-    """Singular values of the first ``n_table`` (table) columns with the others projected out,
-    from a summed information matrix ``info`` (n, n)."""
+    """Singular values of the table columns with the setup unknowns projected out: the roots of the
+    eigenvalues of the Schur complement ``M_tt - M_ts M_ss^+ M_st``.
+
+    Parameters
+    ----------
+    info : ndarray, shape (n, n)
+        A subset's summed information matrix, table columns first.
+    n_table : int
+        Number of table columns.
+
+    Returns
+    -------
+    ndarray, shape (n_table,)
+        Singular values, descending, >= 0.
+    """
     m = info[:n_table, :n_table]
     cross, setup = info[:n_table, n_table:], info[n_table:, n_table:]
     if setup.size:
@@ -53,7 +83,20 @@ def singular_values(info: np.ndarray, n_table: int) -> np.ndarray:
 
 
 def indices(sv: np.ndarray, n_configurations: int) -> dict[str, float]:
-    """The five observability indices of singular values ``sv`` for a subset of N configurations."""
+    """The five observability indices (module docstring).
+
+    Parameters
+    ----------
+    sv : ndarray, shape (k,)
+        Singular values, descending.
+    n_configurations : int
+        Size N of the subset (O1 divides by sqrt(N)).
+
+    Returns
+    -------
+    dict of str to float
+        ``O1`` .. ``O5``; all 0 when the smallest singular value is 0.
+    """
     if sv[-1] <= 0:
         return dict.fromkeys(INDICES, 0.0)
     return {
@@ -68,7 +111,28 @@ def indices(sv: np.ndarray, n_configurations: int) -> dict[str, float]:
 def index_curve(
     info: np.ndarray, n_table: int, sizes, rng: np.random.Generator, index: str = "O1", repeats: int = 5
 ) -> np.ndarray:
-    """Mean ``index`` of random subsets of each size in ``sizes`` (the paper's Fig. 5a)."""
+    """Mean index of random subsets by size (the paper's Fig. 5a).
+
+    Parameters
+    ----------
+    info : ndarray, shape (N0, n, n)
+        Per-configuration information (``configuration_information``).
+    n_table : int
+        Number of table columns.
+    sizes : sequence of int
+        Subset sizes, each <= N0.
+    rng : numpy.random.Generator
+        Draws the subsets.
+    index : str
+        One of ``INDICES``.
+    repeats : int
+        Subsets averaged per size.
+
+    Returns
+    -------
+    ndarray, shape (len(sizes),)
+        Mean index per size.
+    """
     n = info.shape[0]
     out = []
     for size in sizes:
@@ -81,7 +145,22 @@ def index_curve(
 
 
 def flattening_size(sizes: np.ndarray, curve: np.ndarray, fraction: float = 0.95) -> int:
-    """The smallest size whose index reaches ``fraction`` of the curve's final value."""
+    """Where an index curve flattens.
+
+    Parameters
+    ----------
+    sizes : ndarray of int, shape (k,)
+        Subset sizes, ascending.
+    curve : ndarray, shape (k,)
+        Index per size (``index_curve``).
+    fraction : float
+        Share of the curve's last value to reach.
+
+    Returns
+    -------
+    int
+        The smallest size whose index reaches ``fraction`` of the last value.
+    """
     return int(sizes[np.argmax(curve >= fraction * curve[-1])])
 
 
@@ -105,9 +184,35 @@ def anneal(
     min_per_group: int = 4,
     iterations: int = 3000,
 ) -> Selection:
-    """Choose ``n_select`` of the configurations maximising ``index`` by simulated annealing with
-    swap moves, keeping at least ``min_per_group`` configurations of every group (gauge line).
-    ``n_select`` must be smaller than the number of configurations."""
+    """Choose configurations maximising an index by simulated annealing with swap moves.
+
+    The temperature falls geometrically from 5 % of the start value to 1e-3 of that; a swap that
+    would leave a group (gauge line) with fewer than ``min_per_group`` is not tried.
+
+    Parameters
+    ----------
+    info : ndarray, shape (N0, n, n)
+        Per-configuration information (``configuration_information``).
+    n_table : int
+        Number of table columns.
+    n_select : int
+        How many to choose, < N0.
+    groups : ndarray of int, shape (N0,)
+        Gauge line of each configuration.
+    rng : numpy.random.Generator
+        Drives the start and the moves.
+    index : str
+        One of ``INDICES``.
+    min_per_group : int
+        Configurations kept on every line (fewer where a line has fewer).
+    iterations : int
+        Swap trials.
+
+    Returns
+    -------
+    Selection
+        The best subset seen, its index value and the best value after each trial.
+    """
     n = info.shape[0]
     chosen = _initial(groups, n_select, min_per_group, rng)
     total = info[chosen].sum(0)
@@ -168,11 +273,34 @@ def select_configurations(
     *,
     n_select: int | None = None,
     index: str = "O1",
-    n_table: int = 24,
+    n_table: int = N_DH,
 ) -> MCSResult:
-    """MCS over the configurations of a model: ``jac`` (m, n) whitened Jacobian at the setup fit,
-    ``rows`` (m,) configuration of each residual, ``free`` (n,) fitted unknowns (the first
-    ``n_table`` are the table's), ``line`` (N0,) each configuration's gauge line."""
+    """Measurement configuration selection over the configurations of a model.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (m, n)
+        Whitened Jacobian at the setup fit.
+    rows : ndarray of int, shape (m,)
+        Configuration of each residual (< 0: prior rows).
+    free : ndarray of bool, shape (n,)
+        The fitted unknowns; the first ``n_table`` entries of the vector are the table's.
+    line : ndarray of int, shape (N0,)
+        Gauge line of each configuration.
+    rng : numpy.random.Generator
+        Drives the index curve and the annealing.
+    n_select : int, optional
+        How many to choose; default where the index curve flattens (``flattening_size``).
+    index : str
+        One of ``INDICES``.
+    n_table : int
+        Number of table parameters at the head of the vector.
+
+    Returns
+    -------
+    MCSResult
+        The selection (every configuration when N reaches N0), N, and the index curve.
+    """
     n0 = line.size
     table = np.flatnonzero(free) < n_table
     info = configuration_information(jac[:, free], rows, n0, table)

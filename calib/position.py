@@ -24,10 +24,9 @@ import numpy as np
 
 from calib.calibrate import CalibrationOptions, robust_fit
 from calib.identifiability import structural_holds, tolerance
-from calib.kinematics import THETA, base_from_frames, tcp_jacobian, tcp_position
+from calib.kinematics import N_DH, THETA, base_from_frames, tcp_jacobian, tcp_position
 from calib.lm import LMResult
 from calib.metrics import rigid_fit
-from calib.models import N_DH
 from calib.params import DH_NAMES
 
 GROUP_POSITION = 0

@@ -84,59 +84,6 @@ class Cell(Protocol):
     def true_dial_mm(self, q_deg, line_ids) -> np.ndarray: ...
 
 
-def dh_tcp_mm(table: np.ndarray, q_deg) -> np.ndarray:
-    """TCP (N, 3), mm, of the standard D-H ``table`` (6, 4) with rows (alpha_deg, a_mm, d_mm,
-    theta_deg) at ``q_deg`` (N, 6): ``A_i = Rz(theta_i + q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``,
-    tool at the flange origin."""
-    q = np.atleast_2d(np.asarray(q_deg, dtype=float))
-    pose = np.broadcast_to(np.eye(4), (len(q), 4, 4))
-    for (alpha_deg, a, d, theta_deg), qi in zip(table, q.T, strict=True):
-        th, al = np.radians(theta_deg + qi), np.radians(alpha_deg)
-        ct, st = np.cos(th), np.sin(th)
-        ca, sa = np.full_like(th, np.cos(al)), np.full_like(th, np.sin(al))
-        zero, one = np.zeros_like(th), np.ones_like(th)
-        link = np.stack(
-            [
-                np.stack([ct, -st * ca, st * sa, a * ct], axis=-1),
-                np.stack([st, ct * ca, -ct * sa, a * st], axis=-1),
-                np.stack([zero, sa, ca, d * one], axis=-1),
-                np.stack([zero, zero, zero, one], axis=-1),
-            ],
-            axis=1,
-        )
-        pose = pose @ link
-    return pose[:, :3, 3]
-
-
-@dataclass(frozen=True)
-class StandInCell:
-    """A small stand-in for ``sim_fixtures.world.World`` until it is merged: the nominal robot
-    ``table`` taken as true, a drawstring anchored at ``anchor_mm`` with ``length_offset_mm``,
-    and one horizontal gauge edge at the height of the first target, read by a dial along +z
-    (``dial_mm`` = TCP height above the edge). The plan: the working pose swung about joint 1."""
-
-    table: np.ndarray
-    anchor_mm: np.ndarray = field(default_factory=lambda: np.array([-800.0, 600.0, -600.0]))
-    length_offset_mm: float = 200.0
-    plan_deg: np.ndarray = field(
-        default_factory=lambda: np.array(
-            [[q1, -50.0, -20.0, 0.0, -90.0, 0.0] for q1 in (-10.0, -5.0, 0.0, 5.0, 10.0)]
-        )
-    )
-
-    @property
-    def plan_lines(self) -> np.ndarray:
-        return np.zeros(len(self.plan_deg), dtype=int)
-
-    def true_length_mm(self, q_deg) -> np.ndarray:
-        tcp = dh_tcp_mm(self.table, q_deg)
-        return np.linalg.norm(tcp - self.anchor_mm, axis=1) - self.length_offset_mm
-
-    def true_dial_mm(self, q_deg, line_ids) -> np.ndarray:
-        edge_z = dh_tcp_mm(self.table, self.plan_deg[0])[0, 2]
-        return dh_tcp_mm(self.table, q_deg)[:, 2] - edge_z
-
-
 @dataclass(frozen=True)
 class CellSource:
     """The true state from a robot program (``SimRobot.state(t_s)``: joints, mode, target) and

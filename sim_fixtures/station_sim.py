@@ -7,8 +7,8 @@ the simulated true robot's pose implies at the instant they are asked:
   shared ``time_scale``; its RTDE controller runs in a child process on ``[robot] host``;
 - the drawstring serves over the configured transport (Modbus TCP, Modbus RTU on a linked pty
   pair, or serial ASCII on a pty) and the dial on a pty at ``[dial] port``;
-- instrument noise: drawstring 0.02 mm, dial 0.002 mm (1 sigma), both with 1 um resolution,
-  each from its own generator seeded by ``[sim] seed``.
+- instrument noise: the world's (:class:`~sim_fixtures.world.Noise`: drawstring 0.02 mm, dial
+  0.002 mm, 1 um resolution), each from its own generator seeded by ``[sim] seed``.
 """
 
 from __future__ import annotations
@@ -27,12 +27,9 @@ from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.robot_program import RobotFault, SimRobot
 from sim_fixtures.rtde_server import RtdeServerProcess
 from sim_fixtures.serial_device import SerialAsciiDevice
-from sim_fixtures.sources import CellSource, Instrument, SimClock
+from sim_fixtures.sources import CellSource, SimClock
 from sim_fixtures.world import World
 
-DRAWSTRING_SIGMA_MM = 0.02
-DIAL_SIGMA_MM = 0.002
-RESOLUTION_MM = 0.001
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
 
 
@@ -117,8 +114,8 @@ class SimStation:
         self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
         self.source = CellSource(self.robot, cell)
         rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in range(2)]
-        self._length = Instrument(DRAWSTRING_SIGMA_MM, RESOLUTION_MM, rngs[0])
-        self._dial = Instrument(DIAL_SIGMA_MM, RESOLUTION_MM, rngs[1])
+        self._length = cell.world.noise.drawstring(rngs[0])
+        self._dial = cell.world.noise.dial(rngs[1])
         self.devices: dict[str, object] = {}
 
     def measure_length(self) -> float:

@@ -1,45 +1,55 @@
 """A simulated calibration cell: a true robot, gauge-block lines, a drawstring anchor, noisy instruments.
 
-Deliberately independent of ``calib/``: its own forward kinematics (a plain loop over 4x4 link
-transforms) and its own inverse kinematics (damped Newton on the geometric Jacobian), so that the
-calibration maths can be judged against it.
+The truth is drawn here (the robot's errors, where the lines and the anchor are, the noise of every
+reading); its geometry is computed with ``calib``'s kinematics (``calib.kinematics`` forward,
+``calib.ik`` inverse), the one D-H implementation of the project. What checks that kinematics
+independently is ``tests/unit/calib/test_kinematics.py``: the contract's reference pose, a second
+formulation (elementary rotations and translations composed with scipy's ``Rotation``) on seeded
+random tables and configurations, and the analytic Jacobians against finite differences.
 
-Units as a person measures them: mm and degrees. The physics:
+Units as a person measures them: mm and degrees. The nominal robot is the shipped robot file
+(``configs/robots/hsr_jr680.toml``, the paper's Table I); tables are in the robot file's and
+``calib``'s column order (theta_deg, d_mm, a_mm, alpha_deg). The physics:
 
 - the true robot is the nominal table plus errors of a machined, assembled arm: N(0, 0.15 deg) on
   each angle, N(0, 0.75 mm) on each length;
 - each gauge-block line is a straight edge the tool touches; the operator's placement leaves the
   TCP off the edge along the dial axis by U(-0.3, 0.3) mm, which the dial reads;
-- the drawstring reads ``|p_TCP - anchor| - length_offset`` with N(0, 0.02 mm) noise and 1 um
-  resolution; the dial N(0, 0.002 mm); the controller's joint readings N(0, 0.0005 deg);
+- the instruments (:class:`Noise`, the one statement of the simulator's noise): the drawstring
+  reads ``|p_TCP - anchor| - length_offset`` with N(0, 0.02 mm) noise and 1 um resolution; the dial
+  N(0, 0.002 mm), 1 um; the controller's joint readings N(0, 0.0005 deg);
 - a gross reading (cable slip, bumped probe) adds 2-5 mm, either sign, to the drawstring.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-NOMINAL_JR680 = np.array(  # alpha_deg, a_mm, d_mm, theta_deg (the paper's Table I)
-    [
-        [-90.0, 250.0, 653.5, 0.0],
-        [0.0, 900.0, 0.0, -90.0],
-        [-90.0, -205.0, 0.0, 180.0],
-        [90.0, 0.0, 1030.2, 0.0],
-        [-90.0, 0.0, 0.0, 90.0],
-        [0.0, 0.0, 200.6, 0.0],
-    ]
-)
-JR680_LIMITS_DEG = np.array(
-    [[-170, 170], [-150, 90], [-90, 200], [-180, 180], [-135, 135], [-360, 360]], float
-)
+import configs
+from calib import ik
+from calib.kinematics import tcp_position
+from calib.params import DH_KEYS, dh_from_degrees
+from sim_fixtures.sources import Instrument
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+JR680_FILE = configs.path("robots/hsr_jr680.toml")
 WORKING_POSE_DEG = np.array([0.0, -50.0, -20.0, 0.0, -90.0, 0.0])
+IK_TOL = 1e-7  # mm (orientation: mm at a metre): a pose counts as reached below this error
+IK_DAMPING = 1e-6  # Newton's damping: only keeps a step finite at an exact singularity
 
 
 @dataclass(frozen=True)
 class Noise:
-    """Instrument noise (1 sigma) and resolution, in mm and degrees."""
+    """The simulator's instruments, the one place their noise is stated: noise (1 sigma) and
+    resolution in mm and degrees, and the operator's placement off the edge (half width, mm).
+    ``configs/setups/sim.toml`` states the same noise for the user (a test holds them equal)."""
 
     length_mm: float = 0.02
     length_resolution_mm: float = 0.001
@@ -47,6 +57,14 @@ class Noise:
     dial_resolution_mm: float = 0.001
     q_deg: float = 0.0005
     placement_mm: float = 0.3
+
+    def drawstring(self, rng: np.random.Generator) -> Instrument:
+        """The drawstring as a live device reads (``sim serve``), noise drawn from ``rng``."""
+        return Instrument(self.length_mm, self.length_resolution_mm, rng)
+
+    def dial(self, rng: np.random.Generator) -> Instrument:
+        """The dial as a live device reads (``sim serve``), noise drawn from ``rng``."""
+        return Instrument(self.dial_mm, self.dial_resolution_mm, rng)
 
 
 @dataclass(frozen=True)
@@ -85,66 +103,66 @@ DEFAULT_LINES = (
 )
 
 
-def link(alpha, a, d, theta) -> np.ndarray:
-    """Standard D-H link transform ``Rz(theta) Tz(d) Tx(a) Rx(alpha)``, angles in radians."""
-    ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
-    return np.array(
-        [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1]]
-    )
-
-
 @dataclass
 class Robot:
-    """A D-H robot: ``table`` rows (alpha_deg, a_mm, d_mm, theta_deg), TCP ``tool`` [mm], limits."""
+    """A D-H robot: ``table_deg`` (6, 4) with rows (theta_deg, d_mm, a_mm, alpha_deg), TCP ``tool``
+    [mm] in the flange frame, joint ``limits_deg`` (6, 2)."""
 
-    table: np.ndarray
-    tool: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    limits_deg: np.ndarray = field(default_factory=lambda: JR680_LIMITS_DEG.copy())
+    table_deg: np.ndarray
+    tool: np.ndarray
+    limits_deg: np.ndarray
 
-    def frames(self, q_deg) -> list[np.ndarray]:
-        """Base-frame poses of frames 0..6 for one configuration."""
-        out = [np.eye(4)]
-        for (alpha, a, d, theta), q in zip(self.table, q_deg, strict=True):
-            out.append(out[-1] @ link(np.radians(alpha), a, d, np.radians(theta + q)))
-        return out
+    @classmethod
+    def from_file(cls, path: Path) -> Robot:
+        """The robot of a robot model TOML (contract), e.g. ``JR680_FILE``; joint limits +-180 deg
+        where the file gives none. Shipped files only: a user's file goes through ``station``'s
+        validated reader."""
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+        joints = doc["joints"]
+        return cls(
+            np.array([[j[k] for k in DH_KEYS] for j in joints], float),
+            np.array(doc.get("tool_mm", [0.0, 0.0, 0.0]), float),
+            np.array([[j.get("q_min_deg", -180.0), j.get("q_max_deg", 180.0)] for j in joints], float),
+        )
+
+    @property
+    def dh(self) -> np.ndarray:
+        """The table in ``calib``'s internal units (rad, mm)."""
+        return dh_from_degrees(self.table_deg)
 
     def pose(self, q_deg) -> np.ndarray:
-        """Base-frame pose of the TCP (rotation of the flange, position of the tool point)."""
-        t = self.frames(q_deg)[-1].copy()
-        t[:3, 3] = t[:3, :3] @ self.tool + t[:3, 3]
-        return t
+        """Base-frame pose (4, 4) of the TCP for one configuration [deg]: the flange's rotation,
+        the tool point's position [mm]."""
+        p, rot = ik.tool_frames(self.dh, np.radians(np.asarray(q_deg, float))[None], self.tool)
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = rot[0], p[0]
+        return pose
 
     def tcp(self, q_deg) -> np.ndarray:
         """TCP positions [mm] for configurations (N, 6) or (6,) in degrees."""
-        q = np.atleast_2d(q_deg)
-        p = np.array([self.pose(qi)[:3, 3] for qi in q])
+        p = tcp_position(self.dh, np.radians(np.atleast_2d(q_deg)), self.tool)
         return p if np.ndim(q_deg) == 2 else p[0]
 
-    def ik(self, target: np.ndarray, seed_deg, iters: int = 60) -> np.ndarray | None:
-        """Joint angles [deg] reaching the 4x4 ``target`` pose, by damped Newton from ``seed_deg``;
-        None if it does not converge to 1e-7 mm / rad or leaves the joint limits."""
-        q = np.radians(np.array(seed_deg, float))
-        for _ in range(iters):
-            frames = self.frames(np.degrees(q))
-            tcp = frames[-1][:3, :3] @ self.tool + frames[-1][:3, 3]
-            err_p = target[:3, 3] - tcp
-            r_err = target[:3, :3] @ frames[-1][:3, :3].T
-            err_w = 0.5 * np.array(
-                [r_err[2, 1] - r_err[1, 2], r_err[0, 2] - r_err[2, 0], r_err[1, 0] - r_err[0, 1]]
-            )
-            err = np.concatenate([err_p, 1000.0 * err_w])
-            if np.max(np.abs(err)) < 1e-7:
-                q_deg = np.degrees(q)
-                inside = np.all((q_deg >= self.limits_deg[:, 0]) & (q_deg <= self.limits_deg[:, 1]))
-                return q_deg if inside else None
-            jac = np.empty((6, 6))
-            for i in range(6):
-                z, o = frames[i][:3, 2], frames[i][:3, 3]
-                jac[:3, i] = np.cross(z, tcp - o)
-                jac[3:, i] = 1000.0 * z
-            dq = np.linalg.solve(jac.T @ jac + 1e-6 * np.eye(6), jac.T @ err)
-            q += dq / max(1.0, np.max(np.abs(dq)) / 0.2)
-        return None
+    def ik(
+        self, targets: np.ndarray, seeds_deg: np.ndarray, iters: int = 60
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Joint angles [deg] (N, 6) reaching the TCP poses ``targets`` (N, 4, 4), by ``calib.ik``'s
+        damped Newton from ``seeds_deg`` (N, 6), and which of them (N,) got within ``IK_TOL`` in
+        ``iters`` iterations and inside the joint limits."""
+        q, err = ik.solve(
+            self.dh,
+            self.tool,
+            targets[:, :3, 3],
+            targets[:, :3, :3],
+            np.radians(seeds_deg),
+            iterations=iters,
+            damping=IK_DAMPING,
+            tol=IK_TOL,
+        )
+        q_deg = np.degrees(q)
+        inside = np.all((q_deg >= self.limits_deg[:, 0]) & (q_deg <= self.limits_deg[:, 1]), axis=1)
+        return q_deg, (err < IK_TOL) & inside
 
 
 def tool_pose(position, approach, roll_rad) -> np.ndarray:
@@ -205,11 +223,11 @@ class World:
     def create(cls, seed: int = 0, n_lines: int = 3, noise: Noise | None = None) -> World:
         """A JR680 with random geometric errors, ``n_lines`` of the default gauge-block placements."""
         rng = np.random.default_rng(seed)
-        nominal = Robot(NOMINAL_JR680.copy())
-        error = np.column_stack(
-            [rng.normal(0, 0.15, 6), rng.normal(0, 0.75, 6), rng.normal(0, 0.75, 6), rng.normal(0, 0.15, 6)]
-        )
-        true = Robot(NOMINAL_JR680 + error)
+        nominal = Robot.from_file(JR680_FILE)
+        # drawn alpha, a, d, theta: the order every seeded world so far was drawn in
+        alpha, a, d, theta = (rng.normal(0, sigma, 6) for sigma in (0.15, 0.75, 0.75, 0.15))
+        error = np.column_stack([theta, d, a, alpha])
+        true = Robot(nominal.table_deg + error, nominal.tool.copy(), nominal.limits_deg.copy())
         anchor = np.array([-800.0, 600.0, -600.0]) + rng.normal(0, 5.0, 3)
         return cls(
             nominal, true, anchor, 200.0 + rng.normal(0, 2.0), DEFAULT_LINES[:n_lines], noise or Noise()
@@ -253,12 +271,12 @@ class World:
         for ln in self.lines:
             seed = self._seed_for(ln)
             for s in np.linspace(-0.5, 0.5, n_per_line) * ln.length_mm:
-                q = None
-                while q is None:
+                reached = False
+                while not reached:
                     offset = rng.uniform(-1, 1) * self.noise.placement_mm
                     pos = ln.centre + s * ln.direction + offset * ln.dial_axis
                     pose = tool_pose(pos, tilted(ln.approach, max_tilt_deg, rng), rng.uniform(-np.pi, np.pi))
-                    q = self.true.ik(pose, seed)
+                    (q,), (reached,) = self.true.ik(pose[None], seed[None])
                 q_all.append(q)
                 ids.append(ln.id)
                 seed = q
@@ -270,28 +288,27 @@ class World:
         by the operator's placement. Returns true configurations [deg] and the line ids of those
         reached (a target pushed out of the joint limits is skipped, as an operator would)."""
         by_id = {ln.id: ln for ln in self.lines}
-        q_out, ids = [], []
-        for q, lid in zip(np.atleast_2d(q_plan_deg), line_ids, strict=True):
+        q_plan = np.atleast_2d(q_plan_deg)
+        targets = np.empty((len(q_plan), 4, 4))
+        for k, (q, lid) in enumerate(zip(q_plan, line_ids, strict=True)):
             ln = by_id[int(lid)]
-            pose = self.true.pose(q)
-            rel = pose[:3, 3] - ln.centre
+            targets[k] = self.true.pose(q)
+            rel = targets[k, :3, 3] - ln.centre
             offset = rng.uniform(-1, 1) * self.noise.placement_mm
-            pose[:3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + offset * ln.dial_axis
-            q_true = self.true.ik(pose, q)
-            if q_true is not None:
-                q_out.append(q_true)
-                ids.append(int(lid))
-        return np.array(q_out).reshape(-1, 6), np.array(ids, int)
+            targets[k, :3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + offset * ln.dial_axis
+        q_true, reached = self.true.ik(targets, q_plan)
+        return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
 
     def _seed_for(self, ln: GaugeLine) -> np.ndarray:
         """A configuration at the line's centre with the tool along its approach direction: of the
         IK solutions from 40 seeded restarts, the one closest to the working pose."""
         restarts = np.random.default_rng(ln.id).uniform(*self.true.limits_deg.T, (40, 6))
-        target = tool_pose(ln.centre, ln.approach, 0.0)
-        found = [q for q in (self.true.ik(target, q0, iters=200) for q0 in restarts) if q is not None]
-        if not found:
+        targets = np.repeat(tool_pose(ln.centre, ln.approach, 0.0)[None], len(restarts), axis=0)
+        q, reached = self.true.ik(targets, restarts, iters=200)
+        if not reached.any():
             raise RuntimeError(f"gauge line {ln.id} is out of the robot's reach")
-        return min(found, key=lambda q: np.linalg.norm(q - WORKING_POSE_DEG))
+        found = q[reached]
+        return found[np.argmin(np.linalg.norm(found - WORKING_POSE_DEG, axis=1))]
 
     def measure(self, q_true_deg, line_ids, rng, outlier_fraction: float = 0.0) -> SampleSet:
         """Instrument readings at true configurations, with noise, resolution and gross readings."""

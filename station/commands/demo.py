@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from calib.kinematics import tcp_position
+from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
 from errors import DeviceError, InputError
 from sim_fixtures.station_sim import SimStation, make_cell
@@ -179,10 +179,7 @@ def truth_line(world, outcome) -> str:
     rms = [
         float(
             np.sqrt(
-                np.mean(
-                    aligned_errors(tcp_position(x[:24].reshape(6, 4), np.radians(q), np.zeros(3)), p_true)
-                    ** 2
-                )
+                np.mean(aligned_errors(tcp_position(dh_table(x), np.radians(q), np.zeros(3)), p_true) ** 2)
             )
         )
         for x in (cal.before.x, cal.x)

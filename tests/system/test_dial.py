@@ -18,7 +18,7 @@ from drivers.base import (
 )
 from drivers.dial import DialIndicator
 from sim_fixtures.serial_device import SerialAsciiDevice
-from sim_fixtures.sources import Instrument
+from sim_fixtures.world import Noise
 from tests.system.serial_script import ScriptedSerial
 
 TIMEOUT_S = 0.2
@@ -80,7 +80,7 @@ def test_unknown_dialect_is_refused(tmp_path):
 @pytest.fixture(params=["sylvac", "mitutoyo"])
 def sim_dial(request, tmp_path):
     """The simulated indicator at a true 0.5 mm, sigma 2 um, 1 um resolution, range +-12.5 mm."""
-    noise = Instrument(0.002, 0.001, np.random.default_rng(7))
+    noise = Noise().dial(np.random.default_rng(7))
     link = tmp_path / "dial"
     with SerialAsciiDevice(
         link, DIALECTS[request.param], lambda: noise.measure(0.5), range_mm=(-12.5, 12.5)

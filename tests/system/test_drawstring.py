@@ -21,7 +21,7 @@ from drivers.base import (
 from drivers.drawstring import AsciiDrawstring, ModbusDrawstring, RegisterMap
 from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.serial_device import SerialAsciiDevice
-from sim_fixtures.sources import Instrument
+from sim_fixtures.world import Noise
 from tests.system.serial_script import ScriptedSerial
 
 TIMEOUT_S = 0.3
@@ -103,7 +103,7 @@ TRUE_MM = 1234.5
 def sim_modbus(request, tmp_path):
     """Simulated drawstring at a true 1234.5 mm, sigma 20 um, INT32 um at register 10, id 3."""
     regs = RegisterMap(address=10, device_id=3)
-    noise = Instrument(0.02, 0.001, np.random.default_rng(11))
+    noise = Noise().drawstring(np.random.default_rng(11))
     transport = {"tcp": ("127.0.0.1", 0)} if request.param == "tcp" else {"rtu_link": tmp_path / "ds-rtu"}
     with ModbusDevice(regs, lambda: noise.measure(TRUE_MM), **transport) as dev:
         if request.param == "tcp":
@@ -163,7 +163,7 @@ def test_tcp_sensor_that_stays_away_is_unreachable():
 
 
 def test_ascii_drawstring_against_the_simulated_sensor(tmp_path):
-    noise = Instrument(0.02, 0.001, np.random.default_rng(3))
+    noise = Noise().drawstring(np.random.default_rng(3))
     link = tmp_path / "ds"
     with SerialAsciiDevice(link, DIALECTS["drawstring"], lambda: noise.measure(TRUE_MM)) as dev:
         port = serial.serial_for_url(str(link), do_not_open=True, timeout=TIMEOUT_S)

@@ -27,7 +27,7 @@ from rerun.chunk import RrdReader
 
 import configs
 from sim_fixtures.robot_program import RobotFault
-from sim_fixtures.station_sim import DIAL_SIGMA_MM, DRAWSTRING_SIGMA_MM, SimStation, make_cell
+from sim_fixtures.station_sim import SimStation, make_cell
 from station import cli
 from station.acquire import runner
 from station.acquire.session import State
@@ -132,10 +132,10 @@ def test_every_target_once_and_readings_match_the_simulated_truth(finished):
     # Means of K readings: 5 standard errors of the mean, plus half the 1 um resolution.
     length_err = np.array([float(r["length_mm"]) for r in rows]) - world.true_length_mm(q)
     dial_err = np.array([float(r["dial_mm"]) for r in rows]) - world.true_dial_mm(q, lines)
-    assert np.max(np.abs(length_err)) < 5 * DRAWSTRING_SIGMA_MM / np.sqrt(K) + 0.0005
-    assert np.max(np.abs(dial_err)) < 5 * DIAL_SIGMA_MM / np.sqrt(K) + 0.0005
+    assert np.max(np.abs(length_err)) < 5 * world.noise.length_mm / np.sqrt(K) + 0.0005
+    assert np.max(np.abs(dial_err)) < 5 * world.noise.dial_mm / np.sqrt(K) + 0.0005
     spreads = np.array([float(r["length_spread_mm"]) for r in rows])
-    assert 0 < np.median(spreads) < 3 * DRAWSTRING_SIGMA_MM
+    assert 0 < np.median(spreads) < 3 * world.noise.length_mm
 
 
 def test_a_designed_plan_is_walked_and_measured_target_by_target(tmp_path):

@@ -10,7 +10,7 @@ from calib.accuracy import (
     workspace_error_modes,
     workspace_rmse_bound,
 )
-from calib.kinematics import tcp_position
+from calib.kinematics import N_DH, tcp_position
 from calib.metrics import aligned_errors
 from calib.params import dh_from_degrees
 from station.formats.tables import load_robot
@@ -26,18 +26,18 @@ def _jr680():
 def test_modes_sum_to_the_simulated_mean_square_error(rng):
     dh, tool, q = _jr680()
     # Small errors (0.006 deg, 0.05 mm), so the field is linear in them.
-    sigma = np.array([1e-4 if k % 4 in (0, 3) else 0.05 for k in range(24)])
+    sigma = np.array([1e-4 if k % 4 in (0, 3) else 0.05 for k in range(N_DH)])
     cov = np.diag(sigma**2)
     modes = workspace_error_modes(dh, tool, q, cov)
     p = tcp_position(dh, q, tool)
-    tables = dh + (sigma * rng.normal(size=(400, 24))).reshape(400, 6, 4)
+    tables = dh + (sigma * rng.normal(size=(400, N_DH))).reshape(400, 6, 4)
     draws = [np.mean(aligned_errors(tcp_position(t, q, tool), p) ** 2) for t in tables]
     # Monte Carlo mean of 400 draws: its own standard error is std/sqrt(400).
     assert abs(np.mean(draws) - modes.sum()) < 4 * np.std(draws) / np.sqrt(len(draws))
 
 
 def test_bound_is_the_quantile_of_the_mode_sum(rng):
-    for modes in (np.array([1.0]), np.array([0.7, 0.4, 0.2, 0.06, 0.03]), rng.exponential(size=24) ** 3):
+    for modes in (np.array([1.0]), np.array([0.7, 0.4, 0.2, 0.06, 0.03]), rng.exponential(size=N_DH) ** 3):
         z = rng.normal(size=(100_000, modes.size))
         rms = np.sqrt(z**2 @ modes)
         for p in (0.5, 0.95):
@@ -50,7 +50,7 @@ def test_an_exactly_redundant_held_parameter_adds_nothing_to_the_combination(rng
     cov_free = np.linalg.inv(a.T @ a)
     jac_held = a[:, :1]  # the held parameter acts exactly like free parameter 0
     cov = table_covariance(cov_free, a, jac_held, np.array([0, 1, 2]), np.array([5]), np.array([2.0]))
-    together = np.zeros(24)
+    together = np.zeros(N_DH)
     together[[0, 5]] = 1.0
     assert together @ cov @ together == pytest.approx(cov_free[0, 0], rel=1e-9)
     assert cov[5, 5] == 4.0  # alone, it may be off by its full tolerance

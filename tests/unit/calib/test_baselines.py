@@ -14,12 +14,13 @@ import pytest
 from calib.baselines import BASELINES, METHODS, BaselineOptions, run_method, search_half_widths
 from calib.calibrate import calibrate
 from sim_fixtures.scenario import write_scenario
+from sim_fixtures.world import Noise
 from station.cli import main
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
 from station.jobs import calibration
 
-SIGMA = 0.02  # drawstring noise [mm] of the simulated world (sim_fixtures.world.Noise)
+SIGMA = Noise().length_mm  # drawstring noise [mm] of the simulated world
 SMALL = BaselineOptions(max_iter=80, swarm=20, popsize=5, particles=60, max_steps=20, passes=2)
 
 

@@ -5,7 +5,7 @@ import pytest
 
 from calib.calibrate import identify
 from calib.identifiability import structural_holds
-from calib.kinematics import tcp_position
+from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
 from calib.params import DH_NAMES, dh_from_degrees
 from sim_fixtures.scenario import write_scenario
@@ -31,7 +31,7 @@ def _noise_floor(sc) -> float:
 
 def _workspace_rms(sc, x) -> float:
     q = sc.world.random_configurations(1000, np.random.default_rng(99))
-    p = tcp_position(x[:24].reshape(6, 4), np.radians(q), np.zeros(3))
+    p = tcp_position(dh_table(x), np.radians(q), np.zeros(3))
     return float(np.sqrt(np.mean(aligned_errors(p, sc.world.true_tcp_mm(q)) ** 2)))
 
 

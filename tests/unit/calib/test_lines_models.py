@@ -2,8 +2,7 @@ import numpy as np
 
 from calib.lines import LineReference, fit_line, line_residual
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
-from calib.params import dh_from_degrees
-from sim_fixtures.world import NOMINAL_JR680
+from sim_fixtures.world import JR680_FILE, Robot
 
 
 def test_line_fit_and_residual_of_points_on_a_line(rng):
@@ -45,7 +44,7 @@ def test_line_residual_derivatives(rng):
 
 
 def _model(rng, n_lines):
-    dh = dh_from_degrees(NOMINAL_JR680[:, [3, 2, 1, 0]])
+    dh = Robot.from_file(JR680_FILE).dh
     n = 12 * n_lines
     q = np.radians([0, -50, -20, 0, -90, 0] + rng.normal(0, 10, (n, 6)))
     samples = DrawstringSamples(

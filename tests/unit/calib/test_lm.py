@@ -1,7 +1,8 @@
 import numpy as np
+import pytest
 from scipy.optimize import least_squares
 
-from calib.lm import LMOptions, levenberg_marquardt
+from calib.lm import LMOptions, check_termination, damping_update, gain_ratio, levenberg_marquardt
 
 
 def _exp_problem(rng, outliers=0):
@@ -50,3 +51,101 @@ def test_cauchy_loss_ignores_gross_errors(rng):
     assert np.abs(plain.x - truth).max() > 10 * np.abs(robust.x - truth).max()
     assert np.abs(robust.x[2] - 0.5) < 0.01
     assert set(np.flatnonzero(robust.weights**2 < 0.5)) == set(bad)
+
+
+BAD_INPUTS = [
+    ({"options": LMOptions(loss="l2")}, "`loss` must be one of"),
+    ({"options": LMOptions(loss="cauchy")}, r"`loss_scale` is required with loss='cauchy'"),
+    ({"options": LMOptions(loss="huber", loss_scale=np.array([0.0]))}, "`loss_scale` must be positive"),
+    (
+        {"options": LMOptions(loss="cauchy", loss_scale=np.array([1.0])), "groups": np.repeat([0, 1], 40)},
+        r"`loss_scale` must be 1-D with one scale per residual group \(2",
+    ),
+    ({"groups": np.zeros(5, int)}, r"`groups` must be integers of shape \(80,\)"),
+    ({"groups": np.zeros(80)}, r"`groups` must be integers of shape \(80,\)"),
+    ({"groups": np.full(80, -1)}, "`groups` must be >= 0"),
+    ({"free": np.array([True, False])}, r"`free` must be a boolean mask of shape \(3,\)"),
+    ({"free": np.array([1, 1, 0])}, r"`free` must be a boolean mask of shape \(3,\)"),
+    ({"free": np.zeros(3, bool)}, "`free` must select at least one"),
+    ({"options": LMOptions(max_iter=0)}, "`max_iter` must be at least 1"),
+    ({"options": LMOptions(max_iter=2.5)}, "`max_iter` must be an integer"),
+    ({"options": LMOptions(ftol=-1.0)}, "`ftol` must be finite and >= 0"),
+    ({"options": LMOptions(xtol=np.nan)}, "`xtol` must be finite and >= 0"),
+    ({"options": LMOptions(damping=0.0)}, "`damping` must be finite and > 0"),
+    ({"x0": np.array([1.0, np.nan, 0.0])}, "`x0` must be finite, not at entries 1"),
+    ({"x0": np.ones((3, 1))}, r"`x0` must be a non-empty 1-D array, got shape \(3, 1\)"),
+]
+
+
+@pytest.mark.parametrize(("kwargs", "message"), BAD_INPUTS)
+def test_rejects_bad_input_naming_the_argument(rng, kwargs, message):
+    fun_jac, _ = _exp_problem(rng)
+    kwargs = {"x0": np.array([1.0, 0.5, 0.0])} | kwargs
+    with pytest.raises(ValueError, match=message):
+        levenberg_marquardt(fun_jac, **kwargs)
+
+
+def _spoiled(fun_jac, rows=(), column=None):
+    """``fun_jac`` with NaN residuals at ``rows`` and a NaN Jacobian column at the start."""
+
+    def spoiled(x, jacobian=True):
+        r, jac = fun_jac(x, jacobian)
+        r = r.copy()
+        r[list(rows)] = np.nan
+        if jacobian and column is not None:
+            jac = jac.copy()
+            jac[10:12, column] = np.nan
+        return r, jac
+
+    return spoiled
+
+
+def test_non_finite_start_names_the_rows_and_columns(rng):
+    fun_jac, _ = _exp_problem(rng)
+    x0 = np.array([1.0, 0.5, 0.0])
+    with pytest.raises(ValueError, match=r"`fun_jac\(x0\)` returned non-finite residuals at rows 3, 7$"):
+        levenberg_marquardt(_spoiled(fun_jac, rows=(3, 7)), x0)
+    with pytest.raises(ValueError, match=r"non-finite Jacobian at rows 10, 11, columns of x entries 1$"):
+        levenberg_marquardt(_spoiled(fun_jac, column=1), x0)
+    # a held parameter's column is never used: NaN there is no error
+    held = levenberg_marquardt(_spoiled(fun_jac, column=2), x0, free=np.array([True, True, False]))
+    assert held.success and np.all(np.isfinite(held.x))
+
+
+def test_rejects_a_jacobian_of_the_wrong_shape(rng):
+    fun_jac, _ = _exp_problem(rng)
+    with pytest.raises(ValueError, match=r"Jacobian \(m, 3\), got shapes \(80,\) and \(80, 2\)"):
+        levenberg_marquardt(lambda x, jacobian=True: (fun_jac(x)[0], fun_jac(x)[1][:, :2]), np.ones(3))
+
+
+@pytest.mark.parametrize(
+    ("gain", "nu", "expected"),
+    [
+        (1.0, 8.0, (1.0 / 3.0, 2.0)),  # perfect model: the damping shrinks by 3 at most
+        (0.5, 8.0, (1.0, 2.0)),  # 1 - 0^3 = 1: kept
+        (0.25, 2.0, (1.125, 2.0)),  # 1 - (-0.5)^3: a poor model grows it a little
+        (-1.0, 4.0, (4.0, 8.0)),  # rejected: times nu, and nu doubles
+        (0.0, 2.0, (2.0, 4.0)),  # no gain counts as rejected
+    ],
+)
+def test_damping_update_is_nielsens_rule(gain, nu, expected):
+    assert damping_update(1.0, nu, gain) == pytest.approx(expected)
+
+
+def test_gain_ratio_fails_steps_the_model_predicts_nothing_for():
+    assert gain_ratio(1.0, 2.0) == 0.5
+    assert gain_ratio(-1.0, 2.0) == -0.5
+    assert gain_ratio(1.0, 0.0) == -1.0 and gain_ratio(1.0, -1e-3) == -1.0
+
+
+@pytest.mark.parametrize(
+    ("cost_new", "step", "status"),
+    [
+        (0.5, 1.0, 0),  # a real reduction, a real step: go on
+        (1.0 - 1e-10, 1.0, 2),  # relative reduction 1e-10 < ftol
+        (0.5, 1e-10, 3),  # step 1e-10 < xtol (|D x| + xtol) = 1e-9 * 2
+        (1.0, 1e-10, 2),  # both: ftol is reported
+    ],
+)
+def test_check_termination(cost_new, step, status):
+    assert check_termination(1.0, cost_new, step, 2.0, ftol=1e-9, xtol=1e-9) == status

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from calib.calibrate import fit_setup
+from calib.kinematics import N_DH
 from calib.metrics import error_metrics
 from calib.observability import anneal, configuration_information, indices, singular_values
 from errors import ParameterError
@@ -17,7 +18,7 @@ def problem(one_line):
     )
     prep = fit_setup(model)
     _, jac = model.residuals_and_jacobian(prep.before.x)
-    return model, jac[:, prep.free], np.flatnonzero(prep.free) < 24
+    return model, jac[:, prep.free], np.flatnonzero(prep.free) < N_DH
 
 
 def test_schur_singular_values_match_projected_svd(problem, rng):

@@ -1,16 +1,13 @@
 """Position model: analytic Jacobians against finite differences, the gauges against the Jacobian's
 null space, the gravity torques against the potential energy, and recovery of a simulated UR10."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-import tomllib
 
+import configs
 from calib.calibrate import calibrate
-from calib.kinematics import base_from_frames, tcp_position
+from calib.kinematics import N_DH, base_from_frames, joint_transforms, tcp_position
 from calib.metrics import error_metrics
-from calib.params import dh_from_degrees
 from calib.position import (
     G_MS2,
     Compliance,
@@ -22,16 +19,13 @@ from calib.position import (
     register,
     rotation_from_vector,
 )
-from sim_fixtures.world import link
+from sim_fixtures.world import Robot
 
 SIGMA_MM = 0.02  # tracker noise per axis in the simulation
-ROOT = Path(__file__).resolve().parents[3]
 
 
 def ur10() -> np.ndarray:
-    with open(ROOT / "configs/robots/ur10.toml", "rb") as f:
-        joints = tomllib.load(f)["joints"]
-    return dh_from_degrees(np.array([[j["theta_deg"], j["d_mm"], j["a_mm"], j["alpha_deg"]] for j in joints]))
+    return Robot.from_file(configs.path("robots/ur10.toml")).dh
 
 
 LINKS = LinkMasses(
@@ -76,7 +70,7 @@ def test_jacobian_matches_finite_differences(compliant):
     comp = Compliance((1, 2, 3), LINKS) if compliant else None
     model = PositionModel(samples, ur10(), np.array([5.0, -3.0, 100.0]), compliance=comp)
     x = model.x0 + rng.normal(0, 0.01, model.x0.size)
-    x[24:27] = rng.normal(0, 0.3, 3)  # a rotation far from the reference, not only small ones
+    x[N_DH : N_DH + 3] = rng.normal(0, 0.3, 3)  # a rotation far from the reference, not only small ones
     r, jac = model.residuals_and_jacobian(x)
     np.testing.assert_allclose(r, model.residuals(x))
     fd = fd_jacobian(model.residuals, x)
@@ -158,6 +152,6 @@ def test_recovers_a_simulated_ur10_to_the_noise_floor(simulated):
     assert held_out_after["rmse_mm"] < 1.15 * floor
     # J6 is held at nominal, so the probe takes up J6's error: the true probe seen through the
     # nominal last link
-    link6 = [link(alpha, a, d, theta) for theta, d, a, alpha in (nominal[5], true[5])]
+    link6 = [joint_transforms(dh[5:], np.zeros((1, 1)))[0, 0] for dh in (nominal, true)]
     seen = (np.linalg.inv(link6[0]) @ link6[1] @ np.append(probe, 1.0))[:3]
     np.testing.assert_allclose(fitted.probe(after.x), seen, atol=10 * SIGMA_MM)

@@ -10,7 +10,7 @@ import tomli_w
 import configs
 from calib import ik
 from calib.experiment import MIN_CONDITIONING
-from calib.kinematics import tcp_position
+from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
 from calib.params import dh_from_degrees
 from sim_fixtures.scenario import setup_dict
@@ -80,7 +80,7 @@ def test_the_plan_delivers_its_promise_on_the_simulated_world(planned):
         samples = Samples("plan", "drawstring", s.q_deg, s.length_mm, s.dial_mm, s.line)
         out = calibration.calibrate_samples(samples, robot, SetupFile.model_validate(setup_dict(world, rng)))
         q = world.random_configurations(1000, np.random.default_rng(99))
-        p = tcp_position(out.calibration.x[:24].reshape(6, 4), np.radians(q), np.zeros(3))
+        p = tcp_position(dh_table(out.calibration.x), np.radians(q), np.zeros(3))
         true.append(np.sqrt(np.mean(aligned_errors(p, world.true_tcp_mm(q)) ** 2)))
     assert max(true) < promise["predicted_rmse_95_mm"]
     pooled = np.sqrt(np.mean(np.square(true)))
