@@ -14,7 +14,7 @@ from typing import ClassVar, Protocol
 import numpy as np
 
 from calib.identifiability import structural_holds, tolerance
-from calib.kinematics import N_DH, tcp_jacobian, tcp_position
+from calib.kinematics import N_DH, dh_table, tcp_jacobian, tcp_position
 from calib.lines import N_LINE_PARAMS, LineReference, fit_line, line_residual
 from calib.params import DH_NAMES
 
@@ -303,7 +303,7 @@ class DrawstringLineModel:
     def gauges(self) -> dict[str, str]:
         """The table's structural gauges with a free anchor and free lines, and, on one line, the
         anchor's turn about it."""
-        held = structural_holds(self.x0[:N_DH].reshape(6, 4), self.tool, "anchor and the lines")
+        held = structural_holds(dh_table(self.x0), self.tool, "anchor and the lines")
         if len(self.line_ids) == 1:
             held["anchor.about_line_mm"] = (
                 "a single line: turning the anchor about it keeps every distance to the line"
@@ -326,7 +326,7 @@ class DrawstringLineModel:
     # -- unpacking ---------------------------------------------------------------------------
     def dh(self, x: np.ndarray) -> np.ndarray:
         """The D-H table (6, 4) in ``x``, internal units."""
-        return x[:N_DH].reshape(6, 4)
+        return dh_table(x)
 
     def anchor(self, x: np.ndarray) -> np.ndarray:
         """The anchor (3,) [mm], base frame."""

@@ -24,7 +24,7 @@ import numpy as np
 
 from calib.calibrate import CalibrationOptions, robust_fit
 from calib.identifiability import structural_holds, tolerance
-from calib.kinematics import N_DH, THETA, base_from_frames, tcp_jacobian, tcp_position
+from calib.kinematics import N_DH, THETA, base_from_frames, dh_table, tcp_jacobian, tcp_position
 from calib.lm import LMResult
 from calib.metrics import rigid_fit
 from calib.params import DH_NAMES
@@ -307,7 +307,7 @@ class PositionModel:
     # -- unpacking ---------------------------------------------------------------------------
     def dh(self, x: np.ndarray) -> np.ndarray:
         """The D-H table (6, 4) in ``x``, internal units."""
-        return x[:N_DH].reshape(6, 4)
+        return dh_table(x)
 
     def tracker_from_base(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rotation (3, 3) and translation (3,) [mm] of the base in the tracker frame."""

@@ -11,6 +11,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from calib.params import DH_KEYS
 from station.formats.base import read_toml, validate
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
@@ -40,8 +41,9 @@ class RobotFile(_Strict):
     calibration: dict | None = None
 
     def table_deg(self) -> np.ndarray:
-        """(6, 4) table in display units, columns theta_deg, d_mm, a_mm, alpha_deg."""
-        return np.array([[j.theta_deg, j.d_mm, j.a_mm, j.alpha_deg] for j in self.joints])
+        """(6, 4) table in display units, columns as ``calib.params.DH_KEYS`` (theta_deg, d_mm, a_mm,
+        alpha_deg)."""
+        return np.array([[getattr(j, key) for key in DH_KEYS] for j in self.joints])
 
     def limits_deg(self) -> np.ndarray:
         return np.array([[j.q_min_deg, j.q_max_deg] for j in self.joints])

@@ -19,10 +19,10 @@ import numpy as np
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
 from calib.baselines import BASELINES, BaselineOptions, run_method
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, fit_setup
+from calib.kinematics import N_DH, dh_table
 from calib.metrics import error_metrics
 from calib.models import (
     GROUP_PRIOR,
-    N_DH,
     DrawstringFrame,
     DrawstringLineModel,
     DrawstringSamples,
@@ -321,7 +321,7 @@ def predicted_workspace(robot: RobotFile, cal: Calibration) -> WorkspacePredicti
     one calibration stays below with 95 % probability."""
     limits = np.radians(robot.limits_deg())
     q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
-    dh = cal.x[:N_DH].reshape(6, 4)
+    dh = dh_table(cal.x)
     modes = workspace_error_modes(dh, np.asarray(robot.tool_mm), q, cal.table_covariance)
     return WorkspacePrediction(
         predicted_workspace_rmse(modes), workspace_rmse_bound(modes, 0.95), WORKSPACE_POSES

@@ -10,7 +10,8 @@ from datetime import datetime, timezone
 import numpy as np
 
 from calib.calibrate import Calibration
-from calib.models import N_DH, DrawstringSetupEstimate
+from calib.kinematics import N_DH, dh_table
+from calib.models import DrawstringSetupEstimate
 from calib.params import DH_NAMES, dh_to_degrees, display_factor
 from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
@@ -131,7 +132,7 @@ def _plain(value):
 
 def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:
     """The robot file with the calibrated table, per-joint sigmas and provenance (TOML-ready)."""
-    table = dh_to_degrees(cal.x[:N_DH].reshape(6, 4))
+    table = dh_to_degrees(dh_table(cal.x))
     sigma = (cal.sigma[:N_DH] * display_factor(DH_NAMES)).reshape(6, 4)
     cols = ("theta_deg", "d_mm", "a_mm", "alpha_deg")
     joints = []
