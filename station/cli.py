@@ -9,7 +9,10 @@ import sys
 from errors import DeviceError, InputError
 
 # One module per command; each exposes ``register(subparsers)``, which adds its parser with
-# ``func`` set to the module's one entry ``run(args)`` (returns the exit code).
+# ``func`` set to the module's one entry ``run(args)`` (returns the exit code). A command module
+# imports at its top only what its parser needs (the standard library, ``errors``, names): numpy,
+# scipy, pydantic, the drivers, Rerun and matplotlib are imported in ``run``, where they are used,
+# so that ``station --help`` answers at once and each command loads only its own libraries.
 COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare", "plan")
 
 

@@ -16,22 +16,8 @@ import random
 import socket
 from pathlib import Path
 
-import numpy as np
-import tomli_w
-
-from calib.kinematics import dh_table, tcp_position
-from calib.metrics import aligned_errors
 from errors import DeviceError, InputError
-from sim_fixtures.station_sim import SimStation, make_cell
-from station.acquire import runner
-from station.acquire.session import State
 from station.commands.calibrate import summary
-from station.config import StationConfig
-from station.formats.base import atomic_write, check_writable, toml_text
-from station.formats.plan import Plan
-from station.formats.samples import load_samples
-from station.jobs import calibration
-from station.jobs.report import corrected_table
 
 TIME_SCALE = 40.0
 CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial": "/tmp/station-sim/dial"}
@@ -52,6 +38,15 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    import tomli_w
+
+    from sim_fixtures.station_sim import SimStation
+    from station.acquire import runner
+    from station.acquire.session import State
+    from station.config import StationConfig
+    from station.formats.base import atomic_write, check_writable
+    from station.formats.plan import Plan
+
     out = args.out
     if (out / "session").exists():
         raise InputError(f"{out / 'session'}: exists already; choose another --out or remove it")
@@ -138,6 +133,14 @@ def _free_port() -> int:
 
 
 def _calibrate(out: Path, inputs, view, seed: int, targets_per_line: int) -> int:
+    import numpy as np
+
+    from sim_fixtures.station_sim import make_cell
+    from station.formats.base import atomic_write, toml_text
+    from station.formats.samples import load_samples
+    from station.jobs import calibration
+    from station.jobs.report import corrected_table
+
     world = make_cell(seed, targets_per_line).world
     holdout_path = out / "holdout.csv"
     world.sample_set(max(targets_per_line // 4, 2), np.random.default_rng([seed, 4])).to_csv(holdout_path)
@@ -173,6 +176,11 @@ def _calibrate(out: Path, inputs, view, seed: int, targets_per_line: int) -> int
 
 def truth_line(world, outcome) -> str:
     """Workspace TCP error against the simulated truth, nominal vs corrected (rigid base re-fit)."""
+    import numpy as np
+
+    from calib.kinematics import dh_table, tcp_position
+    from calib.metrics import aligned_errors
+
     q = world.random_configurations(1000, np.random.default_rng(7))
     p_true = world.true_tcp_mm(q)
     cal = outcome.calibration

@@ -12,7 +12,6 @@ import logging
 
 import configs
 from drivers.base import Backoff, Driver, Reading, call_with_reconnect
-from station.config import load_station_config
 
 
 def register(subparsers) -> None:
@@ -51,6 +50,8 @@ def as_json(readings: dict[str, Reading]) -> dict:
 
 
 def run(args) -> int:
+    from station.config import load_station_config
+
     cfg = load_station_config(args.config)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # failures are raised, named
     backoff = cfg.reconnect.backoff()

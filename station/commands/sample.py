@@ -11,10 +11,9 @@ from pathlib import Path
 
 import configs
 from errors import InputError
-from station.acquire import runner
-from station.acquire.session import State
 
-EXIT = {State.DONE: 0, State.STOPPED: 130, State.TIMED_OUT: 1}
+EXIT = {"done": 0, "stopped": 130, "timed out": 1}
+"""Exit code by the state the session ended in."""
 
 
 def register(subparsers) -> None:
@@ -35,6 +34,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from station.acquire import runner
+
     if args.resume:
         if args.plan:
             raise InputError("--plan: a resumed session keeps the plan embedded in its session.toml")
@@ -49,4 +50,4 @@ def run(args) -> int:
         f"{state.value}: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "
         f"recording {folder.rrd}"
     )
-    return EXIT[state]
+    return EXIT[state.value]

@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
-from calib.baselines import BASELINES, BaselineOptions, run_method
+from calib.baselines import BaselineOptions, run_method
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, fit_setup
 from calib.kinematics import N_DH, dh_table
+from calib.methods import ALL_METHODS, BASELINES
 from calib.metrics import error_metrics
 from calib.models import (
     GROUP_PRIOR,
@@ -45,7 +46,7 @@ from station.jobs.report import (
     WorkspacePrediction,
 )
 
-METHODS = BASELINES + ("lmlc", "mcs-lmlc")
+METHODS = ALL_METHODS
 WORKSPACE_POSES = 1000
 WORKSPACE_WARNING_RATIO, WORKSPACE_WARNING_FLOOR_MM = 10.0, 0.5
 """Warn when the predicted workspace error exceeds both this many times the training fit and this."""
