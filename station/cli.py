@@ -6,7 +6,7 @@ import argparse
 import importlib
 import sys
 
-from errors import DeviceError, InputError
+from errors import DeviceError, InputError, OutputError
 
 # One module per command; each exposes ``register(subparsers)``, which adds its parser with
 # ``func`` set to the module's one entry ``run(args)`` (returns the exit code). A command module
@@ -34,6 +34,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except DeviceError as exc:
         print(f"station: device error: {exc}", file=sys.stderr)
+        return 1
+    except OutputError as exc:
+        print(f"station: cannot write: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("station: interrupted", file=sys.stderr)

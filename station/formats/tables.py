@@ -9,29 +9,41 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field, NonNegativeFloat, model_validator
 
 from calib.params import DH_KEYS
-from station.formats.base import read_toml, validate
-
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class Joint(_Strict):
-    alpha_deg: float
-    a_mm: float
-    d_mm: float
-    theta_deg: float
-    q_min_deg: float = -180.0
-    q_max_deg: float = 180.0
-    sigma: dict[str, float] | None = None  # written by a calibration: per-parameter sigma
+from station.formats.base import (
+    Angle,
+    Direction,
+    Id,
+    JointAngle,
+    Length,
+    PositiveLength,
+    Sigma,
+    Strict,
+    Vec3,
+    read_toml,
+    validate,
+)
 
 
-class RobotFile(_Strict):
+class Joint(Strict):
+    alpha_deg: Angle
+    a_mm: Length
+    d_mm: Length
+    theta_deg: Angle
+    q_min_deg: JointAngle = -180.0
+    q_max_deg: JointAngle = 180.0
+    sigma: dict[str, NonNegativeFloat] | None = None  # written by a calibration: per-parameter sigma
+
+    @model_validator(mode="after")
+    def _limits_ordered(self) -> Joint:
+        if not self.q_min_deg < self.q_max_deg:
+            raise ValueError(f"q_min_deg {self.q_min_deg:g} must be below q_max_deg {self.q_max_deg:g}")
+        return self
+
+
+class RobotFile(Strict):
     """A robot model (contract: robot model TOML); a corrected table adds ``calibration``."""
 
     name: str
@@ -49,38 +61,45 @@ class RobotFile(_Strict):
         return np.array([[j.q_min_deg, j.q_max_deg] for j in self.joints])
 
 
-class SetupDrawstring(_Strict):
+class SetupDrawstring(Strict):
     anchor_mm: Vec3
-    length_offset_mm: float
-    sigma_mm: float = Field(0.02, gt=0)
+    length_offset_mm: Length
+    sigma_mm: Sigma = 0.02
 
 
-class SetupDial(_Strict):
-    axis: Vec3 | None = None
-    sigma_mm: float = Field(0.002, gt=0)
+class SetupDial(Strict):
+    axis: Direction | None = None
+    sigma_mm: Sigma = 0.002
 
 
-class SetupLine(_Strict):
+class SetupLine(Strict):
     """One gauge-block placement; ``point_mm``, ``direction`` (base frame), usable ``length_mm`` and
     the tool ``approach`` direction are needed only to plan measurements (``station plan``)."""
 
-    id: int
-    dial_axis: Vec3 | None = None
+    id: Id
+    dial_axis: Direction | None = None
     point_mm: Vec3 | None = None
-    direction: Vec3 | None = None
-    length_mm: float = Field(400.0, gt=0)
-    approach: Vec3 | None = None
+    direction: Direction | None = None
+    length_mm: PositiveLength = 400.0
+    approach: Direction | None = None
 
 
-class SetupFile(_Strict):
+class SetupFile(Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
     tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight."""
 
     drawstring: SetupDrawstring | None = None
     dial: SetupDial | None = None
     lines: list[SetupLine] = []
-    line_sigma_mm: float = Field(0.01, gt=0)
-    rho: float = Field(1.0, gt=0)
+    line_sigma_mm: Sigma = 0.01
+    rho: Annotated[float, Field(ge=1e-6, le=1e6)] = 1.0
+
+    @model_validator(mode="after")
+    def _line_ids_unique(self) -> SetupFile:
+        ids = [line.id for line in self.lines]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"line id {next(i for i in ids if ids.count(i) > 1)} appears twice in [[lines]]")
+        return self
 
 
 def load_robot(path) -> RobotFile:
@@ -89,5 +108,3 @@ def load_robot(path) -> RobotFile:
 
 def load_setup(path) -> SetupFile:
     return validate(SetupFile, read_toml(path), str(path))
-
-

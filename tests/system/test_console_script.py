@@ -38,5 +38,7 @@ def test_parsing_any_command_line_imports_nothing_heavy():
         "c.build_parser().parse_args(['calibrate', 'x.csv', '--robot', 'r.toml', '--out', 'o.toml']); "
         f"print(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
     assert json.loads(proc.stdout) == []
