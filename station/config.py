@@ -15,7 +15,7 @@ from pydantic import Field, ValidationError, model_validator
 
 from drivers.config import DialConfig, DrawstringConfig, Name, Reconnect, RobotConfig, Section, error_key
 from errors import InputError
-from station.formats.base import MAX_LENGTH_MM, Length, read_toml
+from station.formats.base import MAX_DIAL_MM, MAX_LENGTH_MM, DialReading, Length, read_toml
 
 if sys.version_info >= (3, 11):
     pass
@@ -50,8 +50,8 @@ class SessionConfig(Section):
     window_s: Seconds = 1.5  # all K rounds inside this synchronisation window
     still_deg: float = Field(0.005, gt=0, le=360)  # joint span during a capture: else "robot moved"
     jump_mm: float = Field(0.15, gt=0, le=MAX_LENGTH_MM)  # drawstring span in a capture: else "jumped"
-    dial_range_mm: tuple[Length, Length] = (-2.0, 2.0)  # dial gate (in range to capture)
-    dial_stable_mm: float = Field(0.02, gt=0, le=MAX_LENGTH_MM)  # dial span during a capture (noise 0.002 mm)
+    dial_range_mm: tuple[DialReading, DialReading] = (-2.0, 2.0)  # dial gate (in range to capture)
+    dial_stable_mm: float = Field(0.02, gt=0, le=MAX_DIAL_MM)  # dial span during a capture (noise 0.002 mm)
     length_range_mm: tuple[Length, Length] = (50.0, 5000.0)  # drawstring outside: slack or jump
     match_deg: float = Field(2.0, gt=0, le=360)  # a settle this far (max |dq|) from every target is ignored
     target_timeout_s: Seconds = 120.0  # no capture for this long: the session ends

@@ -3,9 +3,10 @@ naming the file and key, the ranges a value may take, number cells of a CSV, ato
 writability check before any work.
 
 Ranges: a number a file gives must be finite and within what a robot cell can hold (lengths within
-``MAX_LENGTH_MM``, joint angles within ``MAX_JOINT_DEG``, noise between ``MIN_SIGMA_MM`` and
-``MAX_SIGMA_MM``). Values beyond them are typing or unit mistakes, and they make the maths overflow
-far from the file (a 1e308 mm length, a 1e-300 mm sigma): the loader refuses them, naming the key.
+``MAX_LENGTH_MM``, dial readings within ``MAX_DIAL_MM``, joint angles within ``MAX_JOINT_DEG``, noise
+between ``MIN_SIGMA_MM`` and ``MAX_SIGMA_MM``). Values beyond them are typing or unit mistakes, and
+they make the maths overflow far from the file (a 1e308 mm length, a 1e-300 mm sigma, a dial
+reading of a metre): the loader refuses them, naming the key.
 """
 
 from __future__ import annotations
@@ -29,12 +30,14 @@ else:  # pragma: no cover
 
 
 MAX_LENGTH_MM = 1e5  # 100 m: any length, position or reading of a robot cell
+MAX_DIAL_MM = 100.0  # the longest dial indicators' travel
 MAX_JOINT_DEG = 3600.0  # ten turns: joint readings and limits
 MAX_ANGLE_DEG = 360.0  # D-H table angles
 MIN_SIGMA_MM, MAX_SIGMA_MM = 1e-6, 100.0  # instrument noise: a nanometre to 100 mm
 MAX_ID = 10**9  # sample, target and line ids: whole numbers 0 .. MAX_ID
 
 Length = Annotated[float, Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)]
+DialReading = Annotated[float, Field(ge=-MAX_DIAL_MM, le=MAX_DIAL_MM)]
 PositiveLength = Annotated[float, Field(gt=0, le=MAX_LENGTH_MM)]
 Angle = Annotated[float, Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
 JointAngle = Annotated[float, Field(ge=-MAX_JOINT_DEG, le=MAX_JOINT_DEG)]

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from errors import InputError
-from station.formats.base import MAX_JOINT_DEG, MAX_LENGTH_MM, id_cell, number_cell
+from station.formats.base import MAX_DIAL_MM, MAX_JOINT_DEG, MAX_LENGTH_MM, id_cell, number_cell
 
 Q_COLUMNS = tuple(f"q{i}_deg" for i in range(1, 7))
 XYZ_COLUMNS = ("x_mm", "y_mm", "z_mm")
@@ -88,9 +88,13 @@ def _kind(path: Path, header: list[str]) -> str:
     return "drawstring" if has_len else "position"
 
 
+_LIMITS = {**dict.fromkeys(Q_COLUMNS, (MAX_JOINT_DEG, "deg")), "dial_mm": (MAX_DIAL_MM, "mm")}
+"""Range and unit of a column's numbers (the others are lengths)."""
+
+
 def _numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
-    """Columns ``cols`` of the rows as numbers: joints within MAX_JOINT_DEG, lengths within
-    MAX_LENGTH_MM (an empty cell is NaN where ``allow_empty``)."""
+    """Columns ``cols`` of the rows as numbers: joints within MAX_JOINT_DEG, the dial within
+    MAX_DIAL_MM, lengths within MAX_LENGTH_MM (an empty cell is NaN where ``allow_empty``)."""
     out = np.empty((len(body), len(cols)))
     for i, row in enumerate(body):
         for j, (c, name) in enumerate(zip(cols, names, strict=True)):
@@ -98,9 +102,8 @@ def _numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
             if cell == "" and allow_empty:
                 out[i, j] = math.nan
                 continue
-            limit, unit = (MAX_JOINT_DEG, "deg") if name in Q_COLUMNS else (MAX_LENGTH_MM, "mm")
             try:
-                out[i, j] = number_cell(cell, limit, unit)
+                out[i, j] = number_cell(cell, *_LIMITS.get(name, (MAX_LENGTH_MM, "mm")))
             except ValueError as exc:
                 raise InputError(f"{path}: row {i} (line {i + 2}): {name}: {exc}") from None
     return out

@@ -25,6 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from errors import InputError, OutputError
 from station.formats.base import (
+    MAX_DIAL_MM,
     MAX_JOINT_DEG,
     MAX_LENGTH_MM,
     atomic_write,
@@ -137,8 +138,8 @@ def _length(cell: str) -> float:
     return number_cell(cell, MAX_LENGTH_MM, "mm")
 
 
-def _optional_length(cell: str) -> float | None:
-    return None if cell == "" else _length(cell)
+def _optional_dial(cell: str) -> float | None:
+    return None if cell == "" else number_cell(cell, MAX_DIAL_MM, "mm")
 
 
 SAMPLE_CHECKS = {
@@ -147,7 +148,7 @@ SAMPLE_CHECKS = {
     "line": lambda c: id_cell(c, "a line id"),
     **dict.fromkeys(Q_COLUMNS, _joint),
     "length_mm": _length,
-    "dial_mm": _optional_length,
+    "dial_mm": _optional_dial,
     "t_s": _time,
 }
 """What a resumed session reads of ``samples.csv`` (the live view replays these columns)."""
