@@ -9,7 +9,17 @@ import sys
 from errors import DeviceError, InputError
 
 # One module per command; each exposes ``register(subparsers)`` which sets ``func`` on its parser.
-COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare", "plan")
+COMMANDS = (
+    "demo",
+    "calibrate",
+    "sim",
+    "read",
+    "import-ipa",
+    "sample",
+    "compare",
+    "plan",
+    "export",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
