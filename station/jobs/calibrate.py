@@ -241,7 +241,8 @@ def _new_direction(directions: np.ndarray) -> np.ndarray:
 def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:
     """The robot file with the calibrated table, per-joint sigmas and provenance."""
     table = dh_to_degrees(cal.x[:N_DH].reshape(6, 4))
-    sigma = (cal.sigma[:N_DH] * display_factor(DH_NAMES)).reshape(6, 4)
+    factor = display_factor(DH_NAMES)
+    sigma = (cal.sigma[:N_DH] * factor).reshape(6, 4)
     joints = []
     for j, joint in enumerate(robot.joints):
         entry = joint.model_dump(exclude={"sigma"})
@@ -259,7 +260,11 @@ def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method
             "n_samples": len(samples),
             "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
+            # the table's covariance in display units (deg, mm), held parameters considered
+            "covariance_parameters": list(DH_NAMES),
+            "covariance": (cal.table_covariance * np.outer(factor, factor)).tolist(),
         },
+        **({"controller_hash": robot.controller_hash} if robot.controller_hash else {}),
         "joints": joints,
     }
 
