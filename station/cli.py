@@ -19,6 +19,7 @@ COMMANDS = (
     "compare",
     "plan",
     "export",
+    "compensate",
 )
 
 
