@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import tempfile
-import time
+import timeit
 from pathlib import Path
 
 import numpy as np
@@ -27,12 +27,7 @@ from station.jobs import compensate as compensation
 
 
 def median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return statistics.median(timeit.repeat(fn, number=1, repeat=repeats))
 
 
 def robot_file(table_alpha_a_d_theta: np.ndarray, limits_deg: np.ndarray, covariance=None) -> RobotFile:

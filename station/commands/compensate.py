@@ -32,6 +32,7 @@ def register(sub) -> None:
         "--wrist-margin-deg",
         type=_angle,
         default=10.0,
+        metavar="DEG",
         help="rows whose axes 4 and 6 are closer than this keep their joints (default 10)",
     )
     p.set_defaults(func=main)

@@ -15,12 +15,21 @@ def register(sub) -> None:
         "export", help="write a (corrected) robot table as URDF, UR kinematics YAML or D-H CSV"
     )
     p.add_argument("table", type=Path, help="robot model TOML, e.g. the corrected table of station calibrate")
-    p.add_argument("--format", required=True, choices=exporting.FORMATS, dest="fmt")
+    p.add_argument(
+        "--format",
+        required=True,
+        choices=exporting.FORMATS,
+        dest="fmt",
+        help="urdf: a URDF chain base_link -> tcp; ur-yaml: Universal Robots' kinematics file; "
+        "dh-csv: D-H rows (with --robot, the deltas)",
+    )
     p.add_argument("--out", type=Path, required=True, help="file to write")
     p.add_argument(
         "--robot", type=Path, help="nominal robot TOML: the deltas of dh-csv, a controller hash for ur-yaml"
     )
-    p.add_argument("--hash", dest="hash_", help="ur-yaml: the controller's calibration hash (calib_...)")
+    p.add_argument(
+        "--hash", dest="hash_", metavar="HASH", help="ur-yaml: the controller's calibration hash (calib_...)"
+    )
     p.set_defaults(func=main)
 
 

@@ -4,23 +4,14 @@ rows keep their branch, and rows that cannot be compensated keep their joints an
 import numpy as np
 import pytest
 
+import configs
 from calib.compensation import CompensationOptions, Status, compensate
 from calib.ik import NewtonOptions, solve, solve_pose, tool_frames
 from calib.params import dh_from_degrees
 from calib.robot_model import RobotModel
+from station.formats.tables import load_robot
 
-JR680 = np.array(  # theta_deg, d_mm, a_mm, alpha_deg (Table I)
-    [
-        [0, 653.5, 250, -90],
-        [-90, 0, 900, 0],
-        [180, 0, -205, -90],
-        [0, 1030.2, 0, 90],
-        [90, 0, 0, -90],
-        [0, 200.6, 0, 0],
-    ],
-    float,
-)
-LIMITS_DEG = np.array([[-170, 170], [-150, 90], [-90, 200], [-180, 180], [-135, 135], [-360, 360]], float)
+JR680 = load_robot(configs.path("robots/hsr_jr680.toml"))  # the paper's Table I
 TOOL = np.array([10.0, -5.0, 120.0])
 
 
@@ -29,9 +20,9 @@ def pair():
     """The nominal JR680 and a 'calibrated' one off by a built robot's errors (0.15 deg, 0.75 mm)."""
     rng = np.random.default_rng(7)
     error = rng.normal(0, [0.15, 0.75, 0.75, 0.15], (6, 4))
-    limits = np.radians(LIMITS_DEG)
-    nominal = RobotModel(dh_from_degrees(JR680), TOOL, limits)
-    calibrated = RobotModel(dh_from_degrees(JR680 + error), TOOL, limits)
+    limits = np.radians(JR680.limits_deg())
+    nominal = RobotModel(dh_from_degrees(JR680.table_deg()), TOOL, limits)
+    calibrated = RobotModel(dh_from_degrees(JR680.table_deg() + error), TOOL, limits)
     q = rng.uniform(limits[:, 0], limits[:, 1], (2000, 6))
     return nominal, calibrated, q, compensate(nominal, calibrated, q)
 

@@ -4,21 +4,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+import configs
 from calib.frames import chain_pose, joint_origins, matrix_from_rpy, rot_x, rot_z, rpy_from_matrix
 from calib.kinematics import base_from_frames
 from calib.params import dh_from_degrees
+from station.formats.tables import load_robot
 
-JR680 = np.array(  # theta_deg, d_mm, a_mm, alpha_deg (Table I)
-    [
-        [0, 653.5, 250, -90],
-        [-90, 0, 900, 0],
-        [180, 0, -205, -90],
-        [0, 1030.2, 0, 90],
-        [90, 0, 0, -90],
-        [0, 200.6, 0, 0],
-    ],
-    float,
-)
+JR680 = load_robot(configs.path("robots/hsr_jr680.toml")).table_deg()  # theta, d, a, alpha (Table I)
 
 
 def test_rpy_is_urdf_fixed_axis_xyz(rng):

@@ -197,3 +197,39 @@ def test_bad_table_robot_or_output(cell, tmp_path, capsys):
         assert code == 2, argv
         assert len(err.strip().splitlines()) == 1 and message in err, err
         assert not out.exists()
+
+
+def test_status_says_why_a_row_keeps_its_joints(cell, tmp_path, capsys):
+    sc, _, corrected, _, _ = cell
+    program = _write(
+        tmp_path / "p.csv",
+        "name,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg",
+        ["work,0,-50,-20,0,-40,0", "high,0,95,-20,0,-40,0", "wrist,0,-50,-20,30,-93,10"],
+    )
+    out = tmp_path / "out.csv"
+    code, text, _ = _cli(
+        capsys, "compensate", program, "--table", corrected, "--robot", sc.robot, "--out", out
+    )
+    assert code == 0
+    status = {r["name"]: r["status"] for r in csv.DictReader(out.open())}
+    assert status == {
+        "work": "ok",
+        "high": "kept: q2 outside its limits -150 to 90 deg",
+        "wrist": "kept: axes 4 and 6 3.0 deg apart, within the wrist singularity margin 10 deg",
+    }
+    assert "1 outside limits, 1 wrist singularity" in text
+    code, _, _ = _cli(
+        capsys,
+        "compensate",
+        program,
+        "--table",
+        corrected,
+        "--robot",
+        sc.robot,
+        "--out",
+        out,
+        "--wrist-margin-deg",
+        "2",
+    )
+    assert code == 0
+    assert [r["status"] for r in csv.DictReader(out.open())][2] != status["wrist"]
