@@ -13,7 +13,18 @@ from errors import DeviceError, InputError, OutputError
 # imports at its top only what its parser needs (the standard library, ``errors``, names): numpy,
 # scipy, pydantic, the drivers, Rerun and matplotlib are imported in ``run``, where they are used,
 # so that ``station --help`` answers at once and each command loads only its own libraries.
-COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare", "plan")
+COMMANDS = (
+    "demo",
+    "calibrate",
+    "sim",
+    "read",
+    "import-ipa",
+    "sample",
+    "compare",
+    "plan",
+    "export",
+    "compensate",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
