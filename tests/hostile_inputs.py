@@ -70,13 +70,16 @@ class Kit:
     session: Path
     ipa: Path
     placements: Path
+    corrected: Path
+    program: Path
 
 
 def make_kit(folder: Path) -> Kit:
     """Write the valid files: a simulated 3-line cell (15 samples a line, 4 held out), a plan of
     its configurations, a station config with absent devices and one retry, a session folder with
     40 of the plan's 45 targets measured, an IPA series of 5 rows, and the simulated cell's setup
-    with its gauge-line placements (for ``station plan``)."""
+    with its gauge-line placements (for ``station plan``), the corrected table of the samples and a
+    program of 8 rows (for ``station compensate``)."""
     folder = Path(folder)
     sc = write_scenario(folder, seed=1, n_lines=3, n_per_line=15, n_holdout_per_line=4)
     plan = folder / "plan.csv"
@@ -91,7 +94,15 @@ def make_kit(folder: Path) -> Kit:
     ipa.write_text(_ipa_series(sc.train.q_deg[:5]))
     placements = folder / "placements.toml"
     shutil.copy(configs.path("setups/sim.toml"), placements)
-    return Kit(folder, sc.robot, sc.setup, sc.samples, sc.holdout, plan, config, session, ipa, placements)
+    corrected = folder / "corrected.toml"
+    cli.main(["calibrate", str(sc.samples), "--robot", str(sc.robot), "--setup", str(sc.setup), "--out",
+              str(corrected)])  # fmt: skip
+    program = folder / "program.csv"
+    program.write_text(_program(sc.train.q_deg[:8]))
+    return Kit(
+        folder, sc.robot, sc.setup, sc.samples, sc.holdout, plan, config, session, ipa, placements,
+        corrected, program,
+    )  # fmt: skip
 
 
 def absent_devices() -> dict:
@@ -110,6 +121,12 @@ def _session_row(train, k: int) -> tuple[dict, list[dict]]:
     row.update(dial_mm=float(train.dial_mm[k]), t_s=1.5 * k, window_s=0.01, t_wall_s=1.7e9 + 1.5 * k)
     raw = [{"sample": k, "k": j, **q, "length_mm": row["length_mm"]} for j in range(2)]
     return row, raw
+
+
+def _program(q_deg: np.ndarray) -> str:
+    rows = ["step,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,speed"]
+    rows += [",".join([f"p{k}", *(f"{v:.6f}" for v in q), "0.25"]) for k, q in enumerate(q_deg)]
+    return "\n".join(rows) + "\n"
 
 
 def _ipa_series(q_deg: np.ndarray) -> str:
@@ -147,6 +164,11 @@ def _calibrate(kit: Kit, case: Path, files: dict) -> list:
     ]  # fmt: skip
 
 
+def _compensate_inputs(kit: Kit, source: str, mutated: Path) -> list:
+    files = {"program": kit.program, "corrected": kit.corrected, "robot": kit.robot, source: mutated}
+    return [files["program"], "--table", files["corrected"], "--robot", files["robot"]]
+
+
 CALIBRATE_OUT = ("corrected.toml", "report.json")
 TARGETS = (
     Target("robot", "robot", "toml", lambda k, c, f: _calibrate(k, c, {"robot": f}), CALIBRATE_OUT),
@@ -181,6 +203,19 @@ TARGETS = (
         lambda k, c, f: ["plan", "--robot", k.robot, "--setup", f, "--out", c / "plan.csv",
                          "--per-line", "20", "--no-suggest", "--report", c / "plan.json"],
         ("plan.csv", "plan.json"),
+    ),
+    *(
+        Target(
+            name, source, fmt,
+            lambda k, c, f, src=source: ["compensate", *_compensate_inputs(k, src, f), "--out", c / "out.csv",
+                                         "--report", c / "out.json"],
+            ("out.csv", "out.json"),
+        )
+        for name, source, fmt in (
+            ("program (compensate)", "program", "csv"),
+            ("corrected table (compensate)", "corrected", "toml"),
+            ("nominal robot (compensate)", "robot", "toml"),
+        )
     ),
     Target(
         "IPA series", "ipa", "ipa", lambda k, c, f: ["import-ipa", f, "--out", c / "out.csv"], ("out.csv",)

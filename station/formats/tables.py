@@ -15,6 +15,7 @@ from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees, display_factor
 from calib.robot_model import RobotModel
 from errors import InputError
 from station.formats.base import (
+    MAX_LENGTH_MM,
     Angle,
     Direction,
     Id,
@@ -85,8 +86,25 @@ class RobotFile(Strict):
                 f"{where}: calibration.covariance: expected 24 x 24 finite numbers in the order "
                 "J1.theta_deg, J1.d_mm, J1.a_mm, J1.alpha_deg, J2.theta_deg, ..."
             )
+        if not _is_covariance(cov):
+            raise InputError(
+                f"{where}: calibration.covariance: not a covariance: it must be symmetric, without "
+                f"negative variances (eigenvalues), every entry within {MAX_COVARIANCE:g} mm^2 / deg^2"
+            )
         factor = display_factor(DH_NAMES)
         return cov / np.outer(factor, factor)
+
+
+MAX_COVARIANCE = MAX_LENGTH_MM**2  # mm^2 (deg^2): a standard deviation of 100 m
+
+
+def _is_covariance(cov: np.ndarray) -> bool:
+    """Symmetric and positive semi-definite (to rounding), entries within ``MAX_COVARIANCE``."""
+    scale = np.abs(cov).max()
+    if scale > MAX_COVARIANCE:
+        return False
+    tol = 1e-9 * scale
+    return bool(np.allclose(cov, cov.T, rtol=0, atol=tol) and np.linalg.eigvalsh(cov).min() >= -tol)
 
 
 class SetupDrawstring(Strict):
