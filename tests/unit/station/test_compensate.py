@@ -195,7 +195,7 @@ def test_bad_table_robot_or_output(cell, tmp_path, capsys):
     out = tmp_path / "out.csv"
     cases = [
         (("--table", five, "--robot", sc.robot, "--out", out), f"{five}: joints: expected 6 joints, got 5"),
-        (("--table", asymmetric, "--robot", sc.robot, "--out", out), "calibration.covariance: not a covariance"),
+        (("--table", asymmetric, "--robot", sc.robot, "--out", out), "covariance: not a covariance"),
         (("--table", corrected, "--robot", ur10, "--out", out), "not a calibration of that robot"),
         (("--table", broken, "--robot", sc.robot, "--out", out), "calibration.covariance"),
         (("--table", corrected, "--robot", sc.robot, "--out", tmp_path / "none" / "o.csv"), "does not exist"),
