@@ -5,6 +5,10 @@ SUSPENDED while a suspender holds (robot not running, a sensor out of its gate, 
 answering), back to WAITING by itself when it clears; and the ends DONE (every target measured),
 STOPPED (stop requested: Ctrl-C), TIMED_OUT (no capture for ``target_timeout_s``).
 
+The log names every fault: each suspension and each change of the condition holding it, and each
+transient failure that a retry cleared (``drawstring: bad CRC in reply ...; retrying``), except the
+reconnects to a device the session is already suspended for.
+
 Checkpoints sit between captures and between polls: a stop request is honoured there, so the
 sample in flight is always stored whole. A capture is assigned to the nearest target of the plan
 (joint space, max |dq| within ``match_deg``); if that target is finished already (the robot
@@ -23,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drivers.base import DriverError
 from errors import DeviceError
 from station.acquire.capture import (
     Capture,
@@ -81,6 +86,8 @@ class Session:
         self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
         self.settle = Settle(rules)
         self.rejected = 0
+        self._suspended_by: Suspend | None = None
+        devices.on_retry = self._retrying
         self._stop = False
         self._t0_wall = float(folder.header["start_wall_s"])
 
@@ -165,6 +172,7 @@ class Session:
         A device silent for longer than ``unreachable_s`` ends the session (DeviceError)."""
         self.state = State.SUSPENDED
         self.listener.message(f"suspended: {first}")
+        self._suspended_by = first
         why, silent_since = first, self.clock()
         while not self._stop:
             self.sleep(SUSPENDED_POLL_S)
@@ -172,7 +180,9 @@ class Session:
                 self._check_cleared(why)
                 break
             except Suspend as still:
-                why = still
+                if still.cause != why.cause:  # another condition holds the session now: say which
+                    self.listener.message(f"suspended: {still}")
+                why = self._suspended_by = still
                 silent_since = silent_since if still.device else self.clock()
                 if self.clock() - silent_since > self.rules.unreachable_s:
                     raise DeviceError(
@@ -180,8 +190,16 @@ class Session:
                         f"{len(self.folder.rows)} samples kept)"
                     ) from still
         self.state = State.WAITING
+        self._suspended_by = None
         if not self._stop:
             self.listener.message("resumed")
+
+    def _retrying(self, error: DriverError) -> None:
+        """Name a transient device failure in the log, unless the session already waits for that
+        device to answer again (its reconnects would repeat the same line every poll)."""
+        waiting_for = self._suspended_by.device if self._suspended_by else None
+        if error.device != waiting_for:
+            self.listener.message(f"{error}; retrying")
 
     def _check_cleared(self, why: Suspend) -> None:
         """Raise :class:`Suspend` unless ``why`` has cleared: the silent device answers, the robot
