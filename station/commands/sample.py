@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import configs
-from errors import InputError
+from errors import InputError, OutputError
 
 EXIT = {"done": 0, "stopped": 130, "timed out": 1}
 """Exit code by the state the session ended in."""
@@ -46,6 +46,11 @@ def run(args) -> int:
     state, view = runner.run(inputs, viewer=args.viewer, web=args.web)
     view.close()
     folder = inputs.folder
+    if view.incomplete:
+        raise OutputError(
+            f"{folder.rrd}: the recording could not be written whole ({view.incomplete}); the "
+            f"{len(folder.rows)} samples in {folder.samples_csv} are whole"
+        )
     print(
         f"{state.value}: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "
         f"recording {folder.rrd}"

@@ -25,10 +25,15 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import rerun as rr
-import rerun.blueprint as rrb
+
+# Rerun logs a failing file sink (a full disk) on stderr itself, several lines, besides the error
+# that reaches us at flush: keep the station's one line (other warnings stay).
+os.environ.setdefault("RUST_LOG", "warn,re_log_encoding=off,re_sdk::recording_stream=off")
+import rerun as rr  # noqa: E402
+import rerun.blueprint as rrb  # noqa: E402
 
 GREEN, RED, GREY = (40, 200, 80), (230, 60, 50), (150, 150, 150)
+FLUSH_TIMEOUT_S = 10.0
 
 
 def blueprint() -> rrb.Blueprint:
@@ -62,6 +67,7 @@ class LiveView:
         self.rec = rr.RecordingStream("station", recording_id=f"session-{Path(rrd).parent.name}")
         self.ok_mm = ok_mm
         self.notes: list[str] = []
+        self.incomplete: str | None = None
         sinks = [rr.FileSink(str(rrd)), *self._live_sinks(viewer, web)]
         self.rec.set_sinks(*sinks)
         self.rec.send_blueprint(blueprint())
@@ -149,8 +155,14 @@ class LiveView:
             self.rec.log(f"calibration/cost/{method}", rr.Scalars(float(cost)))
 
     def close(self) -> None:
-        self.rec.flush()
-        self.rec.disconnect()
+        """Flush and close the recording. One that could not be written whole (disk full) keeps
+        what it has; ``incomplete`` says why (None: complete)."""
+        try:
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError as exc:
+            self.incomplete = str(exc)
+        finally:
+            self.rec.disconnect()
 
 
 def _has_display() -> bool:
