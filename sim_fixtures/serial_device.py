@@ -46,6 +46,12 @@ class FaultPlan:
         with self._lock:
             self._queue.extend([kind] * count)
 
+    @property
+    def pending(self) -> int:
+        """Faults queued and not yet applied."""
+        with self._lock:
+            return len(self._queue)
+
     def take(self) -> str | None:
         """The fault for the request being answered, or None."""
         with self._lock:

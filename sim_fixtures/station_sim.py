@@ -120,15 +120,18 @@ class SimStation:
         rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in (0, 1, 6)]
         self._length = cell.world.noise.drawstring(rngs[0])
         self._dial = cell.world.noise.dial(rngs[1])
-        self._slack_rng, self._slack_until = rngs[2], 0.0
+        self._slack_rng, self._slack_until, self.slack_read = rngs[2], 0.0, 0
         self.devices: dict[str, object] = {}
 
     def slacken(self, seconds: float) -> None:
-        """The cable comes off the tool for ``seconds`` (real): the drawstring reads ``SLACK_MM``."""
+        """The cable comes off the tool for ``seconds`` (real): the drawstring reads ``SLACK_MM``;
+        ``slack_read`` counts the readings given meanwhile (reset here)."""
         self._slack_until = time.monotonic() + seconds
+        self.slack_read = 0
 
     def measure_length(self) -> float:
         if time.monotonic() < self._slack_until:
+            self.slack_read += 1
             return self._length.measure(self._slack_rng.uniform(*SLACK_MM))
         return self._length.measure(self.source.state(self.clock.now()).length_mm)
 

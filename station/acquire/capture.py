@@ -220,20 +220,24 @@ def capture(devices: Devices, rules: Rules) -> Capture:
 
 
 def _check(rules: Rules, window, q, qd, length, dial) -> None:
+    """Raise :class:`Rejected` naming every way the capture broke the rule."""
     span = lambda a: float(np.ptp(a, axis=0).max())  # noqa: E731
+    broken = []
+    if window > rules.window_s:
+        broken.append(f"readings took {window * 1e3:.1f} ms, over the {rules.window_s * 1e3:.1f} ms window")
+    if span(q) > rules.still_deg or qd >= rules.settle_speed_deg_s:
+        broken.append(f"robot moved (joints spread {span(q):.4f} deg, speed up to {qd:.3f} deg/s)")
     # the gates hold for every reading: a cable that slackens after the gate check is not a sample
     for value, outside, what in ((length, length_outside, "drawstring"), (dial, dial_outside, "dial")):
         why = next((w for v in value if np.isfinite(v) and (w := outside(float(v), rules))), None)
         if why:
-            raise Rejected(f"{what} read {why}")
-    if window > rules.window_s:
-        raise Rejected(f"readings took {window * 1e3:.1f} ms, over the {rules.window_s * 1e3:.1f} ms window")
-    if span(q) > rules.still_deg or qd >= rules.settle_speed_deg_s:
-        raise Rejected(f"robot moved (joints spread {span(q):.4f} deg, speed up to {qd:.3f} deg/s)")
+            broken.append(f"{what} read {why}")
     if span(length) > rules.jump_mm:
-        raise Rejected(f"drawstring jumped ({span(length):.3f} mm within the capture)")
+        broken.append(f"drawstring jumped ({span(length):.3f} mm within the capture)")
     if np.all(np.isfinite(dial)) and span(dial) > rules.dial_stable_mm:
-        raise Rejected(f"dial not stable ({span(dial):.4f} mm within the capture)")
+        broken.append(f"dial not stable ({span(dial):.4f} mm within the capture)")
+    if broken:
+        raise Rejected("; ".join(broken))
 
 
 def _raw_row(k: int, rnd: list[Reading]) -> dict:

@@ -6,8 +6,8 @@ answering), back to WAITING by itself when it clears; and the ends DONE (every t
 STOPPED (stop requested: Ctrl-C), TIMED_OUT (no capture for ``target_timeout_s``).
 
 The log names every fault: each suspension and each change of the condition holding it, and each
-transient failure that a retry cleared (``drawstring: bad CRC in reply ...; retrying``), except the
-reconnects to a device the session is already suspended for.
+transient failure retried (``drawstring: bad CRC in reply ...; retrying``); of the reconnects to a
+device the session is suspended for, only a failure of a new kind.
 
 Checkpoints sit between captures and between polls: a stop request is honoured there, so the
 sample in flight is always stored whole. A capture is assigned to the nearest target of the plan
@@ -87,6 +87,7 @@ class Session:
         self.settle = Settle(rules)
         self.rejected = 0
         self._suspended_by: Suspend | None = None
+        self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
         devices.on_retry = self._retrying
         self._stop = False
         self._t0_wall = float(folder.header["start_wall_s"])
@@ -191,23 +192,27 @@ class Session:
                     ) from still
         self.state = State.WAITING
         self._suspended_by = None
+        self._last_retry.clear()
         if not self._stop:
             self.listener.message("resumed")
 
     def _retrying(self, error: DriverError) -> None:
-        """Name a transient device failure in the log, unless the session already waits for that
-        device to answer again (its reconnects would repeat the same line every poll)."""
+        """Name a transient device failure in the log; while the session waits for that device to
+        answer again, only a failure of another kind (its reconnects repeat the same one every poll)."""
         waiting_for = self._suspended_by.device if self._suspended_by else None
-        if error.device != waiting_for:
-            self.listener.message(f"{error}; retrying")
+        if error.device == waiting_for and type(error) is self._last_retry.get(error.device):
+            return
+        self._last_retry[error.device] = type(error)
+        self.listener.message(f"{error}; retrying")
 
     def _check_cleared(self, why: Suspend) -> None:
-        """Raise :class:`Suspend` unless ``why`` has cleared: the silent device answers, the robot
-        runs, and, if the robot is settled, the sensor gates pass (a robot moving on clears them)."""
-        if why.device:
-            self.devices.read(why.device)
+        """Raise :class:`Suspend` unless ``why`` has cleared: the robot runs, the silent device
+        answers, and, if the robot is settled, the sensor gates pass (a robot moving on clears them).
+        The robot comes first: a controller stopped while a sensor is silent is told too."""
         robot = self.devices.read("robot")
         check_running(robot)
+        if why.device not in (None, "robot"):
+            self.devices.read(why.device)
         if self.settle.update(robot):
             check_gates(self.devices, self.rules)
 

@@ -8,7 +8,6 @@ every device and removes the pty links.
 from __future__ import annotations
 
 import json
-import logging
 import signal
 import threading
 from pathlib import Path
@@ -45,7 +44,6 @@ def run(args) -> int:
     from station.formats.plan import Plan, load_plan
 
     cfg = load_station_config(args.config)
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # faults are reported by drivers
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
     station = SimStation(cfg, hold=args.hold, plan=None if plan is None else (plan.q_deg, plan.line))
