@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 import tomli_w
+import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -189,6 +190,8 @@ class Injector:
         """Unplug a device (or stop the controller) and bring it back after a random while."""
         device = OUTAGE_OF[kind]
         dev = self.sim.devices[device]
+        if device != "robot" and dev.faults.pending:  # its fault would strike the unplugging itself
+            return
         self._busy.add(kind)
         strike = Strike(time.monotonic(), kind)
         self.strikes.append(strike)
@@ -213,7 +216,7 @@ class Injector:
         on_request = [(t, ON_REQUEST[(name, k)]) for name, plan in plans.items() for t, k in plan.applied]
         gone = [(s.t, s.end or float("inf")) for s in self.strikes if s.kind == "controller gone"]
         seen_stops = [
-            (t0, "protective stop") for t0, t1 in stops if not any(g0 < t1 and t0 < g1 for g0, g1 in gone)
+            (a, "protective stop") for a, b in stops if not any(g0 < b and a < g1 for g0, g1 in gone)
         ]
         strikes = [(s.t, s.kind) for s in self.strikes if s.seen]
         return sorted(strikes + on_request + seen_stops)
@@ -311,29 +314,34 @@ def audit(folder: Path, log: list[tuple[float, str]], seed: int, per_line: int) 
     }
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--targets", type=int, default=60, help="targets of the plan (3 gauge lines)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the cell and of every fault")
-    parser.add_argument("--interval-s", type=float, default=1.0, help="mean time between faults, real s")
-    parser.add_argument("--timeout-s", type=float, default=400.0, help="give up after this long")
-    parser.add_argument("--json", action="store_true", help="end with one JSON line")
-    parser.add_argument("--log", type=Path, help="write the session's log here")
-    args = parser.parse_args()
-    per_line = max(args.targets // 3, 2)
+@dataclass
+class Soak:
+    """A finished soak: the audit ``result``, the session's ``log``, the ``faults`` that struck
+    while it ran and those ``missing`` from its log, and when it started (``t0``)."""
+
+    result: dict
+    log: list[tuple[float, str]]
+    faults: list[tuple[float, str]]
+    missing: list[tuple[float, str]]
+    t0: float
+
+
+def soak(targets: int, seed: int, interval_s: float, timeout_s: float) -> Soak:
+    """Run one session under faults (see the module notes) and audit it."""
+    per_line = max(targets // 3, 2)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        config = write_config(folder, 3 * per_line, args.seed)
-        cfg = StationConfig.model_validate(__import__("tomllib").loads(config.read_text()))
-        stops = protective_stops(np.random.default_rng([args.seed, 7]), args.timeout_s * TIME_SCALE)
+        config = write_config(folder, 3 * per_line, seed)
+        cfg = StationConfig.model_validate(tomllib.loads(config.read_text()))
+        stops = protective_stops(np.random.default_rng([seed, 7]), timeout_s * TIME_SCALE)
         sim = SimStation(cfg, faults=stops)
         publish_plan(folder / "plan.csv", Plan.of(sim.plan_deg, sim.plan_lines))
-        injector = Injector(sim, random.Random(args.seed))
+        injector = Injector(sim, random.Random(seed))
         sim.start()
         plans = {name: sim.devices[name].faults for name in ("drawstring", "dial")}
         t0 = time.monotonic()
         try:
-            code, log = run_session(config, folder / "sess", injector, args.interval_s, args.timeout_s)
+            code, log = run_session(config, folder / "sess", injector, interval_s, timeout_s)
             seconds = time.monotonic() - t0
         finally:
             time.sleep(2.0)  # let pending replugs finish before the devices stop
@@ -341,34 +349,46 @@ def main() -> int:
         start = sim.clock.start_monotonic
         real = [(start + s.start_s / TIME_SCALE, start + s.end_s / TIME_SCALE) for s in stops]
         injector.mark_unneeded_outages(log)
-        faults = injector.applied(plans, [(a, b) for a, b in real if t0 < a and b < t0 + seconds])
+        ended = next((t for t, line in log if re.match(r"(done|stopped|timed out): ", line)), t0 + seconds)
+        faults = [f for f in injector.applied(plans, real) if t0 < f[0] < ended]  # struck while it ran
         missing = unlogged(faults, log)
         result = {
             "targets": 3 * per_line,
-            **audit(folder / "sess", log, args.seed, per_line),
+            **audit(folder / "sess", log, seed, per_line),
             "faults_injected": dict(collections.Counter(kind for _, kind in faults)),
             "suspensions": sum(line.startswith("suspended:") for _, line in log),
             "unlogged": dict(collections.Counter(kind for _, kind in missing)),
             "exit": code,
             "seconds": round(seconds, 1),
-            "seed": args.seed,
+            "seed": seed,
         }
+    return Soak(result, log, faults, missing, t0)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--targets", type=int, default=60, help="targets of the plan (3 gauge lines)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the cell and of every fault")
+    parser.add_argument("--interval-s", type=float, default=1.0, help="mean time between faults, real s")
+    parser.add_argument("--timeout-s", type=float, default=400.0, help="give up after this long")
+    parser.add_argument("--json", action="store_true", help="end with one JSON line")
+    parser.add_argument("--log", type=Path, help="write the session's log and the faults here")
+    args = parser.parse_args()
+    run = soak(args.targets, args.seed, args.interval_s, args.timeout_s)
+    r = run.result
     if args.log:  # the session's log and the faults, in time order (s since the session started)
-        marks = [(t, f"FAULT {kind}{' (unlogged)' if (t, kind) in missing else ''}\n") for t, kind in faults]
-        args.log.write_text("".join(f"{t - t0:8.3f} {line}" for t, line in sorted([*log, *marks])))
-    print("".join(line for _, line in log[-5:]), end="")
+        marks = [(t, f"FAULT {k}{' (unlogged)' if (t, k) in run.missing else ''}\n") for t, k in run.faults]
+        args.log.write_text("".join(f"{t - run.t0:8.3f} {line}" for t, line in sorted([*run.log, *marks])))
     print(
-        f"{result['measured']}/{result['targets']} targets measured in {seconds:.0f} s under "
-        f"{sum(result['faults_injected'].values())} faults of {len(result['faults_injected'])} kinds; "
-        f"{result['suspensions']} suspensions; duplicates {result['duplicates']}, torn {result['torn']}, "
-        f"lost {result['lost']}, corrupt {result['corrupt']}, unlogged {sum(result['unlogged'].values())}; "
-        f"exit {code}"
+        f"{r['measured']}/{r['targets']} targets measured in {r['seconds']:.0f} s under "
+        f"{sum(r['faults_injected'].values())} faults of {len(r['faults_injected'])} kinds; "
+        f"{r['suspensions']} suspensions; duplicates {r['duplicates']}, torn {r['torn']}, lost {r['lost']}, "
+        f"corrupt {r['corrupt']}, unlogged {sum(r['unlogged'].values())}; exit {r['exit']}"
     )
     if args.json:
-        print(json.dumps(result))
-    ok = result["measured"] == result["targets"] and code == 0
-    ok &= not (result["duplicates"] or result["torn"] or result["lost"] or result["corrupt"])
-    return 0 if ok and not result["unlogged"] else 1
+        print(json.dumps(r))
+    clean = not (r["duplicates"] or r["torn"] or r["lost"] or r["corrupt"] or r["unlogged"])
+    return 0 if r["measured"] == r["targets"] and r["exit"] == 0 and clean else 1
 
 
 if __name__ == "__main__":

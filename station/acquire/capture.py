@@ -103,7 +103,9 @@ class Devices:
                 raise Suspend(f"dial out of range ({exc.cause})", "dial out of range") from exc
             raise Suspend(str(exc), f"{name} error reply") from exc
         except DriverError as exc:
-            raise Suspend(f"{name} not answering: {exc.cause}", f"{name} silent", device=name) from exc
+            last = exc.__cause__ if isinstance(exc.__cause__, DriverError) else exc  # the last attempt's
+            cause = f"{name} silent ({type(last).__name__})"  # a new kind of failure is a new cause
+            raise Suspend(f"{name} not answering: {exc.cause}", cause, device=name) from exc
 
 
 class Settle:

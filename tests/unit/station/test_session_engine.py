@@ -14,7 +14,16 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from drivers.base import Backoff, CrcError, DeviceReplyError, DeviceTimeout, Driver, Field, Reading
+from drivers.base import (
+    Backoff,
+    CrcError,
+    DeviceReplyError,
+    DeviceTimeout,
+    Driver,
+    Field,
+    GarbledReply,
+    Reading,
+)
 from errors import DeviceError
 from station.acquire.capture import RUNNING, Devices, Rules
 from station.acquire.session import SUSPENDED_POLL_S, Listener, Session, State
@@ -387,4 +396,20 @@ def test_each_condition_that_holds_a_suspension_is_named(tmp_path, clock):
     suspended = [m for m in cell.messages if m.startswith("suspended")]
     assert suspended[0].startswith("suspended: robot not running")
     assert suspended[1].startswith("suspended: dial not answering")
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_a_new_kind_of_failure_of_a_silent_device_is_named(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    silent, garbled = DeviceTimeout("dial", "no reply"), GarbledReply("dial", "unparseable reply b'#'")
+    # at target 1 the dial falls silent, then answers garbage, then recovers
+    cell.dial.script = lambda t: (
+        silent if 5.0 <= t < 6.0 else garbled if 6.0 <= t < 7.0 else {"dial_mm": 0.25}
+    )
+    assert cell.run() is State.DONE
+    suspended = [m for m in cell.messages if m.startswith("suspended")]
+    assert suspended == [
+        "suspended: dial not answering: unreachable after 2 attempts (no reply)",
+        "suspended: dial not answering: unreachable after 2 attempts (unparseable reply b'#')",
+    ]
     assert cell.targets() == [0, 1, 2]
