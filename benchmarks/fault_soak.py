@@ -349,8 +349,10 @@ def soak(targets: int, seed: int, interval_s: float, timeout_s: float) -> Soak:
         start = sim.clock.start_monotonic
         real = [(start + s.start_s / TIME_SCALE, start + s.end_s / TIME_SCALE) for s in stops]
         injector.mark_unneeded_outages(log)
+        # the faults struck from the first sample (when the strikes begin) to the session's end
+        began = next((t for t, line in log if line.startswith("sample ")), t0 + seconds)
         ended = next((t for t, line in log if re.match(r"(done|stopped|timed out): ", line)), t0 + seconds)
-        faults = [f for f in injector.applied(plans, real) if t0 < f[0] < ended]  # struck while it ran
+        faults = [f for f in injector.applied(plans, real) if began < f[0] < ended]
         missing = unlogged(faults, log)
         result = {
             "targets": 3 * per_line,
