@@ -33,7 +33,8 @@ from calib.kinematics import N_DH  # noqa: E402
 from calib.metrics import error_metrics  # noqa: E402
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
 from calib.params import dh_from_degrees  # noqa: E402
-from calib.position import Compliance, LinkMasses, PositionModel, PositionSamples, register  # noqa: E402
+from calib.joint_terms import JointTerms, LinkMasses, compliance_group  # noqa: E402
+from calib.position import PositionModel, PositionSamples, register  # noqa: E402
 from sim_fixtures.world import Noise  # noqa: E402
 from station.formats.ipa import probe_file_for, read_probe_mm, read_series  # noqa: E402
 from station.formats.tables import load_robot  # noqa: E402
@@ -67,8 +68,7 @@ def held_out_errors(tests, dh, compliance=None, values=None) -> dict[str, np.nda
     """Per test series, the registered position errors [mm] with table ``dh`` (and compliances)."""
     out = {}
     for name, (samples, probe) in tests.items():
-        comp = Compliance(COMPLIANT_JOINTS, UR10_LINKS) if compliance else None
-        model, fit = register(PositionModel(samples, dh, probe, compliance=comp), dh, values)
+        model, fit = register(PositionModel(samples, dh, probe, terms=compliance), dh, values)
         out[name] = model.row_error_mm(fit.x)
     return out
 
@@ -120,7 +120,8 @@ def main(argv=None) -> int:
     model = PositionModel(train, nominal, probe)
     cal = calibrate(model)
     t_position = time.perf_counter() - t0
-    comp_model = PositionModel(train, nominal, probe, compliance=Compliance(COMPLIANT_JOINTS, UR10_LINKS))
+    comp_terms = JointTerms([compliance_group(j).terms[0] for j in COMPLIANT_JOINTS], nominal, UR10_LINKS)
+    comp_model = PositionModel(train, nominal, probe, terms=comp_terms)
     comp_cal = calibrate(comp_model)
     compliance = comp_cal.x[N_DH + 9 :]
 
@@ -128,7 +129,7 @@ def main(argv=None) -> int:
         "nominal": held_out_errors(tests, nominal),
         "position": held_out_errors(tests, model.dh(cal.x)),
         "drawstring": held_out_errors(tests, drawstring_table(train, model, cal.before.x, rng)),
-        "compliance": held_out_errors(tests, comp_model.dh(comp_cal.x), True, compliance),
+        "compliance": held_out_errors(tests, comp_model.dh(comp_cal.x), comp_terms, compliance),
     }
     train_err = {
         "before": error_metrics(model.row_error_mm(cal.before.x)),

@@ -257,7 +257,7 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
     found = run_method(method, model, start.before.x, start.identified, BaselineOptions())
     prior = WithPrior(model, model.x0)
     noise = np.where(prior.groups == GROUP_PRIOR, 1.0, start.scale[prior.groups])
-    cov, table_cov = covariance(prior, found.x, start.identified, 1.0 / noise)
+    cov, robot_cov = covariance(prior, found.x, start.identified, 1.0 / noise)
     sigma = np.full(len(model.names), np.nan)
     sigma[start.identified] = np.sqrt(np.diag(cov))
     after = dataclasses.replace(
@@ -268,7 +268,7 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
         after=after,
         sigma=sigma,
         covariance=cov,
-        table_covariance=table_cov,
+        robot_covariance=robot_cov,
         downweighted=np.array([], int),
     )
     return cal, start.x
@@ -285,7 +285,7 @@ def _report(
 ) -> CalibrationReport:
     cal = fit.calibration
     after = metrics(model, hold_model, cal.x)
-    workspace = predicted_workspace(robot, cal)
+    workspace = predicted_workspace(robot, cal, model)
     messages = workspace_warnings(model, cal.x, after.train, workspace)
     messages += short_of_optimum(model, cal.x, fit.optimum, method)
     return CalibrationReport(
@@ -316,13 +316,15 @@ def _errors(model: MeasurementModel, x: np.ndarray) -> ErrorMetrics:
     return ErrorMetrics(**error_metrics(model.row_error_mm(x)))
 
 
-def predicted_workspace(robot: RobotFile, cal: Calibration) -> WorkspacePrediction:
-    """Expected RMS TCP error [mm] over random configurations within the joint limits, and the RMS
-    one calibration stays below with 95 % probability."""
+def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementModel) -> WorkspacePrediction:
+    """Expected RMS error [mm] of the measured point (the model's TCP) over random configurations
+    within the joint limits, and the RMS one calibration stays below with 95 % probability."""
     limits = np.radians(robot.limits_deg())
     q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
     dh = dh_table(cal.x)
-    modes = workspace_error_modes(dh, np.asarray(robot.tool_mm), q, cal.table_covariance)
+    modes = workspace_error_modes(
+        dh, model.tcp_in_flange(cal.x), q, cal.robot_covariance, model.terms, model.tool_mask.any()
+    )
     return WorkspacePrediction(
         predicted_workspace_rmse(modes), workspace_rmse_bound(modes, 0.95), WORKSPACE_POSES
     )

