@@ -29,11 +29,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calib.calibrate import calibrate  # noqa: E402
+from calib.joint_terms import JointTerms, LinkMasses, compliance_group  # noqa: E402
 from calib.kinematics import N_DH  # noqa: E402
 from calib.metrics import error_metrics  # noqa: E402
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
 from calib.params import dh_from_degrees  # noqa: E402
-from calib.joint_terms import JointTerms, LinkMasses, compliance_group  # noqa: E402
 from calib.position import PositionModel, PositionSamples, register  # noqa: E402
 from sim_fixtures.world import Noise  # noqa: E402
 from station.formats.ipa import probe_file_for, read_probe_mm, read_series  # noqa: E402

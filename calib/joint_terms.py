@@ -172,6 +172,10 @@ class JointTerms:
     def __len__(self) -> int:
         return len(self.terms)
 
+    def subset(self, terms) -> JointTerms:
+        """Other terms with the same table and masses."""
+        return JointTerms(terms, self.dh, self.links)
+
     def prior_sigma(self) -> np.ndarray:
         """What is known of each term before measuring (1 sigma, internal units), shape (K,)."""
         return np.array(

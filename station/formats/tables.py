@@ -22,22 +22,41 @@ class _Strict(BaseModel):
 
 
 class Joint(_Strict):
+    """One D-H joint; optionally its link's mass and centre of mass (in D-H frame i) for the
+    gravity torques, and the joint-space terms a calibration identified (``calib.joint_terms``)."""
+
     alpha_deg: float
     a_mm: float
     d_mm: float
     theta_deg: float
     q_min_deg: float = -180.0
     q_max_deg: float = 180.0
+    mass_kg: float | None = Field(None, ge=0)
+    com_mm: Vec3 | None = None
+    compliance_urad_per_Nm: float | None = None
+    sin1_deg: float | None = None
+    cos1_deg: float | None = None
+    sin2_deg: float | None = None
+    cos2_deg: float | None = None
     sigma: dict[str, float] | None = None  # written by a calibration: per-parameter sigma
 
 
+class Payload(_Strict):
+    """What the flange carries: mass [kg] and centre of mass [mm] in the flange frame."""
+
+    mass_kg: float = Field(ge=0)
+    com_mm: Vec3 = [0.0, 0.0, 0.0]
+
+
 class RobotFile(_Strict):
-    """A robot model (contract: robot model TOML); a corrected table adds ``calibration``."""
+    """A robot model (contract: robot model TOML); a corrected table adds ``calibration`` and,
+    where it identified compliances, the ``payload`` they were identified with."""
 
     name: str
     convention: Literal["dh"] = "dh"
     tool_mm: Vec3 = [0.0, 0.0, 0.0]
     joints: Annotated[list[Joint], Field(min_length=6, max_length=6)]
+    payload: Payload | None = None
     calibration: dict | None = None
 
     def table_deg(self) -> np.ndarray:
@@ -74,10 +93,12 @@ class SetupLine(_Strict):
 
 class SetupFile(_Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
-    tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight."""
+    tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight;
+    ``payload``: what the flange carried while measuring (for the gravity torques)."""
 
     drawstring: SetupDrawstring | None = None
     dial: SetupDial | None = None
+    payload: Payload | None = None
     lines: list[SetupLine] = []
     line_sigma_mm: float = Field(0.01, gt=0)
     rho: float = Field(1.0, gt=0)
