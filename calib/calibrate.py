@@ -212,8 +212,13 @@ def identify(
     order = np.concatenate([np.flatnonzero(free_setup), candidates]).astype(int)
     kept = select_columns(jac, order, rtol)
     held = {n: r for n, r in gauges.items() if n in names}
+    norms = np.linalg.norm(jac, axis=0)
     for k in candidates:
-        if not kept[k]:
+        if kept[k]:
+            continue
+        if norms[k] <= 1e-9 * norms.max():
+            held[names[k]] = "it moves none of the measured points"
+        else:
             partners = ", ".join(redundancy_partners(jac, k, kept, names))
             held[names[k]] = f"the data cannot tell it apart from {partners}"
     kept_robot = [k for k in candidates if kept[k]]

@@ -1,0 +1,133 @@
+"""``station calibrate --model``: a corrected table carries the terms it identified and reads back
+as a robot model, ``auto`` cross-validates on the training rows alone (a hold-out set changes
+nothing of its choice), and a bad ``--model`` or a compliance without masses is one line."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib.joint_terms import JointTerms, Term
+from calib.kinematics import tcp_position
+from calib.params import dh_from_degrees
+from calib.position import rotation_from_vector
+from calib.selection import kfold
+from errors import InputError
+from sim_fixtures.world import JointError
+from station.cli import main
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot
+from station.jobs import calibration
+from station.jobs.terms import link_masses, robot_terms
+
+ROBOT = Path(__file__).resolve().parents[3] / "configs/robots/ur10.toml"
+HEADER = "sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"
+COMPLIANCE = {1: 15.0, 2: 10.0}  # the simulated UR10's joints 2 and 3 [urad / (N m)]
+
+
+def write_compliant_set(path: Path, n: int, seed: int) -> None:
+    """A UR10 with machining errors and joints 2-3 yielding under gravity (the robot file's masses),
+    ``n`` random poses seen by a tracker with 0.02 mm noise."""
+    rng = np.random.default_rng(seed)
+    robot = load_robot(ROBOT)
+    nominal = dh_from_degrees(robot.table_deg())
+    true = nominal + np.column_stack(
+        [np.radians(rng.normal(0, 0.15, 6)), rng.normal(0, 0.75, (6, 2)), np.radians(rng.normal(0, 0.15, 6))]
+    )
+    terms = JointTerms([Term(j, "compliance_urad_per_Nm") for j in COMPLIANCE], nominal, link_masses(robot))
+    q_links = rng.uniform(-180, 180, (n, 6))
+    q = JointError(terms, np.array(list(COMPLIANCE.values()))).readings_deg(q_links)
+    p = tcp_position(true, np.radians(q_links), np.array([0.0, 0.0, 100.0]))
+    p = p @ rotation_from_vector(np.array([0.1, -0.2, 2.5])).T + [2500.0, -1000.0, 200.0]
+    p += rng.normal(0, 0.02, p.shape)
+    rows = [HEADER] + [",".join(map(str, [k, *q[k], *p[k]])) for k in range(n)]
+    path.write_text("\n".join(rows) + "\n")
+
+
+@pytest.fixture(scope="module")
+def compliant(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("compliant")
+    write_compliant_set(folder / "train.csv", 150, seed=1)
+    write_compliant_set(folder / "test.csv", 60, seed=2)
+    return folder
+
+
+def test_the_corrected_table_carries_the_terms_and_reads_back(compliant, capsys):
+    out, report = compliant / "c.toml", compliant / "r.json"
+    argv = ["calibrate", str(compliant / "train.csv"), "--robot", str(ROBOT), "--model", "compliance"]
+    assert main(argv + ["--out", str(out), "--report", str(report)]) == 0
+    r = json.loads(report.read_text())
+    assert r["model"] == "compliance" and set(r["terms"]) == {
+        f"J{j + 1}.compliance_urad_per_Nm" for j in COMPLIANCE
+    }
+    assert "terms: J2.compliance_urad_per_Nm" in capsys.readouterr().out
+    corrected = load_robot(out)  # reads back as a robot model
+    terms, values = robot_terms(corrected, str(out))
+    assert terms.names == tuple(r["terms"])
+    np.testing.assert_allclose(values, [e["value"] for e in r["terms"].values()])
+    for j, truth in COMPLIANCE.items():
+        estimate = r["terms"][f"J{j + 1}.compliance_urad_per_Nm"]
+        assert abs(estimate["value"] - truth) < 3 * estimate["sigma"]
+        assert corrected.joints[j].sigma["compliance_urad_per_Nm"] == estimate["sigma"]
+    assert corrected.joints[1].mass_kg == load_robot(ROBOT).joints[1].mass_kg  # the masses travel along
+
+
+def test_auto_never_looks_at_the_holdout(compliant):
+    """The choice and its cross-validation table are the same with the real hold-out and with a
+    hold-out of nonsense (every position 100 mm off): nothing but the training rows enters."""
+    robot, train = load_robot(ROBOT), load_samples(compliant / "train.csv")
+    test = load_samples(compliant / "test.csv")
+    nonsense = type(test)(test.path, test.kind, test.q_deg, test.measured + 100.0, test.dial_mm, test.line)
+    runs = [
+        calibration.calibrate_samples(train, robot, None, holdout=h, terms="auto")
+        for h in (None, test, nonsense)
+    ]
+    tables = [r.report.cross_validation for r in runs]
+    assert tables[0] == tables[1] == tables[2]
+    assert runs[0].report.terms == runs[1].report.terms == runs[2].report.terms
+    assert "J2.compliance_urad_per_Nm" in runs[0].report.terms  # and it found what is there
+    assert runs[2].report.after.holdout.rmse_mm > 50  # the nonsense was evaluated, after the fit
+
+
+def test_folds_are_contiguous_blocks_of_every_placement():
+    placements = np.array([0] * 10 + [1] * 7 + [-1] * 3)
+    folds = kfold(placements, 5)
+    np.testing.assert_array_equal(np.sort(np.concatenate(folds)), np.arange(20))
+    for rows in folds:
+        for pid in (0, 1):
+            mine = rows[placements[rows] == pid]
+            assert mine.size >= 1 and np.all(np.diff(mine) == 1)
+
+
+def test_a_bad_model_is_one_line(compliant, capsys):
+    argv = [
+        "calibrate",
+        str(compliant / "train.csv"),
+        "--robot",
+        str(ROBOT),
+        "--out",
+        str(compliant / "x.toml"),
+    ]
+    with pytest.raises(SystemExit):
+        main(argv + ["--model", "everything"])
+    assert "invalid choice: 'everything'" in capsys.readouterr().err
+
+
+def test_a_compliance_without_masses_is_bad_input(tmp_path):
+    text = ROBOT.read_text()
+    no_masses = "\n".join(line for line in text.splitlines() if not line.startswith(("mass_kg", "com_mm")))
+    path = tmp_path / "r.toml"
+    path.write_text(
+        no_masses.replace("d_mm = 0.0\ntheta_deg", "d_mm = 0.0\ncompliance_urad_per_Nm = 12.0\ntheta_deg", 1)
+    )
+    with pytest.raises(InputError, match=f"{path}: a compliance_urad_per_Nm needs mass_kg and com_mm"):
+        robot_terms(load_robot(path), str(path))
+
+
+def test_without_masses_the_compliance_is_held_with_the_reason(compliant):
+    robot = load_robot(ROBOT)
+    bare = robot.model_copy(update={"joints": [j.model_copy(update={"mass_kg": None}) for j in robot.joints]})
+    out = calibration.calibrate_samples(load_samples(compliant / "train.csv"), bare, None, terms="compliance")
+    held = {h.param: h.reason for h in out.report.held}
+    assert "no link masses" in held["J2.compliance_urad_per_Nm"] and out.report.terms == {}
