@@ -106,6 +106,8 @@ class Calibration:
     robot_covariance : ndarray, shape (r, r)
         Covariance of what the TCP's workspace error depends on (``workspace_mask``: the table, the
         TCP where the model fits it, the terms), the held ones considered at their prior.
+    robot_index : ndarray of int, shape (r,)
+        Where ``robot_covariance``'s rows are in ``x``.
     scale : ndarray, shape (groups,)
         Fitted noise scale per residual group, in units of the stated noise.
     downweighted : ndarray of int
@@ -120,6 +122,7 @@ class Calibration:
     sigma: np.ndarray
     covariance: np.ndarray
     robot_covariance: np.ndarray
+    robot_index: np.ndarray
     scale: np.ndarray
     downweighted: np.ndarray
 
@@ -328,6 +331,7 @@ def calibrate(
         sigma=full_sigma,
         covariance=cov,
         robot_covariance=robot_cov,
+        robot_index=np.flatnonzero(workspace_mask(model)),
         scale=scale,
         downweighted=_downweighted_rows(start.prior, after, scale, options),
     )

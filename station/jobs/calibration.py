@@ -47,7 +47,7 @@ from station.jobs.report import (
     Selection,
     WorkspacePrediction,
 )
-from station.jobs.terms import MODELS, TermChoice, choose_terms, link_masses
+from station.jobs.terms import MODELS, TermChoice, choose_terms
 
 METHODS = BASELINES + ("lmlc", "mcs-lmlc")
 WORKSPACE_POSES = 1000
@@ -125,7 +125,7 @@ def calibrate_samples(
     if terms not in MODELS:
         raise ParameterError(MESSAGES["terms"], value=terms, choices=", ".join(MODELS))
     payload = setup.payload if setup is not None else None
-    choice = choose_terms(terms, model, link_masses(robot, payload), unknowns(model))
+    choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
     fit = SOLVERS[method](choice.model, method, select)
     elapsed = time.perf_counter() - t0
     report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms)

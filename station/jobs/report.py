@@ -11,9 +11,9 @@ import numpy as np
 
 from calib.calibrate import Calibration
 from calib.joint_terms import TERM_KINDS
-from calib.kinematics import dh_table
+from calib.kinematics import N_DH, dh_table
 from calib.models import DrawstringSetupEstimate
-from calib.params import DH_NAMES, dh_to_degrees, display_factor
+from calib.params import DH_KEYS, DH_NAMES, dh_to_degrees, display_factor
 from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
 from station.formats.tables import Payload, RobotFile
@@ -177,7 +177,7 @@ def corrected_table(
     ``payload`` the compliances were identified with, where one was given."""
     factor = display_factor(cal.names)
     table = dh_to_degrees(dh_table(cal.x))
-    cols = ("theta_deg", "d_mm", "a_mm", "alpha_deg")
+    cols = DH_KEYS
     joints = []
     for j, joint in enumerate(robot.joints):
         entry = joint.model_dump(exclude={"sigma", *TERM_KINDS}, exclude_none=True)
@@ -201,9 +201,26 @@ def corrected_table(
             "n_samples": len(samples),
             "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
+            **_covariance(cal),
         },
+        **({"controller_hash": robot.controller_hash} if robot.controller_hash else {}),
         "joints": joints,
     }
     if payload is not None and any(key in TERM_KINDS for j in joints for key in j):
         out["payload"] = payload.model_dump()
     return out
+
+
+def _covariance(cal: Calibration) -> dict:
+    """The covariance of the table and of the terms the file carries (the identified ones; a held
+    term is 0 and stays out), display units (deg, mm, urad/(N m)), held parameters considered;
+    a fitted TCP (a tracker's probe) is the setup's and stays out too."""
+    keep = [
+        i
+        for i, k in enumerate(cal.robot_index)
+        if k < N_DH or (cal.names[k].partition(".")[2] in TERM_KINDS and np.isfinite(cal.sigma[k]))
+    ]
+    index = cal.robot_index[keep]
+    factor = display_factor([cal.names[k] for k in index])
+    cov = cal.robot_covariance[np.ix_(keep, keep)] * np.outer(factor, factor)
+    return {"covariance_parameters": [cal.names[k] for k in index], "covariance": cov.tolist()}

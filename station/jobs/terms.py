@@ -17,12 +17,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from calib.calibrate import CalibrationOptions
 from calib.joint_terms import (
     COMPLIANCE,
-    TERM_KINDS,
     JointTerms,
     LinkMasses,
     Term,
@@ -33,10 +30,7 @@ from calib.joint_terms import (
 )
 from calib.kinematics import N_JOINTS, dh_table
 from calib.models import MeasurementModel
-from calib.params import dh_from_degrees
 from calib.selection import FOLDS, TermSelection, select_terms
-from errors import InputError
-from station.formats.tables import Payload, RobotFile
 
 MODELS = ("geometric", "compliance", "full", "auto")
 ARM_JOINTS = (1, 2)
@@ -53,17 +47,6 @@ TOO_FEW = (
     "--model auto: {n} samples leave too few per fold ({per_fold}) for the {needed} unknowns of "
     "every candidate term: the table alone is fitted"
 )
-
-
-def link_masses(robot: RobotFile, payload: Payload | None = None) -> LinkMasses | None:
-    """The robot file's link masses with the payload lumped into link 6; None unless every joint
-    gives ``mass_kg`` and ``com_mm``."""
-    if any(j.mass_kg is None or j.com_mm is None for j in robot.joints):
-        return None
-    links = LinkMasses(
-        np.array([j.mass_kg for j in robot.joints]), np.array([j.com_mm for j in robot.joints])
-    )
-    return links if payload is None else links.with_payload(payload.mass_kg, payload.com_mm)
 
 
 @dataclass(frozen=True)
@@ -129,20 +112,3 @@ def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, u
         )
         held.update(dict.fromkeys((t.name for t in by_label[label].terms), reason))
     return TermChoice(model.with_terms(offer.pool.subset(kept)), selection, held)
-
-
-def robot_terms(robot: RobotFile, where: str) -> tuple[JointTerms, np.ndarray]:
-    """The joint-space terms a robot file carries (a corrected table) and their values, internal
-    units: what compensation applies. A compliance without the link masses is bad input
-    (``InputError`` naming ``where``)."""
-    terms, values = [], []
-    for j, joint in enumerate(robot.joints):
-        for key in TERM_KINDS:
-            value = getattr(joint, key)
-            if value is not None:
-                terms.append(Term(j, key))
-                values.append(np.radians(value) if key.endswith("_deg") else value)
-    links = link_masses(robot, robot.payload)
-    if links is None and any(t.key == COMPLIANCE for t in terms):
-        raise InputError(f"{where}: a compliance_urad_per_Nm needs mass_kg and com_mm on every joint")
-    return JointTerms(terms, dh_from_degrees(robot.table_deg()), links), np.array(values, float)

@@ -19,7 +19,6 @@ from station.cli import main
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot
 from station.jobs import calibration
-from station.jobs.terms import link_masses, robot_terms
 
 ROBOT = Path(__file__).resolve().parents[3] / "configs/robots/ur10.toml"
 HEADER = "sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"
@@ -35,7 +34,7 @@ def write_compliant_set(path: Path, n: int, seed: int) -> None:
     true = nominal + np.column_stack(
         [np.radians(rng.normal(0, 0.15, 6)), rng.normal(0, 0.75, (6, 2)), np.radians(rng.normal(0, 0.15, 6))]
     )
-    terms = JointTerms([Term(j, "compliance_urad_per_Nm") for j in COMPLIANCE], nominal, link_masses(robot))
+    terms = JointTerms([Term(j, "compliance_urad_per_Nm") for j in COMPLIANCE], nominal, robot.link_masses())
     q_links = rng.uniform(-180, 180, (n, 6))
     q = JointError(terms, np.array(list(COMPLIANCE.values()))).readings_deg(q_links)
     p = tcp_position(true, np.radians(q_links), np.array([0.0, 0.0, 100.0]))
@@ -53,24 +52,53 @@ def compliant(tmp_path_factory):
     return folder
 
 
-def test_the_corrected_table_carries_the_terms_and_reads_back(compliant, capsys):
+@pytest.fixture(scope="module")
+def corrected(compliant):
+    """``station calibrate --model compliance`` of the training set: the corrected table and report."""
     out, report = compliant / "c.toml", compliant / "r.json"
     argv = ["calibrate", str(compliant / "train.csv"), "--robot", str(ROBOT), "--model", "compliance"]
     assert main(argv + ["--out", str(out), "--report", str(report)]) == 0
+    return out, report
+
+
+def test_the_corrected_table_carries_the_terms_and_reads_back(corrected, capsys):
+    out, report = corrected
     r = json.loads(report.read_text())
     assert r["model"] == "compliance" and set(r["terms"]) == {
         f"J{j + 1}.compliance_urad_per_Nm" for j in COMPLIANCE
     }
-    assert "terms: J2.compliance_urad_per_Nm" in capsys.readouterr().out
-    corrected = load_robot(out)  # reads back as a robot model
-    terms, values = robot_terms(corrected, str(out))
-    assert terms.names == tuple(r["terms"])
-    np.testing.assert_allclose(values, [e["value"] for e in r["terms"].values()])
+    corrected = load_robot(out)  # reads back as a robot model, with its terms
+    model = corrected.model()
+    assert model.terms.names == tuple(r["terms"])
+    np.testing.assert_allclose(model.term_values, [e["value"] for e in r["terms"].values()])
     for j, truth in COMPLIANCE.items():
         estimate = r["terms"][f"J{j + 1}.compliance_urad_per_Nm"]
         assert abs(estimate["value"] - truth) < 3 * estimate["sigma"]
         assert corrected.joints[j].sigma["compliance_urad_per_Nm"] == estimate["sigma"]
     assert corrected.joints[1].mass_kg == load_robot(ROBOT).joints[1].mass_kg  # the masses travel along
+
+
+def test_compensate_uses_the_terms(corrected, tmp_path, capsys):
+    """The compensated joints bring the corrected model, joints yielding, to the nominal poses; the
+    covariance with the terms reads back for the predicted accuracy."""
+    out, _ = corrected
+    q = np.random.default_rng(3).uniform(-170, 170, (40, 6))
+    program, result = tmp_path / "p.csv", tmp_path / "o.csv"
+    rows = ["q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg"] + [",".join(f"{v:.6f}" for v in qi) for qi in q]
+    program.write_text("\n".join(rows) + "\n")
+    argv = ["compensate", str(program), "--table", str(out), "--robot", str(ROBOT), "--out", str(result)]
+    assert main(argv + ["--report", str(tmp_path / "r.json")]) == 0
+    assert json.loads((tmp_path / "r.json").read_text())["predicted"] is not None
+    lines = result.read_text().splitlines()
+    header = lines[0].split(",")
+    cols = [header.index(f"q{i}_deg") for i in range(1, 7)]
+    body = [line.split(",") for line in lines[1:]]
+    done = np.array([r[header.index("status")] == "ok" for r in body])
+    q_comp = np.radians([[float(r[c]) for c in cols] for r in body])[done]
+    meant = load_robot(ROBOT).model().tool_frames(np.radians(q[done]))[0]
+    model = load_robot(out).model()
+    assert done.sum() > 20 and len(model.terms) == 2
+    np.testing.assert_allclose(model.tool_frames(q_comp)[0], meant, atol=1e-3)
 
 
 def test_auto_never_looks_at_the_holdout(compliant):
@@ -121,8 +149,11 @@ def test_a_compliance_without_masses_is_bad_input(tmp_path):
     path.write_text(
         no_masses.replace("d_mm = 0.0\ntheta_deg", "d_mm = 0.0\ncompliance_urad_per_Nm = 12.0\ntheta_deg", 1)
     )
-    with pytest.raises(InputError, match=f"{path}: a compliance_urad_per_Nm needs mass_kg and com_mm"):
-        robot_terms(load_robot(path), str(path))
+    with pytest.raises(InputError) as err:
+        load_robot(path)
+    assert (
+        str(err.value) == f"{path}: joints.1.compliance_urad_per_Nm needs mass_kg and com_mm on every joint"
+    )
 
 
 def test_without_masses_the_compliance_is_held_with_the_reason(compliant):
