@@ -36,6 +36,16 @@ def test_reads_series_d_as_published():
     np.testing.assert_allclose(series.q_rad[0], [0.934319, -1.79251, 1.5196, 0.272862, 0.934269, -1.57075])
     np.testing.assert_allclose(series.position_mm[0], [2336.7643, -905.76441, -454.63664])
     np.testing.assert_allclose(read_probe_mm(probe_file_for(SERIES_D)), [0.0, 0.0, 109.0], atol=1e-3)
+    assert series.temperature_c[0] == pytest.approx(20.7425, abs=1e-6)
+    assert 20.7 < series.temperature_c.min() and series.temperature_c.max() < 20.9
+
+
+def test_temperature_is_read_where_the_file_has_it(tmp_path):
+    with_t, without = tmp_path / "t.csv", tmp_path / "n.csv"
+    with_t.write_text(HEADER + ";measurement_temperature\n" + ROW + ";21,5\n")
+    without.write_text(HEADER + "\n" + ROW + "\n")
+    assert read_series(with_t).temperature_c.tolist() == [21.5]
+    assert np.isnan(read_series(without).temperature_c).all()
 
 
 @needs_data
