@@ -135,18 +135,17 @@ def workspace_rmse_bound(modes: np.ndarray, probability: float = 0.95) -> float:
 
 def robot_covariance(
     cov_free: np.ndarray,
-    jac_free: np.ndarray,
-    jac_held: np.ndarray,
+    sensitivity: np.ndarray,
     free: np.ndarray,
     held: np.ndarray,
     held_sigma: np.ndarray,
     robot: np.ndarray,
 ) -> np.ndarray:
     """The robot's covariance with its held parameters as "consider" parameters (Schmidt): each
-    held one may be off by its prior, which moves the TCP itself and shifts the fitted ones by
-    ``-cov_free J_free^T J_held`` per unit::
+    held one may be off by its prior, which moves the TCP itself and the fitted ones by
+    ``sensitivity`` per unit (for least squares ``-(A^T A)^-1 A^T J_held``)::
 
-        S = [-cov_free J_free^T J_held]_robot + E_held,     C = C_free + S diag(held_sigma^2) S^T
+        S = [sensitivity]_robot + E_held,     C = C_free + S diag(held_sigma^2) S^T
 
     An exact redundancy (joints 2-3's d) cancels in the TCP; a near one does not: on one gauge line
     a few micrometres of unmodelled effect move the weakly determined directions by millimetres.
@@ -155,10 +154,8 @@ def robot_covariance(
     ----------
     cov_free : ndarray, shape (n, n)
         The fit's covariance of the free unknowns, internal units.
-    jac_free : ndarray, shape (m, n)
-        Whitened, weighted Jacobian of the free unknowns.
-    jac_held : ndarray, shape (m, h)
-        Same for the held robot parameters considered.
+    sensitivity : ndarray, shape (n, h)
+        How far the fit moves each free unknown per unit of each held parameter.
     free : ndarray of int, shape (n,)
         Indices of the free unknowns in the parameter vector.
     held : ndarray of int, shape (h,)
@@ -176,9 +173,9 @@ def robot_covariance(
     free, held, robot = np.asarray(free), np.asarray(held, int), np.asarray(robot)
     in_robot = np.isin(free, robot)
     at_free, at_held = np.searchsorted(robot, free[in_robot]), np.searchsorted(robot, held)
-    sensitivity = np.zeros((robot.size, held.size))
-    sensitivity[at_free] = -(cov_free @ (jac_free.T @ jac_held))[in_robot]
-    sensitivity[at_held, np.arange(held.size)] += 1.0
+    total = np.zeros((robot.size, held.size))
+    total[at_free] = sensitivity[in_robot]
+    total[at_held, np.arange(held.size)] += 1.0
     cov = np.zeros((robot.size, robot.size))
     cov[np.ix_(at_free, at_free)] = cov_free[np.ix_(in_robot, in_robot)]
-    return cov + (sensitivity * held_sigma**2) @ sensitivity.T
+    return cov + (total * held_sigma**2) @ total.T

@@ -75,6 +75,9 @@ class CalibrationOptions:
         Where the robust loss starts to down-weight, in robust standard deviations of each group.
     rank_rtol : float
         Relative size below which a scaled Jacobian column counts as produced by the others.
+    hold_weak : bool
+        Hold a parameter the data determines no better than its prior (True), or estimate it under
+        its prior (False); exact redundancies are held either way.
     lm : LMOptions
         Solver options.
     """
@@ -82,6 +85,7 @@ class CalibrationOptions:
     loss: str = "cauchy"
     loss_threshold: float = 3.0
     rank_rtol: float = 1e-6
+    hold_weak: bool = True
     lm: LMOptions = field(default_factory=LMOptions)
 
 
@@ -178,7 +182,12 @@ def robust_fit(
 
 
 def identify(
-    model: MeasurementModel, x: np.ndarray, free_setup: np.ndarray, gauges: dict[str, str], rtol: float
+    model: MeasurementModel,
+    x: np.ndarray,
+    free_setup: np.ndarray,
+    gauges: dict[str, str],
+    rtol: float,
+    hold_weak: bool = True,
 ) -> tuple[np.ndarray, dict[str, str]]:
     """The robot parameters (table and terms) the data determines at ``x``, and why the others are
     held.
@@ -201,6 +210,9 @@ def identify(
         Parameters held by structure, with reasons.
     rtol : float
         Relative column size below which a scaled column counts as produced by the others.
+    hold_weak : bool
+        Whether to hold what the data determines no better than its prior (else it is estimated,
+        its prior keeping it near where the robot was built).
 
     Returns
     -------
@@ -226,7 +238,9 @@ def identify(
             held[names[k]] = f"the data cannot tell it apart from {partners}"
     kept_robot = [k for k in candidates if kept[k]]
     prior = model.prior_sigma()
-    weak = weakly_determined(jac, np.flatnonzero(free_setup | kept), set(kept_robot), prior)
+    weak = {}
+    if hold_weak:
+        weak = weakly_determined(jac, np.flatnonzero(free_setup | kept), set(kept_robot), prior)
     for k, sigma in weak.items():
         held[names[k]] = weak_reason(
             names[k], sigma, prior[k], "manufacturing tolerance" if k < N_DH else "prior"
@@ -295,7 +309,7 @@ def fit_setup(model: MeasurementModel, options: CalibrationOptions = Calibration
     free_setup = model.setup_mask & ~np.isin(model.names, list(gauges))
     prior = WithPrior(model, model.x0)
     before, _ = robust_fit(prior, model.x0, free_setup, options)
-    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol)
+    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol, options.hold_weak)
     return SetupFit(prior, before, free_setup | table, held)
 
 
@@ -346,23 +360,43 @@ def _scale(result: LMResult, model) -> np.ndarray:
 
 
 def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np.ndarray):
-    """Standard deviations and covariance of the free unknowns and the robot's covariance, each
-    instrument's rows weighted by its fitted noise ``scale`` (per group) and the robust weights."""
-    noise = np.where(model.groups == GROUP_PRIOR, 1.0, scale[model.groups])
-    cov, robot_cov = covariance(model, result.x, free, result.weights / noise)
+    """Standard deviations and covariance of the free unknowns and the robot's covariance, of the
+    fit as it was weighted (stated noise, robust weights), each instrument's rows with the noise
+    the fit found (``scale``, per group)."""
+    cov, robot_cov = covariance(model, result.x, free, result.weights, row_noise(model, scale))
     return np.sqrt(np.diag(cov)), cov, robot_cov
 
 
+def row_noise(model: WithPrior, scale: np.ndarray) -> np.ndarray:
+    """Each row's fitted noise in units of its stated noise (m,): its group's ``scale``; 1 for the
+    prior rows (what was known before measuring does not shrink because the instruments read
+    better than stated)."""
+    return np.where(model.groups == GROUP_PRIOR, 1.0, scale[model.groups])
+
+
 def covariance(
-    model: WithPrior, x: np.ndarray, free: np.ndarray, row_weights: np.ndarray | float = 1.0
+    model: WithPrior,
+    x: np.ndarray,
+    free: np.ndarray,
+    row_weights: np.ndarray | float = 1.0,
+    noise: np.ndarray | float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Covariance of the ``free`` unknowns and of the robot, the held parameters considered.
 
-    The robot here is what the TCP's workspace error depends on (``workspace_mask``): the table,
-    the terms and, where the model fits it (``model.tool_mask``: a tracker's probe), the TCP in the
-    flange frame; so a held parameter the fitted TCP absorbs (any change of the last link, on a
-    tracker) shifts the TCP instead and leaves the measured point where it is. Each held robot
-    parameter counts at its prior (``model.prior_sigma()``).
+    The fit minimised ``|W r|^2`` with ``r`` the rows whitened by their stated noise and ``W`` the
+    robust weights; the rows' actual noise is ``noise`` (stated units). Where the instruments read
+    otherwise than stated, that fit is not the best-weighted one, and its covariance is the
+    sandwich::
+
+        A = W J,   C = (A^T A)^-1 A^T diag(noise^2) A (A^T A)^-1
+
+    (``(A^T A)^-1`` when the noise is as stated). A held parameter moves the fit by
+    ``-(A^T A)^-1 A^T W J_held`` per unit (``accuracy.robot_covariance``). The robot here is what the
+    TCP's workspace error depends on (``workspace_mask``): the table, the terms and, where the model
+    fits it (``model.tool_mask``: a tracker's probe), the TCP in the flange frame; so a held
+    parameter the fitted TCP absorbs (any change of the last link, on a tracker) shifts the TCP
+    instead and leaves the measured point where it is. Each held robot parameter counts at its
+    prior (``model.prior_sigma()``).
 
     Parameters
     ----------
@@ -373,9 +407,9 @@ def covariance(
     free : ndarray of bool, shape (n,)
         The fitted unknowns (k of them).
     row_weights : ndarray, shape (m,), or float
-        Factors on the whitened rows (fitted against stated noise, robust weights); the prior rows
-        keep theirs: what was known before measuring does not shrink because the instruments read
-        better than stated.
+        The fit's robust weights ``W``.
+    noise : ndarray, shape (m,), or float
+        Each row's actual noise in units of its stated noise (``row_noise``).
 
     Returns
     -------
@@ -386,12 +420,14 @@ def covariance(
     """
     _, jac = model.residuals_and_jacobian(x)
     jac = jac * np.broadcast_to(row_weights, model.groups.shape)[:, None]
+    a = jac[:, free]
+    gain = np.linalg.pinv(a.T @ a) @ a.T  # (k, m): the fit's response to its rows
+    spread = gain * np.broadcast_to(noise, model.groups.shape)
+    cov = spread @ spread.T
     held = np.flatnonzero(~model.setup_mask & ~free)
-    cov = np.linalg.pinv(jac[:, free].T @ jac[:, free])
-    held_sigma = model.model.prior_sigma()[held]
     robot = np.flatnonzero(workspace_mask(model))
     robot_cov = robot_covariance(
-        cov, jac[:, free], jac[:, held], np.flatnonzero(free), held, held_sigma, robot
+        cov, -gain @ jac[:, held], np.flatnonzero(free), held, model.model.prior_sigma()[held], robot
     )
     return cov, robot_cov
 

@@ -18,11 +18,18 @@ import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
 from calib.baselines import BASELINES, BaselineOptions, run_method
-from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, fit_setup
+from calib.calibrate import (
+    Calibration,
+    CalibrationOptions,
+    WithPrior,
+    calibrate,
+    covariance,
+    fit_setup,
+    row_noise,
+)
 from calib.kinematics import dh_table
 from calib.metrics import error_metrics
 from calib.models import (
-    GROUP_PRIOR,
     DrawstringFrame,
     DrawstringLineModel,
     DrawstringSamples,
@@ -269,8 +276,7 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
     start = calibrate(model, CalibrationOptions())
     found = run_method(method, model, start.before.x, start.identified, BaselineOptions())
     prior = WithPrior(model, model.x0)
-    noise = np.where(prior.groups == GROUP_PRIOR, 1.0, start.scale[prior.groups])
-    cov, robot_cov = covariance(prior, found.x, start.identified, 1.0 / noise)
+    cov, robot_cov = covariance(prior, found.x, start.identified, 1.0, row_noise(prior, start.scale))
     sigma = np.full(len(model.names), np.nan)
     sigma[start.identified] = np.sqrt(np.diag(cov))
     after = dataclasses.replace(
