@@ -4,8 +4,9 @@ instead, it may move towards the truth. Simulated HSR-JR680 cells, truth known.
 
     python benchmarks/priors_study.py [--worlds 12] [--noise 1.0]
 
-Per world (seeds 200, 201, ...): one line with 200 samples and three lines with 70 each (the
-shipped cell's placements), calibrated twice by the station's pipeline, weakly determined
+Per world (seeds 200, 201, ...): one line with 200 samples, three lines with 70 each (the
+shipped cell's placements) and one line with 40 (few samples: there the data leaves some
+parameters weakly determined), calibrated twice by the station's pipeline, weakly determined
 parameters held or estimated under their prior (exact redundancies held either way). For each:
 the TRUE workspace error (1,000 random poses within the limits, rigid base re-fit), the predicted
 one (``workspace.predicted_rmse_mm``) and their ratio. ``--noise`` scales every instrument's noise
@@ -34,7 +35,7 @@ from station.formats.tables import SetupFile, load_robot  # noqa: E402
 from station.jobs.calibration import build_model, predicted_workspace  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SETTINGS = ((3, 70),)
+SETTINGS = ((1, 200), (3, 70), (1, 40))
 VARIANTS = {"hold": True, "estimate": False}
 
 

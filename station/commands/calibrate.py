@@ -6,7 +6,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from calib.params import DH_NAMES
+from calib.joint_terms import TERM_KINDS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
 from station.formats.base import atomic_write, check_writable, toml_text
@@ -113,9 +113,9 @@ def summary(report: CalibrationReport) -> str:
         for when, m in (("before", before), ("after", after)):
             if m is not None:
                 lines.append(f"{part + ' ' + when:18}{m.rmse_mm:8.3f}{m.mean_mm:8.3f}{m.max_mm:8.3f}")
-    table_held = [h.param for h in report.held if h.param in DH_NAMES]
-    terms_held = len(report.held) - len(table_held)
-    held = ", ".join(table_held) + (f"; {terms_held} terms (reasons in the report)" if terms_held else "")
+    terms_held = sum(1 for h in report.held if h.param.partition(".")[2] in TERM_KINDS)
+    held = ", ".join(h.param for h in report.held if h.param.partition(".")[2] not in TERM_KINDS)
+    held += f"; {terms_held} joint-space terms (reasons in the report)" if terms_held else ""
     lines.append(f"identified {len(report.identified)} table parameters; held: {held}")
     lines += terms_summary(report)
     if report.downweighted:
