@@ -17,11 +17,9 @@ from calib.joint_terms import (
 )
 from calib.kinematics import base_from_frames, tcp_position
 from sim_fixtures.world import Robot
+from station.formats.tables import load_robot
 
-LINKS = LinkMasses(
-    mass_kg=np.array([7.1, 12.7, 4.27, 2.0, 2.0, 0.365]),
-    com_mm=np.array([[21, 0, 27], [380, 0, 158], [240, 0, 68], [0, 7, 18], [0, 7, 18], [0, 0, -26]], float),
-)
+LINKS = load_robot(configs.path("robots/ur10.toml")).link_masses()  # UR's published masses
 
 
 def ur10() -> np.ndarray:

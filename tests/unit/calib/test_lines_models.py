@@ -1,10 +1,12 @@
 import numpy as np
 import pytest
 
-from calib.joint_terms import JointTerms, LinkMasses, compliance_group, harmonic_group
+import configs
+from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.lines import LineReference, fit_line, line_residual
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from sim_fixtures.world import JR680_FILE, Robot
+from station.formats.tables import load_robot
 
 
 def test_line_fit_and_residual_of_points_on_a_line(rng):
@@ -45,11 +47,8 @@ def test_line_residual_derivatives(rng):
         np.testing.assert_allclose(dr_dl[:, :, k], fd, atol=1e-4)
 
 
-# Masses for the gravity torques of the terms (assumed: the paper gives none for the JR680).
-JR680_LINKS = LinkMasses(
-    mass_kg=np.array([40.0, 25.0, 20.0, 8.0, 4.0, 2.0]),
-    com_mm=np.array([[-100, 0, 50], [-300, 0, 0], [-50, 0, 0], [0, 0, -250], [0, 0, 0], [0, 0, 30]], float),
-)
+# any masses will do: the test is of derivatives
+UR10_LINKS = load_robot(configs.path("robots/ur10.toml")).link_masses()
 
 
 def _model(rng, n_lines, with_terms=False):
@@ -57,7 +56,7 @@ def _model(rng, n_lines, with_terms=False):
     groups = [compliance_group(1), compliance_group(2)] + [
         harmonic_group(j, h) for j in range(6) for h in (1, 2)
     ]
-    terms = JointTerms([t for g in groups for t in g.terms], dh, JR680_LINKS) if with_terms else None
+    terms = JointTerms([t for g in groups for t in g.terms], dh, UR10_LINKS) if with_terms else None
     n = 12 * n_lines
     q = np.radians([0, -50, -20, 0, -90, 0] + rng.normal(0, 10, (n, 6)))
     samples = DrawstringSamples(

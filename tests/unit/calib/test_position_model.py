@@ -7,7 +7,7 @@ import pytest
 import configs
 from calib.accuracy import workspace_error_modes
 from calib.calibrate import calibrate
-from calib.joint_terms import JointTerms, LinkMasses, compliance_group, harmonic_group
+from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.kinematics import N_DH, joint_transforms, tcp_position
 from calib.metrics import aligned_errors, error_metrics
 from calib.position import (
@@ -18,6 +18,7 @@ from calib.position import (
     rotation_from_vector,
 )
 from sim_fixtures.world import Robot
+from station.formats.tables import load_robot
 
 SIGMA_MM = 0.02  # tracker noise per axis in the simulation
 
@@ -26,10 +27,7 @@ def ur10() -> np.ndarray:
     return Robot.from_file(configs.path("robots/ur10.toml")).dh
 
 
-LINKS = LinkMasses(
-    mass_kg=np.array([7.1, 12.7, 4.27, 2.0, 2.0, 0.365]),
-    com_mm=np.array([[21, 0, 27], [380, 0, 158], [240, 0, 68], [0, 7, 18], [0, 7, 18], [0, 0, -26]], float),
-)
+LINKS = load_robot(configs.path("robots/ur10.toml")).link_masses()
 
 
 def fd_jacobian(fun, x, h=1e-6):

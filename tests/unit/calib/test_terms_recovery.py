@@ -16,11 +16,9 @@ from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples
 from calib.position import PositionModel, PositionSamples, rotation_from_vector
 from calib.selection import select_terms
 from sim_fixtures.world import JointError, Robot, World
+from station.formats.tables import load_robot
 
-UR10_LINKS = LinkMasses(
-    mass_kg=np.array([7.1, 12.7, 4.27, 2.0, 2.0, 0.365]),
-    com_mm=np.array([[21, 0, 27], [380, 0, 158], [240, 0, 68], [0, 7, 18], [0, 7, 18], [0, 0, -26]], float),
-)
+UR10_LINKS = load_robot(configs.path("robots/ur10.toml")).link_masses()
 # Assumed masses (the paper gives none for the JR680): what matters is a gravity torque to yield under.
 JR680_LINKS = LinkMasses(
     mass_kg=np.array([40.0, 25.0, 20.0, 8.0, 4.0, 2.0]),
