@@ -1,5 +1,6 @@
-"""Progress of a session for the operator: a bar on a terminal, one plain line per sample otherwise;
-both carry the last live error and the running calibration's predicted workspace error."""
+"""Progress of a session for the operator: a bar on a terminal, one plain line per sample otherwise
+(or only the messages); both carry the last live error and the running calibration's predicted
+workspace error."""
 
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ class Progress:
     """Samples taken of ``total``, capture rate (samples/s), the last live error (mm) and the
     latest predicted workspace error (mm, with its 95 % bound)."""
 
-    def __init__(self, total: int, done: int = 0, stream=None, width: int = 30):
+    def __init__(self, total: int, done: int = 0, stream=None, width: int = 30, every_sample: bool = True):
         self.stream = stream or sys.stdout
         self.tty = self.stream.isatty()
+        self.every_sample = every_sample
         self.total, self.done, self.width = total, done, width
         self.start_done, self.t0 = done, time.monotonic()
         self.last = ""
@@ -33,6 +35,8 @@ class Progress:
         error = _error_text(live)
         if self.tty:
             self._bar(error)
+            return
+        if not self.every_sample:
             return
         predicted = ""
         if self.workspace != self._shown:

@@ -23,6 +23,7 @@ from station.formats.base import validate
 from station.formats.plan import Plan, load_plan
 from station.formats.session_folder import SessionFolder
 from station.formats.tables import RobotFile, SetupFile, load_robot, load_setup
+from station.jobs.running import Refit
 from station.view.live import LiveView
 
 WORKER_START_S = 30.0  # the session waits this long at most for the running calibration's worker
@@ -120,6 +121,18 @@ def open_devices(cfg: StationConfig) -> Devices:
     return devices
 
 
+@dataclass
+class SessionRun:
+    """How a session run ended: its ``state``, the ``view`` (open: the caller closes it), the
+    running calibration's ``refit`` on every sample (None if it never answered) and the largest
+    live error [mm] of the run (None before any prediction)."""
+
+    state: State
+    view: LiveView
+    refit: Refit | None
+    worst_error_mm: float | None
+
+
 def run(
     inputs: SessionInputs,
     *,
@@ -127,18 +140,22 @@ def run(
     web: str | None = None,
     until_mm: float | None = None,
     stream=None,
-) -> tuple[State, LiveView]:
-    """Run the session to its end; the live view stays open for a calibration to log into (the
-    caller closes it). ``web`` is the address to serve the web viewer on; ``until_mm`` ends the
-    session once the running calibration's 95 % workspace bound reaches it. Devices are opened
-    first: an unreachable one fails before anything else."""
+    every_sample: bool = True,
+) -> SessionRun:
+    """Run the session to its end; the live view stays open for a calibration to log into. ``web``
+    is the address to serve the web viewer on; ``until_mm`` ends the session once the running
+    calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
+    progress to the messages. Devices are opened first: an unreachable one fails before anything
+    else."""
     worker = FitWorker(inputs.robot, inputs.setup)  # starts while the devices open
     view = None
     try:
         devices = open_devices(inputs.cfg)
         try:
             view = LiveView(inputs.folder.rrd, viewer=viewer, web=web, resume=bool(inputs.folder.rows))
-            state = _run_session(inputs, devices, view, worker, until_mm, stream)
+            progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream, every_sample=every_sample)
+            live = _Live(inputs, worker, view, progress, until_mm)
+            state = _run_session(inputs, devices, live)
         finally:
             devices.close()
     except BaseException:
@@ -148,7 +165,7 @@ def run(
     finally:
         worker.close()
     inputs.folder.update_header(last_state=state.value, samples=len(inputs.folder.rows))
-    return state, view
+    return SessionRun(state, view, live.running.latest, live.worst_mm)
 
 
 class _Live:
@@ -160,6 +177,7 @@ class _Live:
         self.view, self.progress = view, progress
         self.sigma_mm = inputs.setup.drawstring.sigma_mm
         self.ids: list[int] = []  # sample ids in the order the running calibration got them
+        self.worst_mm: float | None = None
         self.session: Session | None = None
         listener = LiveListener(self.refit, self.message, self.reached)
         self.running = RunningCalibration(
@@ -175,6 +193,8 @@ class _Live:
         tcp = self.running.nominal_tcp_mm(cap.q_deg)[0]
         self.view.sample(row["sample"], row["t_s"], tcp, cap.length_mm, cap.dial_mm, live)
         self.progress.sample(row, live)
+        if live.error_mm is not None:
+            self.worst_mm = max(abs(live.error_mm), self.worst_mm or 0.0)
         if live.suspect:
             self.message(
                 f"sample {row['sample']}: reading {live.error_mm:+.3f} mm off the running calibration "
@@ -208,12 +228,10 @@ class _Live:
             self.running.poll(left)
 
 
-def _run_session(inputs: SessionInputs, devices: Devices, view: LiveView, worker, until_mm, stream) -> State:
+def _run_session(inputs: SessionInputs, devices: Devices, live: _Live) -> State:
     """The session with its running calibration, live view and progress wired to it; Ctrl-C stops
     it. A resumed session's samples are refitted first, so its next capture is judged at once."""
-    progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream=stream)
-    live = _Live(inputs, worker, view, progress, until_mm)
-    plan = inputs.plan
+    view, progress, worker, plan = live.view, live.progress, live.running.worker, inputs.plan
     view.cell(
         inputs.setup.drawstring.anchor_mm, line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line)
     )

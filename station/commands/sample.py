@@ -65,8 +65,9 @@ def run(args) -> int:
     if args.until_mm:
         inputs.folder.update_header(until_mm=args.until_mm)
     web = (args.web_bind or "127.0.0.1") if args.web or args.web_bind else None
-    state, view = runner.run(inputs, viewer=args.viewer, web=web, until_mm=until_mm)
-    view.close()
+    outcome = runner.run(inputs, viewer=args.viewer, web=web, until_mm=until_mm)
+    outcome.view.close()
+    state = outcome.state
     folder = inputs.folder
     print(
         f"{state.value}: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "

@@ -99,8 +99,9 @@ def finished(tmp_path_factory):
     messages = []
     with simulated(config):
         inputs = runner.new_session(tmp / "sess", config, None)
-        state, view = runner.run(inputs, stream=_Sink(messages))
-        view.close()
+        done = runner.run(inputs, stream=_Sink(messages))
+        done.view.close()
+        state = done.state
     assert state is State.DONE
     return tmp / "sess", messages
 
@@ -152,8 +153,9 @@ def test_a_designed_plan_is_walked_and_measured_target_by_target(tmp_path):
     with simulated(config, plan=(plan.q_deg, plan.line)):
         inputs = runner.new_session(tmp_path / "sess", config, plan_path)
         messages = []
-        state, view = runner.run(inputs, stream=_Sink(messages))
-        view.close()
+        done = runner.run(inputs, stream=_Sink(messages))
+        done.view.close()
+        state = done.state
     assert state is State.DONE, messages
     rows = rows_of(tmp_path / "sess")
     targets = np.array([int(r["target"]) for r in rows])
@@ -215,9 +217,9 @@ def test_sigkill_mid_session_then_resume_without_torn_or_duplicate_rows(tmp_path
             fh.write("99,7,2,1.0,2.0")  # a row torn by a power cut mid-write
         inputs = runner.resume_session(folder, None)
         assert len(inputs.folder.rows) == taken
-        state, view = runner.run(inputs, stream=_Sink([]))
-        view.close()
-    assert state is State.DONE
+        done = runner.run(inputs, stream=_Sink([]))
+        done.view.close()
+    assert done.state is State.DONE
     rows = rows_of(folder)
     assert [int(r["sample"]) for r in rows] == list(range(N_TARGETS))
     assert sorted(int(r["target"]) for r in rows) == list(range(N_TARGETS))
@@ -250,11 +252,11 @@ def test_unplugged_dial_suspends_the_session_which_continues_after_replug(tmp_pa
         assert len(inputs.folder.rows) == unplugged_rows  # nothing recorded while the dial is gone
         sim.devices["dial"].replug()
         worker.join(30)
-    state, view = result["out"]
-    view.close()
+    done = result["out"]
+    done.view.close()
     text = "".join(messages)
     assert "suspended: dial not answering" in text and "resumed" in text
-    assert state is State.DONE and len(rows_of(tmp_path / "sess")) == N_TARGETS
+    assert done.state is State.DONE and len(rows_of(tmp_path / "sess")) == N_TARGETS
 
 
 def test_robot_that_never_settles_times_out_with_a_clear_message(tmp_path, capsys):
