@@ -10,7 +10,18 @@ from errors import DeviceError, InputError
 
 # One module per command; each exposes ``register(subparsers)``, which adds its parser with
 # ``func`` set to the module's one entry ``run(args)`` (returns the exit code).
-COMMANDS = ("demo", "calibrate", "sim", "read", "import-ipa", "sample", "compare", "plan")
+COMMANDS = (
+    "demo",
+    "calibrate",
+    "sim",
+    "read",
+    "import-ipa",
+    "sample",
+    "compare",
+    "plan",
+    "export",
+    "compensate",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

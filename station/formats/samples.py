@@ -36,6 +36,31 @@ class Samples:
 def load_samples(path) -> Samples:
     """Read a contract sample CSV (columns in any order, unknown columns ignored)."""
     path = Path(path)
+    header, body = read_csv(path, "samples")
+    kind = _kind(path, header)
+    missing = [c for c in Q_COLUMNS if c not in header]
+    if missing:
+        raise InputError(f"{path}: missing column {missing[0]}")
+    if not body:
+        raise InputError(f"{path}: no samples after the header row")
+    col = {name: header.index(name) for name in header}
+    q = parse_numbers(path, body, [col[c] for c in Q_COLUMNS], Q_COLUMNS)
+    if kind == "drawstring":
+        measured = parse_numbers(path, body, [col["length_mm"]], ["length_mm"])[:, 0]
+    else:
+        measured = parse_numbers(path, body, [col[c] for c in XYZ_COLUMNS], XYZ_COLUMNS)
+    dial = (
+        parse_numbers(path, body, [col["dial_mm"]], ["dial_mm"], allow_empty=True)[:, 0]
+        if "dial_mm" in col
+        else None
+    )
+    line = _line_ids(path, body, col.get("line"))
+    n = len(body)
+    return Samples(str(path), kind, q, measured, np.full(n, np.nan) if dial is None else dial, line)
+
+
+def read_csv(path: Path, what: str) -> tuple[list[str], list[list[str]]]:
+    """The header (stripped names) and the non-blank rows of a CSV file of ``what``."""
     try:
         with path.open(newline="") as fh:
             rows = list(csv.reader(fh))
@@ -47,29 +72,8 @@ def load_samples(path) -> Samples:
         raise InputError(f"{path}: not a text CSV file") from None
     rows = [r for r in rows if any(cell.strip() for cell in r)]
     if not rows:
-        raise InputError(f"{path}: empty file, expected a header row and samples")
-    header = [h.strip() for h in rows[0]]
-    kind = _kind(path, header)
-    missing = [c for c in Q_COLUMNS if c not in header]
-    if missing:
-        raise InputError(f"{path}: missing column {missing[0]}")
-    if len(rows) == 1:
-        raise InputError(f"{path}: no samples after the header row")
-    col = {name: header.index(name) for name in header}
-    body = rows[1:]
-    q = _numbers(path, body, [col[c] for c in Q_COLUMNS], Q_COLUMNS)
-    if kind == "drawstring":
-        measured = _numbers(path, body, [col["length_mm"]], ["length_mm"])[:, 0]
-    else:
-        measured = _numbers(path, body, [col[c] for c in XYZ_COLUMNS], XYZ_COLUMNS)
-    dial = (
-        _numbers(path, body, [col["dial_mm"]], ["dial_mm"], allow_empty=True)[:, 0]
-        if "dial_mm" in col
-        else None
-    )
-    line = _line_ids(path, body, col.get("line"))
-    n = len(body)
-    return Samples(str(path), kind, q, measured, np.full(n, np.nan) if dial is None else dial, line)
+        raise InputError(f"{path}: empty file, expected a header row and {what}")
+    return [h.strip() for h in rows[0]], rows[1:]
 
 
 def _kind(path: Path, header: list[str]) -> str:
@@ -85,7 +89,9 @@ def _kind(path: Path, header: list[str]) -> str:
     return "drawstring" if has_len else "position"
 
 
-def _numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
+def parse_numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
+    """(N, len(cols)) finite numbers from columns ``cols`` (named ``names``) of the rows ``body``; a
+    bad cell is an InputError naming the file, the row and the column."""
     out = np.empty((len(body), len(cols)))
     for i, row in enumerate(body):
         for j, (c, name) in enumerate(zip(cols, names, strict=True)):

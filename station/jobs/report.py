@@ -12,7 +12,7 @@ import numpy as np
 from calib.calibrate import Calibration
 from calib.kinematics import N_DH, dh_table
 from calib.models import DrawstringSetupEstimate
-from calib.params import DH_NAMES, dh_to_degrees, display_factor
+from calib.params import DH_KEYS, DH_NAMES, dh_to_degrees, display_factor
 from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile
@@ -133,8 +133,9 @@ def _plain(value):
 def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:
     """The robot file with the calibrated table, per-joint sigmas and provenance (TOML-ready)."""
     table = dh_to_degrees(dh_table(cal.x))
-    sigma = (cal.sigma[:N_DH] * display_factor(DH_NAMES)).reshape(6, 4)
-    cols = ("theta_deg", "d_mm", "a_mm", "alpha_deg")
+    factor = display_factor(DH_NAMES)
+    sigma = (cal.sigma[:N_DH] * factor).reshape(6, 4)
+    cols = DH_KEYS
     joints = []
     for j, joint in enumerate(robot.joints):
         entry = joint.model_dump(exclude={"sigma"})
@@ -151,6 +152,10 @@ def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method
             "n_samples": len(samples),
             "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
+            # the table's covariance in display units (deg, mm), held parameters considered
+            "covariance_parameters": list(DH_NAMES),
+            "covariance": (cal.table_covariance * np.outer(factor, factor)).tolist(),
         },
+        **({"controller_hash": robot.controller_hash} if robot.controller_hash else {}),
         "joints": joints,
     }

@@ -1,0 +1,73 @@
+"""``station compensate``: rewrite a joint program so the calibrated robot reaches what it meant."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from calib.compensation import CompensationOptions
+from station.formats.base import atomic_write, check_writable
+from station.formats.program import load_program
+from station.formats.tables import check_same_robot, check_same_tool, load_robot
+from station.jobs import compensate as compensation
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "compensate", help="rewrite a program's joints so the calibrated robot reaches the nominal poses"
+    )
+    p.add_argument("program", type=Path, help="program CSV: q1_deg..q6_deg per row, other columns kept")
+    p.add_argument(
+        "--table", type=Path, required=True, help="calibrated robot TOML (station calibrate --out)"
+    )
+    p.add_argument(
+        "--robot", type=Path, required=True, help="nominal robot TOML the program was written with"
+    )
+    p.add_argument("--out", type=Path, required=True, help="compensated program CSV to write")
+    p.add_argument("--report", type=Path, help="report JSON to write")
+    p.add_argument(
+        "--wrist-margin-deg",
+        type=_angle,
+        default=10.0,
+        metavar="DEG",
+        help="rows whose axes 4 and 6 are closer than this keep their joints (default 10)",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    check_writable(args.out, "--out")
+    if args.report:
+        check_writable(args.report, "--report")
+    program = load_program(args.program)
+    table, nominal = load_robot(args.table), load_robot(args.robot)
+    check_same_robot(table, str(args.table), nominal, str(args.robot))
+    check_same_tool(table, str(args.table), nominal, str(args.robot))
+    table.table_covariance(str(args.table))  # a malformed covariance is bad input before any work
+    outcome = compensation.run(
+        program,
+        table,
+        nominal,
+        table_where=str(args.table),
+        nominal_where=str(args.robot),
+        options=CompensationOptions(wrist_margin=np.radians(args.wrist_margin_deg)),
+    )
+    atomic_write(args.out, outcome.text)
+    if args.report:
+        atomic_write(args.report, json.dumps(outcome.report, indent=2) + "\n")
+    print(compensation.summary(outcome.report))
+    print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+    return 0
+
+
+def _angle(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= value < 90.0:
+        raise argparse.ArgumentTypeError(f"{value:g} must lie in [0, 90) deg")
+    return value

@@ -1,0 +1,1 @@
+"""The station's files: robot and setup tables, samples, plans, session folders, the IPA series."""

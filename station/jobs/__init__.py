@@ -1,0 +1,1 @@
+"""The jobs behind the commands: calibration service and report, method comparison, plan design."""

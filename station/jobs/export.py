@@ -1,0 +1,105 @@
+"""``station export``: a robot model (a corrected table) where robots use it, and what the user must
+know about it (notes, printed and, where the format has comments, written in the file)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.frames import joint_origins, rpy_from_matrix
+from station.formats.exports import Chain, Origin, dh_csv_text, ur_kinematics_yaml, urdf_text
+from station.formats.tables import RobotFile
+
+FORMATS = ("urdf", "ur-yaml", "dh-csv")
+NO_HASH = "unknown"
+DH_CSV_ORDER = [3, 2, 1, 0]  # RobotFile.table_deg's theta, d, a, alpha -> alpha, a, d, theta
+
+
+@dataclass(frozen=True)
+class Export:
+    """The file's ``text`` and the ``notes`` to print."""
+
+    text: str
+    notes: list[str]
+
+
+def export(
+    robot: RobotFile, fmt: str, *, source: str, nominal: RobotFile | None = None, hash_: str | None = None
+) -> Export:
+    """``robot`` (read from ``source``) in format ``fmt``; ``nominal`` gives the dh-csv deltas and
+    a controller hash the robot file lacks; ``hash_`` overrides both."""
+    if fmt == "urdf":
+        return _urdf(robot, source)
+    if fmt == "ur-yaml":
+        known = robot.controller_hash or (nominal.controller_hash if nominal else None)
+        return _ur_yaml(robot, source, hash_ or known)
+    nominal_table = None if nominal is None else nominal.table_deg()[:, DH_CSV_ORDER]
+    table = robot.table_deg()[:, DH_CSV_ORDER]
+    deltas = None if nominal_table is None else table - nominal_table
+    notes = [] if nominal is None else ["delta_* columns: this table minus the nominal one"]
+    return Export(dh_csv_text(table, deltas), notes)
+
+
+def provenance(robot: RobotFile, source: str) -> str:
+    """One line: where the model comes from."""
+    cal = robot.calibration or {}
+    how = f", calibrated {cal['date_utc']} ({cal.get('method', '?')})" if "date_utc" in cal else ""
+    return f"{robot.name} from {source}{how}; written by station export"
+
+
+def _origins(robot: RobotFile) -> list[Origin]:
+    """The joint origins ``O_1 .. O_7`` of ``calib.frames`` in metres and URDF rpy."""
+    return [
+        Origin(tuple(o[:3, 3] / 1000.0), tuple(rpy_from_matrix(o[:3, :3])))
+        for o in joint_origins(robot.model().dh)
+    ]
+
+
+def _urdf(robot: RobotFile, source: str) -> Export:
+    origins = _origins(robot)
+    tool = np.asarray(robot.tool_mm)
+    chain = Chain(
+        robot.name,
+        tuple(origins[:6]),
+        robot.model().limits,
+        origins[6],
+        Origin(tuple(tool / 1000.0), (0.0, 0.0, 0.0)),
+    )
+    comments = [
+        provenance(robot, source),
+        "joint_i takes the controller's reading of joint i [rad]: the table's offsets are in the origins",
+        "base_link is the robot's base frame (D-H frame 0); flange is the D-H flange frame; "
+        f"tcp is tool_mm = {list(robot.tool_mm)} mm in it",
+        "geometry only (no inertia, meshes, effort or velocity limits: set those from the datasheet)",
+    ]
+    return Export(urdf_text(chain, comments), [])
+
+
+def _ur_yaml(robot: RobotFile, source: str, hash_: str | None) -> Export:
+    origins = _origins(robot)
+    dh = robot.model().dh
+    notes = [
+        "the controller keeps its factory model "
+        f"(hash {hash_ or NO_HASH}): its own Cartesian moves and poses (movel, pose targets, the "
+        "pendant's TCP readout) are not corrected; run joint targets computed with this file, or pass "
+        "Cartesian programs through `station compensate`"
+    ]
+    if hash_ is None:
+        notes.append(
+            f"no controller hash (--hash, or controller_hash in the robot TOML): wrote hash {NO_HASH!r}; "
+            "the UR driver will report a calibration mismatch; take it from the kinematics file "
+            "ur_calibration extracts from the controller"
+        )
+    if abs(dh[5, 2]) > 1e-6 or abs(dh[5, 3]) > 1e-9:
+        notes.append(
+            f"the table puts the flange {dh[5, 2]:.4f} mm along x of wrist_3_link, turned "
+            f"{np.degrees(dh[5, 3]):.5f} deg about it (J6 a, alpha): UR's description fixes tool0 on "
+            "wrist_3_link, so add this offset to the TCP you define for the tool"
+        )
+    if np.any(np.asarray(robot.tool_mm) != 0.0):
+        notes.append(
+            f"tool_mm = {list(robot.tool_mm)} mm is a TCP: define it on the controller or end effector"
+        )
+    text = ur_kinematics_yaml(tuple(origins[:6]), hash_ or NO_HASH, [provenance(robot, source), *notes])
+    return Export(text, notes)

@@ -1,0 +1,1 @@
+"""What people look at: the Rerun live view and the PNG plots."""
