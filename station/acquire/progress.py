@@ -12,12 +12,21 @@ class Progress:
     """Samples taken of ``total``, capture rate (samples/s), the last live error (mm) and the
     latest predicted workspace error (mm, with its 95 % bound)."""
 
-    def __init__(self, total: int, done: int = 0, stream=None, width: int = 30, every_sample: bool = True):
+    def __init__(
+        self,
+        total: int,
+        done: int = 0,
+        stream=None,
+        width: int = 30,
+        every_sample: bool = True,
+        clock=time.monotonic,
+    ):
         self.stream = stream or sys.stdout
+        self.clock = clock
         self.tty = self.stream.isatty()
         self.every_sample = every_sample
         self.total, self.done, self.width = total, done, width
-        self.start_done, self.t0 = done, time.monotonic()
+        self.start_done, self.t0 = done, clock()
         self.last = ""
         self.workspace = ""  # the latest prediction, as shown
         self._shown = ""  # what the last plain line showed of it
@@ -25,7 +34,7 @@ class Progress:
 
     @property
     def rate(self) -> float:
-        elapsed = time.monotonic() - self.t0
+        elapsed = self.clock() - self.t0
         return (self.done - self.start_done) / elapsed if elapsed > 0 else 0.0
 
     def sample(self, row: dict, live) -> None:

@@ -154,7 +154,7 @@ def run(
         try:
             view = LiveView(inputs.folder.rrd, viewer=viewer, web=web, resume=bool(inputs.folder.rows))
             progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream, every_sample=every_sample)
-            live = _Live(inputs, worker, view, progress, until_mm)
+            live = Live(inputs.robot, inputs.setup, inputs.plan.line, worker, view, progress, until_mm)
             state = _run_session(inputs, devices, live)
         finally:
             devices.close()
@@ -168,21 +168,23 @@ def run(
     return SessionRun(state, view, live.running.latest, live.worst_mm)
 
 
-class _Live:
-    """The running calibration wired to the session, the view and the progress line."""
+class Live:
+    """The running calibration of a session on ``robot`` and ``setup`` following a plan with gauge
+    lines ``plan_lines``, refitting with ``worker``, wired to the session (:meth:`listener`), the
+    view and the progress line; ``until_mm`` as in :func:`run`."""
 
-    def __init__(
-        self, inputs: SessionInputs, worker: FitWorker, view: LiveView, progress: Progress, until_mm
-    ):
+    def __init__(self, robot, setup, plan_lines, worker, view: LiveView, progress: Progress, until_mm):
         self.view, self.progress = view, progress
-        self.sigma_mm = inputs.setup.drawstring.sigma_mm
         self.ids: list[int] = []  # sample ids in the order the running calibration got them
         self.worst_mm: float | None = None
         self.session: Session | None = None
         listener = LiveListener(self.refit, self.message, self.reached)
-        self.running = RunningCalibration(
-            inputs.robot, inputs.setup, worker, inputs.plan.line, listener, until_mm
-        )
+        self.running = RunningCalibration(robot, setup, worker, plan_lines, listener, until_mm)
+
+    def listener(self) -> Listener:
+        """The session's listener: each sample judged and handed on; the worker looked in on at
+        every checkpoint, never waited for."""
+        return Listener(self.sample, self.message, self.running.poll)
 
     def add(self, row: dict, q_deg, length_mm: float, dial_mm: float) -> None:
         self.ids.append(int(row["sample"]))
@@ -228,7 +230,7 @@ class _Live:
             self.running.poll(left)
 
 
-def _run_session(inputs: SessionInputs, devices: Devices, live: _Live) -> State:
+def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     """The session with its running calibration, live view and progress wired to it; Ctrl-C stops
     it. A resumed session's samples are refitted first, so its next capture is judged at once."""
     view, progress, worker, plan = live.view, live.progress, live.running.worker, inputs.plan
@@ -244,8 +246,7 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: _Live) -> State:
         live.add(row, q, float(row["length_mm"]), dial)
     live.drain(RESUME_FIT_S)
     rules = Rules.from_config(inputs.cfg.session, inputs.cfg.time_scale)
-    listener = Listener(live.sample, live.message, live.running.poll)
-    session = live.session = Session(inputs.folder, plan, devices, rules, listener)
+    session = live.session = Session(inputs.folder, plan, devices, rules, live.listener())
     if live.running.goal_met:
         session.finish("accuracy reached")
     in_main = threading.current_thread() is threading.main_thread()

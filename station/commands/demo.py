@@ -37,6 +37,7 @@ from station.formats.plan import Plan
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot, load_setup
 from station.jobs import calibration, planning
+from station.jobs import export as exporting
 from station.jobs.report import corrected_table
 
 TIME_SCALE = 40.0
@@ -229,9 +230,13 @@ def _one_line(report) -> str:
 
 
 def _export(out: Path) -> None:
-    """Step 5: the corrected table as URDF beside it (``station export``, issue 12)."""
-    # EXPORT: the single call site of step 5, added once station/commands/export.py lands on main
-    print("export:    not yet: `station export` (issue 12) writes the URDF once it lands", flush=True)
+    """Step 5: the corrected table as URDF beside it (what ``station export --format urdf`` writes)."""
+    table = out / "corrected.toml"
+    urdf = out / "corrected.urdf"
+    result = exporting.export(load_robot(table), "urdf", source=str(table))
+    atomic_write(urdf, result.text)
+    notes = "".join(f"; note: {n}" for n in result.notes)
+    print(f"export:    {urdf} (URDF: base_link -> tcp, the corrected joint origins){notes}", flush=True)
 
 
 def truth_line(world, outcome) -> str:
