@@ -33,6 +33,7 @@ from station.jobs.planning import NextPlacement, next_placement
 from station.jobs.running import Refit, SessionSamples, refit
 
 SUSPECT_SIGMAS = 5.0
+WORKER_NICE = 10
 SATURATION_SAMPLES, SATURATION_GAIN = 10, 0.05
 
 
@@ -64,19 +65,17 @@ def _serve(conn, robot: RobotFile, setup: SetupFile) -> None:
 
 
 def _yield_cpu() -> None:
-    """Run on CPU time nothing else wants. On Linux: the idle scheduling class, in an autogroup of
-    its own at the lowest weight (in the session's group, the fit's CPU time would count against
-    the capture path's share of a shared machine); elsewhere the lowest niceness."""
+    """Leave the CPU to the capture path: niceness ``WORKER_NICE`` and, on Linux, an autogroup of
+    its own at that niceness (in the session's autogroup, the fit's CPU time counts against the
+    capture path's share of a loaded machine). Not the idle class: a browser showing the live view
+    on the same machine would starve the running calibration."""
     try:
         os.setsid()
         with open("/proc/self/autogroup", "w") as fh:
-            fh.write("19")
+            fh.write(str(WORKER_NICE))
     except (AttributeError, OSError):
         pass
-    try:
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):
-        os.nice(19)
+    os.nice(WORKER_NICE)
 
 
 class FitWorker:

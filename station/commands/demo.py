@@ -41,6 +41,7 @@ from station.jobs import export as exporting
 from station.jobs.report import corrected_table
 
 TIME_SCALE = 40.0
+START_S = 4.0  # the simulated robot waits at its first target while the session starts
 HOLDOUT_PER_LINE = 12
 CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial": "/tmp/station-sim/dial"}
 
@@ -71,7 +72,7 @@ def run(args) -> int:
     config_path = out / "station.toml"
     atomic_write(config_path, tomli_w.dumps(raw))
     plan = _plan(out, config_path, args.plan_size)
-    sim = SimStation(StationConfig.model_validate(raw), plan=(plan.q_deg, plan.line))
+    sim = SimStation(StationConfig.model_validate(raw), plan=(plan.q_deg, plan.line), start_delay_s=START_S)
     try:
         sim.start()
     except (OSError, RuntimeError) as exc:

@@ -71,6 +71,7 @@ def blueprint() -> rrb.Blueprint:
             rrb.Tabs(live, readings, calibration),
             column_shares=[2, 3],
         ),
+        rrb.TimePanel(timeline="sample", state="collapsed"),
         collapse_panels=True,
     )
 
@@ -174,6 +175,7 @@ class LiveView:
         """The running calibration's predicted workspace error [mm] and its 95 % bound after a refit
         on the samples up to ``index``."""
         self.rec.set_time("sample", sequence=index)
+        self.rec.disable_timeline("session_time")  # a refit answers at no sample's time
         self.rec.log("live/predicted_workspace_mm", rr.Scalars(predicted_mm))
         self.rec.log("live/predicted_workspace_95_mm", rr.Scalars(bound_95_mm))
 
