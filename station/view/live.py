@@ -86,7 +86,7 @@ class LiveView:
         self.rec = rr.RecordingStream("station", recording_id=f"session-{rrd.parent.name}")
         self.notes: list[str] = []
         self.web: WebViewer | None = None
-        self._previous = rrd.with_name(rrd.name + ".previous")
+        self._previous = rrd.with_name(rrd.stem + ".previous.rrd")  # loaders go by extension
         if resume and rrd.exists():
             os.replace(rrd, self._previous)  # the new sink truncates rrd: keep what it held
         sinks = [rr.FileSink(str(rrd)), *self._live_sinks(viewer, web)]
