@@ -30,6 +30,7 @@ from calib.kinematics import tcp_position
 from calib.params import dh_from_degrees
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.planning import NextPlacement, next_placement
+from station.jobs.planning import vector_text as _vec
 from station.jobs.running import Refit, SessionSamples, refit
 
 SUSPECT_SIGMAS = 5.0
@@ -299,10 +300,6 @@ class RunningCalibration:
 def _counts(line: np.ndarray) -> dict[int, int]:
     ids, counts = np.unique(line, return_counts=True)
     return {int(i): int(c) for i, c in zip(ids, counts, strict=True)}
-
-
-def _vec(v, digits: int) -> str:
-    return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"
 
 
 def _planned_line_text(setup: SetupFile, lid: int) -> str:

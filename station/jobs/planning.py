@@ -197,8 +197,9 @@ def summary(design_: Design) -> str:
     for k, nxt in enumerate(r["next"][:3]):
         lead = "next placement" if k == 0 else "           or"
         out.append(
-            f"{lead}: point {_vec(nxt['point_mm'], 0)} mm, direction {_vec(nxt['direction'], 2)}, tool "
-            f"approach {_vec(nxt['approach'], 2)} -> {_fmt(nxt)} with the present lines"
+            f"{lead}: point {vector_text(nxt['point_mm'], 0)} mm, "
+            f"direction {vector_text(nxt['direction'], 2)}, "
+            f"tool approach {vector_text(nxt['approach'], 2)} -> {_fmt(nxt)} with the present lines"
         )
     return "\n".join(out)
 
@@ -276,7 +277,8 @@ def _fmt(promise: dict) -> str:
     return f"{promise['predicted_rmse_mm']:.3f} mm (95 %: below {promise['predicted_rmse_95_mm']:.3f} mm)"
 
 
-def _vec(v, digits: int) -> str:
+def vector_text(v, digits: int) -> str:
+    """A vector as a person reads it: ``[1.00, 0.00, 0.00]``."""
     return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"
 
 

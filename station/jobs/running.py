@@ -81,7 +81,7 @@ class Refit:
         that the model's residuals are divided by (contract)."""
         row = SessionSamples(np.atleast_2d(q_deg), np.zeros(1), np.full(1, np.nan), np.full(1, -1))
         one = self.model.with_samples(model_samples(row.as_samples("prediction")))
-        r, jac = one.residuals_and_jacobian(self.x)
+        _, jac = one.residuals_and_jacobian(self.x)
         model_mm = -float(one.row_error_mm(self.x)[0])  # reading 0: the error is minus the model
         gradient = sigma_mm * jac[0, self.free]  # the first residual is (model - reading) / sigma
         return model_mm, float(np.sqrt(max(gradient @ self.covariance @ gradient, 0.0)))

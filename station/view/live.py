@@ -108,7 +108,11 @@ class LiveView:
             except (OSError, RuntimeError) as exc:
                 self.notes.append(f"viewer not opened: {exc}")
         if web is not None:
-            self.web = WebViewer(web)
+            try:
+                self.web = WebViewer(web)
+            except (OSError, RuntimeError) as exc:  # the session goes on; session.rrd has it all
+                self.notes.append(f"web viewer not started: {exc}")
+                return sinks
             sinks.append(rr.GrpcSink(self.web.sink_url))
             self.notes.append(f"live view: {self.web.url}")
             if web not in LOOPBACK:
