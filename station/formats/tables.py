@@ -145,5 +145,3 @@ def load_robot(path) -> RobotFile:
 
 def load_setup(path) -> SetupFile:
     return validate(SetupFile, read_toml(path), str(path))
-
-
