@@ -14,6 +14,7 @@ the simulated true robot's pose implies at the instant they are asked:
 from __future__ import annotations
 
 import functools
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -81,7 +82,8 @@ class SimStation:
     """The simulated devices of a station configuration ``cfg`` (its device sections from
     ``drivers.config``, ``time_scale`` and ``sim``: seed and robot motion); ``start()`` returns one
     address dict per device and ``stop()`` ends them all (safe after a partial start).
-    ``plan_deg``/``plan_lines`` are the targets the simulated robot walks."""
+    ``plan_deg``/``plan_lines`` are the targets the simulated robot walks; it waits ``start_delay_s``
+    (real s) still at the first before it runs (an operator presses play once the station listens)."""
 
     def __init__(
         self,
@@ -89,6 +91,7 @@ class SimStation:
         hold: bool = False,
         faults: Sequence[RobotFault] = (),
         plan: tuple[np.ndarray, np.ndarray] | None = None,
+        start_delay_s: float = 0.0,
     ):
         if not isinstance(cfg.robot, RobotRtde):
             raise InputError(
@@ -96,7 +99,7 @@ class SimStation:
                 'controller only (kind = "rtde")'
             )
         self.cfg = cfg
-        self.clock = SimClock()
+        self.clock = SimClock(time.monotonic() + start_delay_s)
         if plan is None:
             cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
         else:

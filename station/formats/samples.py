@@ -128,5 +128,3 @@ def _line_ids(path, body, c) -> np.ndarray:
                 f"{path}: row {i} (line {i + 2}): line: {cell!r} is not a line id (a whole number >= 0)"
             ) from None
     return ids
-
-
