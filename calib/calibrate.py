@@ -85,7 +85,7 @@ class CalibrationOptions:
     loss: str = "cauchy"
     loss_threshold: float = 3.0
     rank_rtol: float = 1e-6
-    hold_weak: bool = True
+    hold_weak: bool = False
     lm: LMOptions = field(default_factory=LMOptions)
 
 
