@@ -388,7 +388,7 @@ def covariance(
     otherwise than stated, that fit is not the best-weighted one, and its covariance is the
     sandwich::
 
-        A = W J,   C = (A^T A)^-1 A^T diag(noise^2) A (A^T A)^-1
+        A = W J,   C = (A^T A)^-1 A^T diag(W^2 noise^2) A (A^T A)^-1
 
     (``(A^T A)^-1`` when the noise is as stated). A held parameter moves the fit by
     ``-(A^T A)^-1 A^T W J_held`` per unit (``accuracy.robot_covariance``). The robot here is what the
@@ -421,8 +421,10 @@ def covariance(
     _, jac = model.residuals_and_jacobian(x)
     jac = jac * np.broadcast_to(row_weights, model.groups.shape)[:, None]
     a = jac[:, free]
-    gain = np.linalg.pinv(a.T @ a) @ a.T  # (k, m): the fit's response to its rows
-    spread = gain * np.broadcast_to(noise, model.groups.shape)
+    gain = np.linalg.pinv(a.T @ a) @ a.T  # (k, m): the fit's response to its weighted rows
+    spread = (
+        gain * np.broadcast_to(row_weights, model.groups.shape) * np.broadcast_to(noise, model.groups.shape)
+    )
     cov = spread @ spread.T
     held = np.flatnonzero(~model.setup_mask & ~free)
     robot = np.flatnonzero(workspace_mask(model))
