@@ -261,8 +261,13 @@ def main(argv=None) -> int:
     for kind in ("auto", "drawstring auto"):
         cv = outcomes[kind].report.cross_validation
         steps = " -> ".join(f"{r.added or 'table'} {r.rmse_mm:.4f}" for r in cv.rows if r.kept)
-        best_left = max((r for r in cv.rows if not r.kept), key=lambda r: r.gain, default=None)
-        rest = f"; best rejected: {best_left.added} {best_left.gain:+.1%}" if best_left else ""
+        last = [r for r in cv.rows if r.round == max(r.round for r in cv.rows) and not r.kept]
+        best_left = max(last, key=lambda r: r.gain, default=None)
+        rest = (
+            f"; best of the last round, not kept: {best_left.added} {best_left.gain:+.2%}"
+            if best_left
+            else ""
+        )
         print(f"{kind}: {cv.folds}-fold cross-validated RMSE on {args.train}: {steps}{rest}")
     t_range = np.ptp(train.ipa.temperature_c)
     print(
