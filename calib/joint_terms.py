@@ -31,6 +31,8 @@ G_MS2 = 9.80665
 MICRO = 1e-6  # compliances are in urad / (N m)
 COMPLIANCE = "compliance_urad_per_Nm"
 HARMONICS = {1: ("sin1_deg", "cos1_deg"), 2: ("sin2_deg", "cos2_deg")}
+WAVE = {"sin1_deg": (np.sin, 1), "cos1_deg": (np.cos, 1), "sin2_deg": (np.sin, 2), "cos2_deg": (np.cos, 2)}
+"""Each harmonic's function and order: its basis is ``fun(order * q_j)``."""
 TERM_KINDS = (COMPLIANCE,) + HARMONICS[1] + HARMONICS[2]
 """Term keys, as a robot file's joint and the report (``J2.compliance_urad_per_Nm``) name them."""
 
@@ -201,8 +203,8 @@ class JointTerms:
             joints = self.joints[compliant]
             out[:, compliant] = MICRO * gravity_torques(self.dh, q, self.links, joints)
         for k, t in enumerate(self.terms):
-            if t.key != COMPLIANCE:
-                order, fun = int(t.key[3]), np.sin if t.key.startswith("sin") else np.cos
+            if t.key in WAVE:
+                fun, order = WAVE[t.key]
                 out[:, k] = fun(order * q[:, t.joint])
         return out
 

