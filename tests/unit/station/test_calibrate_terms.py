@@ -162,3 +162,17 @@ def test_without_masses_the_compliance_is_held_with_the_reason(compliant):
     out = calibration.calibrate_samples(load_samples(compliant / "train.csv"), bare, None, terms="compliance")
     held = {h.param: h.reason for h in out.report.held}
     assert "no link masses" in held["J2.compliance_urad_per_Nm"] and out.report.terms == {}
+
+
+def test_the_setups_payload_loads_the_joints_and_travels_with_the_table(compliant, corrected):
+    """A payload in the setup joins the links' gravity torques (the compliance fitted to the same
+    deflections comes out smaller) and the corrected table records it for compensation."""
+    setup = compliant / "payload.toml"
+    setup.write_text("[payload]\nmass_kg = 10.0\ncom_mm = [0.0, 0.0, 150.0]\n")
+    out = compliant / "p.toml"
+    argv = ["calibrate", str(compliant / "train.csv"), "--robot", str(ROBOT), "--model", "compliance"]
+    assert main(argv + ["--setup", str(setup), "--out", str(out)]) == 0
+    loaded, plain = load_robot(out), load_robot(corrected[0])
+    assert loaded.payload.mass_kg == 10.0 and loaded.payload.com_mm == [0.0, 0.0, 150.0]
+    assert plain.payload is None
+    assert loaded.joints[1].compliance_urad_per_Nm < 0.8 * plain.joints[1].compliance_urad_per_Nm
