@@ -6,7 +6,8 @@
   residuals and Jacobian solved by scipy.optimize.least_squares (trf, linear loss): median and ratio;
 - the whole in-process pipeline (setup fit, identification, robust LMLC, uncertainty, workspace);
 - MCS choosing 72 of 200 configurations;
-- the whole ``station calibrate`` process (lmlc and mcs-lmlc), interpreter start included.
+- the whole ``station calibrate`` process (lmlc and mcs-lmlc with the table alone, and lmlc with
+  ``--model auto``, the default: terms chosen by cross-validation), interpreter start included.
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def main() -> None:
     print(f"| ratio scipy / LMLC | {t_scipy / t_ours:.1f}x | |")
     print(f"| whole pipeline in-process (robust, uncertainty, workspace) | {t_run * 1e3:.0f} ms | |")
     print(f"| MCS: 72 of 200 | {t_mcs * 1e3:.0f} ms | |")
-    for method in ("lmlc", "mcs-lmlc"):
+    for method, terms in (("lmlc", "geometric"), ("mcs-lmlc", "geometric"), ("lmlc", "auto")):
         cmd = [
             sys.executable,
             "-m",
@@ -91,9 +92,11 @@ def main() -> None:
             str(folder / "c.toml"),
             "--method",
             method,
+            "--model",
+            terms,
         ]
         t = median_time(lambda cmd=cmd: subprocess.run(cmd, check=True, capture_output=True), 3)
-        print(f"| whole `station calibrate --method {method}` process | {t:.2f} s | |")
+        print(f"| whole `station calibrate --method {method} --model {terms}` process | {t:.2f} s | |")
 
 
 if __name__ == "__main__":

@@ -102,7 +102,7 @@ def refit(robot: RobotFile, setup: SetupFile, samples: SessionSamples) -> Refit:
         covariance=cal.covariance,
         free=cal.identified,
         noise_mm=1.4826 * float(np.median(np.abs(model.row_error_mm(cal.x)))),
-        workspace=predicted_workspace(robot, cal) if enough else None,
+        workspace=predicted_workspace(robot, cal, model) if enough else None,
         needed=needed,
         advice=None if advice is None else advice.next_measurement,
         time_s=time.perf_counter() - t0,

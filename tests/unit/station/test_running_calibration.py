@@ -29,8 +29,8 @@ from tests.unit.station.test_session_engine import RULES, T0_WALL, Cell, clock, 
 
 ROBOT = load_robot(configs.path("robots/hsr_jr680.toml"))
 SETUP = load_setup(configs.path("setups/sim.toml"))
-PER_LINE = (45, 25, 25)  # samples on lines 0, 1, 2, in this order
-BAD = 80  # this sample's drawstring reads 0.3 mm long (cable slip)
+PER_LINE = (70, 25, 25)  # samples on lines 0, 1, 2, in this order
+BAD = PER_LINE[0] + PER_LINE[1] + 10  # this sample's drawstring reads 0.3 mm long (cable slip), on line 2
 NOISE_MM = 0.02  # the simulated drawstring, one reading per sample
 LAG = 3  # samples taken while a refit runs
 GOAL_MM = 1.0  # --until-mm
