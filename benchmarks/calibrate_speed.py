@@ -6,7 +6,8 @@
   residuals and Jacobian solved by scipy.optimize.least_squares (trf, linear loss): median and ratio;
 - the whole in-process pipeline (setup fit, identification, robust LMLC, uncertainty, workspace);
 - MCS choosing 72 of 200 configurations;
-- the whole ``station calibrate`` process (lmlc and mcs-lmlc), interpreter start included;
+- the whole ``station calibrate`` process (lmlc and mcs-lmlc with the table alone, and lmlc with
+  ``--model auto``, the default: terms chosen by cross-validation), interpreter start included;
 - responsiveness (issue 15), in the same run: ``station --help``, and ``station calibrate`` on
   210 samples (3 lines) against a bare ``python -c "import numpy, scipy.optimize, scipy.linalg"``
   (medians of ``--process-repeats`` runs each, interleaved so that the machine's load hits both).
@@ -80,7 +81,7 @@ def main() -> None:
     print(f"| ratio scipy / LMLC | {t_scipy / t_ours:.1f}x | |")
     print(f"| whole pipeline in-process (robust, uncertainty, workspace) | {t_run * 1e3:.0f} ms | |")
     print(f"| MCS: 72 of 200 | {t_mcs * 1e3:.0f} ms | |")
-    for method in ("lmlc", "mcs-lmlc"):
+    for method, terms in (("lmlc", "geometric"), ("mcs-lmlc", "geometric"), ("lmlc", "auto")):
         cmd = [
             sys.executable,
             "-m",
@@ -95,9 +96,11 @@ def main() -> None:
             str(folder / "c.toml"),
             "--method",
             method,
+            "--model",
+            terms,
         ]
         t = median_time(lambda cmd=cmd: subprocess.run(cmd, check=True, capture_output=True), 3)
-        print(f"| whole `station calibrate --method {method}` process | {t:.2f} s | |")
+        print(f"| whole `station calibrate --method {method} --model {terms}` process | {t:.2f} s | |")
     responsiveness(folder, args.process_repeats)
 
 

@@ -1,17 +1,22 @@
 """UR10 on real laser-tracker data (IPA robot-accuracy dataset, Landgraf et al., CASE 2021).
 
-Calibrate on one series, validate on the others. Every series was measured from its own tracker
-placement with its own probe mounting, so each held-out series is first *registered*: its
-base-to-tracker transform and probe offset are fitted with the table held, the same way for the
-nominal table and the corrected one. The figures are the distances |measured - model| [mm] of the
-held-out rows after that registration, per series and pooled.
+Every model is trained on one series through the station's own calibration (``calibrate_samples``,
+what ``station calibrate`` runs) and validated on the others. Every series was measured from its
+own tracker placement with its own probe mounting, so each held-out series is first *registered*:
+its base-to-tracker transform and probe offset are fitted with the robot held (table and terms),
+the same way for the nominal robot and the corrected one. The figures are the distances
+|measured - model| [mm] of the held-out rows after that registration, per series and pooled.
 
-Three models are trained on the same series:
-
-- ``position``: the position model (D-H + base-to-tracker + probe), the main result;
-- ``drawstring``: the tracker positions turned into drawstring readings from a chosen anchor
-  (0.02 mm noise) and calibrated with the distance model (no lines): what a drawstring station gets;
-- ``compliance``: the position model plus one gravity compliance per joint 2 and 3.
+- position path: the tracker positions, each ``--model`` (geometric, compliance, full, auto; auto is
+  ``station calibrate``'s default and chooses by cross-validation on the training series alone);
+- drawstring path: the tracker positions turned into drawstring readings from a chosen anchor
+  (0.02 mm noise), no gauge lines: what a drawstring station gets, same models;
+- thermal: a linear thermal expansion of every link length, ``k (T - T_train)``, fitted on the
+  training series beside the auto model (one Gauss-Newton step with every unknown) and measured
+  on the held-out series, which are registered again with it;
+- what is left: the auto model's training residual regressed on the first three harmonics of every
+  joint's angle, blocked 5-fold cross-validation on the training rows (how much of it any smooth
+  function of the joint angles could still predict).
 
 Usage: ``python benchmarks/ipa_ur10.py --data DIR [--train B] [--test C D] [--json]``.
 """
@@ -22,21 +27,24 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from calib.calibrate import calibrate  # noqa: E402
-from calib.kinematics import N_DH  # noqa: E402
+from calib.calibrate import WithPrior  # noqa: E402
+from calib.kinematics import A, D, dh_table, tcp_jacobian  # noqa: E402
 from calib.metrics import error_metrics  # noqa: E402
-from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
-from calib.params import dh_from_degrees  # noqa: E402
-from calib.position import Compliance, LinkMasses, PositionModel, PositionSamples, register  # noqa: E402
+from calib.position import PositionModel, PositionSamples, register  # noqa: E402
+from calib.selection import kfold  # noqa: E402
 from sim_fixtures.world import Noise  # noqa: E402
-from station.formats.ipa import probe_file_for, read_probe_mm, read_series  # noqa: E402
-from station.formats.tables import load_robot  # noqa: E402
+from station.formats.ipa import IpaSeries, probe_file_for, read_probe_mm, read_series  # noqa: E402
+from station.formats.samples import Samples  # noqa: E402
+from station.formats.tables import SetupDrawstring, SetupFile, load_robot  # noqa: E402
+from station.jobs.calibration import CalibrationOutcome, calibrate_samples  # noqa: E402
+from station.jobs.terms import MODELS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SERIES = {
@@ -45,63 +53,162 @@ SERIES = {
     "C": "Series_C/measurements_random_poses.csv",
     "D": "Series_D/measurements_iso_cubes.csv",
 }
-# UR10 (CB3) link masses and centres of mass in their D-H frames, as Universal Robots publishes them
-# ("Parameters for calculations of kinematics and dynamics"); the probe's own mass is not known.
-UR10_LINKS = LinkMasses(
-    mass_kg=np.array([7.1, 12.7, 4.27, 2.0, 2.0, 0.365]),
-    com_mm=np.array([[21, 0, 27], [380, 0, 158], [240, 0, 68], [0, 7, 18], [0, 7, 18], [0, 0, -26]], float),
-)
-# 0-based: joints 2 and 3 carry the arm against gravity. Adding joint 4 (wrist torques are small)
-# fitted 589 urad/(N m), helped C and hurt D: overfitting, so it is left out.
-COMPLIANT_JOINTS = (1, 2)
 DRAWSTRING_SIGMA_MM = Noise().length_mm  # the simulated drawstring's reading noise
 ANCHOR_OFFSET_MM = np.array([500.0, 300.0, -1200.0])  # anchor below and beside the workspace centre
+DRAWSTRING_MODELS = ("geometric", "compliance", "auto")
+HARMONIC_ORDERS = 3
 
 
-def load(data: Path, name: str) -> tuple[PositionSamples, np.ndarray]:
+@dataclass(frozen=True)
+class Series:
+    """A series as the benchmark uses it: the rows, the probe's start from the dataset's file."""
+
+    ipa: IpaSeries
+    probe: np.ndarray
+
+    @property
+    def samples(self) -> PositionSamples:
+        return PositionSamples(self.ipa.q_rad, self.ipa.position_mm)
+
+
+def load(data: Path, name: str) -> Series:
     series = read_series(data / SERIES[name])
-    return PositionSamples(series.q_rad, series.position_mm), read_probe_mm(probe_file_for(series.path))
+    return Series(series, read_probe_mm(probe_file_for(series.path)))
 
 
-def held_out_errors(tests, dh, compliance=None, values=None) -> dict[str, np.ndarray]:
-    """Per test series, the registered position errors [mm] with table ``dh`` (and compliances)."""
+def position_set(series: Series) -> Samples:
+    """The series as ``station import-ipa`` writes it: a position set."""
+    n = len(series.ipa)
+    q_deg = np.degrees(series.ipa.q_rad)
+    return Samples(
+        str(series.ipa.path), "position", q_deg, series.ipa.position_mm, np.full(n, np.nan), np.full(n, -1)
+    )
+
+
+def drawstring_set(train: Series, geometric: CalibrationOutcome, robot, rng):
+    """Drawstring readings from the tracker points, a rough setup and the robot with the cable tied
+    at the probe (on joint 6's axis at the registered probe length); the anchor's rough place
+    (base frame) comes from the nominal registration, +-30 mm."""
+    before = geometric.calibration.before.x
+    anchor_tracker = train.ipa.position_mm.mean(axis=0) + ANCHOR_OFFSET_MM
+    offset = 500.0
+    length = np.linalg.norm(train.ipa.position_mm - anchor_tracker, axis=1) - offset
+    length += rng.normal(0, DRAWSTRING_SIGMA_MM, length.size)
+    rot, t = geometric.model.tracker_from_base(before)
+    anchor_base = rot.T @ (anchor_tracker - t) + rng.uniform(-30, 30, 3)
+    setup = SetupFile(
+        drawstring=SetupDrawstring(
+            anchor_mm=list(anchor_base),
+            length_offset_mm=offset + rng.uniform(-8, 8),
+            sigma_mm=DRAWSTRING_SIGMA_MM,
+        )
+    )
+    n = len(train.ipa)
+    samples = Samples(
+        "drawstring", "drawstring", np.degrees(train.ipa.q_rad), length, np.full(n, np.nan), np.full(n, -1)
+    )
+    tool = [0.0, 0.0, float(geometric.model.probe(before)[2])]
+    return samples, setup, robot.model_copy(update={"tool_mm": tool})
+
+
+def held_out_errors(
+    tests: dict[str, Series], outcome: CalibrationOutcome | None, nominal
+) -> dict[str, np.ndarray]:
+    """Per test series, the registered position errors [mm] with the outcome's table and terms held
+    (the nominal table without terms where ``outcome`` is None)."""
     out = {}
-    for name, (samples, probe) in tests.items():
-        comp = Compliance(COMPLIANT_JOINTS, UR10_LINKS) if compliance else None
-        model, fit = register(PositionModel(samples, dh, probe, compliance=comp), dh, values)
+    for name, series in tests.items():
+        if outcome is None:
+            model, fit = register(PositionModel(series.samples, nominal, series.probe), nominal)
+        else:
+            x, terms = outcome.calibration.x, outcome.model.terms
+            values = outcome.model.term_values(x)
+            model, fit = register(
+                PositionModel(series.samples, nominal, series.probe, terms=terms), dh_table(x), values
+            )
         out[name] = model.row_error_mm(fit.x)
     return out
 
 
-def drawstring_table(train: PositionSamples, position_model: PositionModel, x_before, rng) -> np.ndarray:
-    """Simulated drawstring readings from the tracker positions, calibrated with the distance model.
-    The rough anchor (base frame) comes from the nominal registration, +-30 mm; the cable is tied at
-    the probe point, taken on joint 6's axis at the registered probe length."""
-    anchor_tracker = train.position.mean(axis=0) + ANCHOR_OFFSET_MM
-    offset = 500.0
-    length = np.linalg.norm(train.position - anchor_tracker, axis=1) - offset
-    length += rng.normal(0, DRAWSTRING_SIGMA_MM, length.size)
-    rot, t = position_model.tracker_from_base(x_before)
-    anchor_base = rot.T @ (anchor_tracker - t)
-    n = len(train)
-    samples = DrawstringSamples(train.q, length, np.full(n, np.nan), np.full(n, -1))
-    setup = DrawstringSetup(
-        anchor_base + rng.uniform(-30, 30, 3), offset + rng.uniform(-8, 8), DRAWSTRING_SIGMA_MM
-    )
-    tool = np.array([0.0, 0.0, position_model.probe(x_before)[2]])
-    dh0 = position_model.dh0
-    model = DrawstringLineModel(
-        samples, setup, DrawstringFrame.from_nominal(samples, setup, dh0, tool), dh0, tool
-    )
-    return model.dh(calibrate(model).x)
+# -- thermal -------------------------------------------------------------------------------------
+def thermal_field(model: PositionModel, x: np.ndarray, delta_t: np.ndarray) -> np.ndarray:
+    """What ``k = 1/K`` of linear thermal expansion of every link length does to each measured point,
+    tracker frame [mm] (N, 3): ``R sum_i dp/dl_i l_i (T - T_ref)``, the lengths' columns of the TCP
+    Jacobian at the angles the links take."""
+    dh = dh_table(x)
+    _, jac = tcp_jacobian(dh, model.joints(x), model.probe(x))
+    lengths = [4 * j + c for j in range(6) for c in (D, A)]
+    rot, _ = model.tracker_from_base(x)
+    return (jac[:, :, lengths] @ dh.ravel()[lengths]) @ rot.T * delta_t[:, None]
 
 
+def thermal_coefficient(outcome: CalibrationOutcome, temperature: np.ndarray) -> tuple[float, float]:
+    """The expansion coefficient [1/K] fitted beside every unknown of the calibration (one
+    Gauss-Newton step from it, its robust weights), and its standard deviation."""
+    model, cal = outcome.model, outcome.calibration
+    prior = WithPrior(model, model.x0)
+    r, jac = prior.residuals_and_jacobian(cal.x)
+    column = np.zeros(r.size)
+    column[: 3 * len(model.samples)] = (
+        thermal_field(model, cal.x, temperature - temperature.mean()).ravel() / model.sigma
+    )
+    w = cal.after.weights
+    a = np.column_stack([jac[:, cal.identified], column]) * w[:, None]
+    step, *_ = np.linalg.lstsq(a, -r * w, rcond=None)
+    cov = np.linalg.pinv(a.T @ a) * np.mean((r * w + a @ step) ** 2)
+    return float(step[-1]), float(np.sqrt(cov[-1, -1]))
+
+
+def thermal_held_out(tests, outcome, k: float, t_ref: float) -> dict[str, np.ndarray]:
+    """Held-out errors with the expansion ``k`` at each row's temperature: each series registered,
+    its measured points corrected by the expansion in that registration's frame, registered again."""
+    out = {}
+    x, terms = outcome.calibration.x, outcome.model.terms
+    values = outcome.model.term_values(x)
+    for name, series in tests.items():
+        dh0 = outcome.model.dh0
+        model, fit = register(
+            PositionModel(series.samples, dh0, series.probe, terms=terms), dh_table(x), values
+        )
+        shift = k * thermal_field(model, fit.x, series.ipa.temperature_c - t_ref)
+        corrected = PositionSamples(series.ipa.q_rad, series.ipa.position_mm - shift)
+        model, fit = register(PositionModel(corrected, dh0, series.probe, terms=terms), dh_table(x), values)
+        out[name] = model.row_error_mm(fit.x)
+    return out
+
+
+# -- what is left ----------------------------------------------------------------------------------
+def residual_predictability(outcome: CalibrationOutcome) -> tuple[float, float]:
+    """RMS of the training residual (3-D, base frame) [mm], and of what is left of it when each fold
+    is predicted by a least-squares fit, on the other folds, of the first ``HARMONIC_ORDERS``
+    harmonics of every joint's angle (blocked 5-fold, ``calib.selection.kfold``)."""
+    model, x = outcome.model, outcome.calibration.x
+    rot, _ = model.tracker_from_base(x)
+    e = (model.samples.position - model.predicted_mm(x)) @ rot
+    q = model.samples.q
+    f = [np.ones(len(q))] + [
+        fun(h * q[:, j]) for j in range(6) for h in range(1, HARMONIC_ORDERS + 1) for fun in (np.sin, np.cos)
+    ]
+    features = np.column_stack(f)
+    left = np.empty_like(e)
+    for rows in kfold(np.zeros(len(q), int)):
+        fit = np.setdiff1d(np.arange(len(q)), rows)
+        coef, *_ = np.linalg.lstsq(features[fit], e[fit], rcond=None)
+        left[rows] = e[rows] - features[rows] @ coef
+    return float(np.sqrt(np.mean(np.sum(e**2, axis=1)))), float(np.sqrt(np.mean(np.sum(left**2, axis=1))))
+
+
+# -- output ----------------------------------------------------------------------------------------
 def pooled(errors: dict[str, np.ndarray]) -> dict[str, float]:
     return error_metrics(np.concatenate(list(errors.values())))
 
 
 def fmt(m: dict) -> str:
-    return f"{m['rmse_mm']:6.3f} {m['mean_mm']:6.3f} {m['max_mm']:6.3f}"
+    return f"{m['rmse_mm']:.3f} / {m['mean_mm']:.3f} / {m['max_mm']:.3f}"
+
+
+def terms_text(outcome: CalibrationOutcome) -> str:
+    return ", ".join(f"{n} {e.value:.4g} +- {e.sigma:.2g}" for n, e in outcome.report.terms.items()) or "-"
 
 
 def main(argv=None) -> int:
@@ -112,53 +219,82 @@ def main(argv=None) -> int:
     p.add_argument("--json", action="store_true", help="last stdout line: the pooled figures as JSON")
     args = p.parse_args(argv)
     rng = np.random.default_rng(0)
-    nominal = dh_from_degrees(load_robot(ROOT / "configs/robots/ur10.toml").table_deg())
-    train, probe = load(args.data, args.train)
+    robot = load_robot(ROOT / "configs/robots/ur10.toml")
+    train = load(args.data, args.train)
     tests = {name: load(args.data, name) for name in args.test}
+    train_set = position_set(train)
 
-    t0 = time.perf_counter()
-    model = PositionModel(train, nominal, probe)
-    cal = calibrate(model)
-    t_position = time.perf_counter() - t0
-    comp_model = PositionModel(train, nominal, probe, compliance=Compliance(COMPLIANT_JOINTS, UR10_LINKS))
-    comp_cal = calibrate(comp_model)
-    compliance = comp_cal.x[N_DH + 9 :]
+    rows, outcomes, times = {}, {}, {}
+    for kind in MODELS:
+        t0 = time.perf_counter()
+        outcomes[kind] = calibrate_samples(train_set, robot, None, terms=kind)
+        times[kind] = time.perf_counter() - t0
+    nominal = outcomes["geometric"].model.dh0
+    rows["nominal (before)"] = held_out_errors(tests, None, nominal)
+    for kind in MODELS:
+        rows[f"position, --model {kind}"] = held_out_errors(tests, outcomes[kind], nominal)
+    ds_samples, ds_setup, ds_robot = drawstring_set(train, outcomes["geometric"], robot, rng)
+    for kind in DRAWSTRING_MODELS:
+        t0 = time.perf_counter()
+        outcomes[f"drawstring {kind}"] = calibrate_samples(ds_samples, ds_robot, ds_setup, terms=kind)
+        times[f"drawstring {kind}"] = time.perf_counter() - t0
+        rows[f"drawstring, --model {kind}"] = held_out_errors(tests, outcomes[f"drawstring {kind}"], nominal)
 
-    results = {
-        "nominal": held_out_errors(tests, nominal),
-        "position": held_out_errors(tests, model.dh(cal.x)),
-        "drawstring": held_out_errors(tests, drawstring_table(train, model, cal.before.x, rng)),
-        "compliance": held_out_errors(tests, comp_model.dh(comp_cal.x), True, compliance),
-    }
-    train_err = {
-        "before": error_metrics(model.row_error_mm(cal.before.x)),
-        "after": error_metrics(model.row_error_mm(cal.x)),
-        "compliance": error_metrics(comp_model.row_error_mm(comp_cal.x)),
-    }
+    auto = outcomes["auto"]
+    t_ref = float(train.ipa.temperature_c.mean())
+    k, k_sigma = thermal_coefficient(auto, train.ipa.temperature_c)
+    rows["position, auto + thermal"] = thermal_held_out(tests, auto, k, t_ref)
 
-    print(f"UR10, IPA dataset: train {args.train} ({len(train)} rows), test {' '.join(args.test)}")
-    print(f"position model: {cal.identified[:N_DH].sum()} table parameters identified in {t_position:.2f} s")
-    print(f"train {args.train}: {fmt(train_err['before'])} -> {fmt(train_err['after'])}  (RMSE MEAN MAX mm)")
-    heads = ("nominal (before)", "position (after)", "drawstring", "+compliance")
-    print(f"{'held-out':10}" + "".join(f"{h:>22}" for h in heads))
-    for name in [*args.test, "pooled"]:
-        row = [
-            fmt(pooled({name: results[k][name]}) if name != "pooled" else pooled(results[k]))
-            for k in ("nominal", "position", "drawstring", "compliance")
-        ]
-        label = f"{name} ({len(tests[name][0])})" if name != "pooled" else "pooled"
-        print(f"{label:10}" + "".join(f"{r:>22}" for r in row))
-    names = [f"J{j + 1}" for j in COMPLIANT_JOINTS]
-    comp_txt = ", ".join(f"{n} {c:.2f}" for n, c in zip(names, compliance, strict=True))
-    print(f"compliances [urad/(N m)]: {comp_txt}; train {fmt(train_err['compliance'])}")
+    print(f"UR10, IPA dataset: train {args.train} ({len(train.ipa)} rows), test {' '.join(args.test)}")
+    print(
+        f"{'held-out RMSE / MEAN / MAX [mm]':34}"
+        + "".join(f"{n + f' ({len(tests[n].ipa)})':>24}" for n in args.test)
+        + f"{'pooled':>24}"
+    )
+    for label, errs in rows.items():
+        cells = [fmt(pooled({n: errs[n]})) for n in args.test] + [fmt(pooled(errs))]
+        print(f"{label:34}" + "".join(f"{c:>24}" for c in cells))
+    print(f"training fit on {args.train} (RMSE [mm], time [s], terms):")
+    for kind, outcome in outcomes.items():
+        fit = outcome.report.after.train.rmse_mm
+        print(f"  {kind:22} {fit:.3f}  {times[kind]:6.1f} s  {terms_text(outcome)}")
+    for kind in ("auto", "drawstring auto"):
+        cv = outcomes[kind].report.cross_validation
+        steps = " -> ".join(f"{r.added or 'table'} {r.rmse_mm:.4f}" for r in cv.rows if r.kept)
+        last = [r for r in cv.rows if r.round == max(r.round for r in cv.rows) and not r.kept]
+        best_left = max(last, key=lambda r: r.gain, default=None)
+        rest = (
+            f"; best of the last round, not kept: {best_left.added} {best_left.gain:+.2%}"
+            if best_left
+            else ""
+        )
+        print(f"{kind}: {cv.folds}-fold cross-validated RMSE on {args.train}: {steps}{rest}")
+    t_range = np.ptp(train.ipa.temperature_c)
+    print(
+        f"thermal: k = {k * 1e6:.1f} +- {k_sigma * 1e6:.1f} ppm/K on {args.train} "
+        f"(T {t_ref:.2f} deg C, range {t_range:.2f} K); test means "
+        + ", ".join(f"{n} {s.ipa.temperature_c.mean():.2f}" for n, s in tests.items())
+    )
+    raw, left = residual_predictability(auto)
+    print(
+        f"what is left: auto's residual on {args.train} {raw:.3f} mm RMS; after harmonics "
+        f"1-{HARMONIC_ORDERS} of every joint, cross-validated: {left:.3f} mm"
+    )
     if args.json:
         summary = {
-            "before": pooled(results["nominal"]),
-            "after": pooled(results["position"]),
+            "before": pooled(rows["nominal (before)"]),
+            "after": pooled(rows["position, --model geometric"]),
             "train": args.train,
             "test": args.test,
-            "drawstring_after": pooled(results["drawstring"]),
-            "compliance_after": pooled(results["compliance"]),
+            "drawstring_after": pooled(rows["drawstring, --model geometric"]),
+            "compliance_after": pooled(rows["position, --model compliance"]),
+            "default_after": pooled(rows["position, --model auto"]),
+            "default_terms": list(auto.report.terms),
+            "full_after": pooled(rows["position, --model full"]),
+            "drawstring_default_after": pooled(rows["drawstring, --model auto"]),
+            "drawstring_default_terms": list(outcomes["drawstring auto"].report.terms),
+            "thermal_after": pooled(rows["position, auto + thermal"]),
+            "thermal_ppm_per_K": [k * 1e6, k_sigma * 1e6],
         }
         print(json.dumps(summary))
     return 0

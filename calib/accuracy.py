@@ -6,9 +6,10 @@ of ``J`` in that 6-dimensional span is removed first::
 
     J_perp = (I - B B^+) J,        predicted RMS = sqrt(trace(J_perp C J_perp^T) / N)
 
-with ``B`` (3N, 6) the rigid displacement fields at the nominal TCPs and ``C`` (24, 24) the table's
-covariance: the fit's covariance for identified parameters, plus what each held parameter's
-manufacturing tolerance does to the TCP and, through the fit, to the identified ones.
+with ``B`` (3N, 6) the rigid displacement fields at the nominal TCPs and ``C`` (r, r) the robot's
+covariance (the table, then its joint-space terms: ``calib.joint_terms``): the fit's covariance for
+identified parameters, plus what each held parameter's prior (a table parameter's manufacturing
+tolerance) does to the TCP and, through the fit, to the identified ones.
 
 That is an expectation. One calibration's actual error is ``sum_i lambda_i z_i^2`` (squared RMS),
 ``lambda_i`` the eigenvalues of ``C^1/2 J_perp^T J_perp C^1/2 / N`` and ``z_i`` standard normal: when
@@ -21,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import gammaincinv
 
-from calib.kinematics import N_DH, tcp_jacobian
+from calib.joint_terms import JointTerms
+from calib.kinematics import base_from_frames
 
 
 def rigid_fields(p: np.ndarray) -> np.ndarray:
@@ -46,7 +48,14 @@ def rigid_fields(p: np.ndarray) -> np.ndarray:
     return fields.reshape(-1, 6)
 
 
-def workspace_error_modes(dh: np.ndarray, tool: np.ndarray, q: np.ndarray, cov: np.ndarray) -> np.ndarray:
+def workspace_error_modes(
+    dh: np.ndarray,
+    tool: np.ndarray,
+    q: np.ndarray,
+    cov: np.ndarray,
+    terms: JointTerms | None = None,
+    tool_fitted: bool = False,
+) -> np.ndarray:
     """Variances of the independent modes of the TCP error field after a rigid re-fit of the base:
     the eigenvalues of ``C^1/2 J_perp^T J_perp C^1/2 / N`` (module docstring).
 
@@ -58,16 +67,24 @@ def workspace_error_modes(dh: np.ndarray, tool: np.ndarray, q: np.ndarray, cov: 
         TCP in the flange frame [mm].
     q : ndarray, shape (N, 6)
         Configurations over which the error is averaged [rad].
-    cov : ndarray, shape (N_DH, N_DH)
-        Covariance of the table's error, internal units (rad, mm).
+    cov : ndarray, shape (r, r)
+        Covariance of the error of the table (24), the TCP in the flange frame (3, only where
+        ``tool_fitted``), then ``terms`` (K), internal units.
+    terms : JointTerms, optional
+        The robot's joint-space terms (default: none), linearised at zero.
+    tool_fitted : bool
+        Whether ``cov`` covers the TCP's flange coordinates (a calibration that fitted them).
 
     Returns
     -------
-    ndarray, shape (N_DH,)
+    ndarray, shape (r,)
         Mode variances [mm^2], descending, >= 0; their sum is the expected squared RMS error.
     """
-    p, jac = tcp_jacobian(dh, q, tool)
-    a = jac.reshape(-1, jac.shape[2])
+    terms = terms or JointTerms()
+    basis = terms.basis(q)
+    p, jac_table, jac_terms = terms.tcp_jacobian(dh, q, tool, np.zeros(len(terms)), basis)
+    jac_tool = base_from_frames(dh, q)[:, -1, :3, :3] if tool_fitted else np.zeros((len(q), 3, 0))
+    a = np.concatenate([jac_table, jac_tool, jac_terms], axis=2).reshape(-1, cov.shape[0])
     q_rigid = np.linalg.qr(rigid_fields(p))[0]
     a_perp = a - q_rigid @ (q_rigid.T @ a)
     s, u = np.linalg.eigh(cov)
@@ -118,19 +135,19 @@ def workspace_rmse_bound(modes: np.ndarray, probability: float = 0.95) -> float:
     return float(np.sqrt(total / dof * chi2_quantile))
 
 
-def table_covariance(
+def robot_covariance(
     cov_free: np.ndarray,
-    jac_free: np.ndarray,
-    jac_held: np.ndarray,
+    sensitivity: np.ndarray,
     free: np.ndarray,
     held: np.ndarray,
     held_sigma: np.ndarray,
+    robot: np.ndarray,
 ) -> np.ndarray:
-    """The table covariance with the held table parameters as "consider" parameters (Schmidt):
-    each held one may be off by its tolerance, which moves the TCP itself and shifts the fitted
-    ones by ``-cov_free J_free^T J_held`` per unit::
+    """The robot's covariance with its held parameters as "consider" parameters (Schmidt): each
+    held one may be off by its prior, which moves the TCP itself and the fitted ones by
+    ``sensitivity`` per unit (for least squares ``-(A^T A)^-1 A^T J_held``)::
 
-        S = [-cov_free J_free^T J_held]_table + E_held,     C = C_free + S diag(held_sigma^2) S^T
+        S = [sensitivity]_robot + E_held,     C = C_free + S diag(held_sigma^2) S^T
 
     An exact redundancy (joints 2-3's d) cancels in the TCP; a near one does not: on one gauge line
     a few micrometres of unmodelled effect move the weakly determined directions by millimetres.
@@ -139,27 +156,28 @@ def table_covariance(
     ----------
     cov_free : ndarray, shape (n, n)
         The fit's covariance of the free unknowns, internal units.
-    jac_free : ndarray, shape (m, n)
-        Whitened, weighted Jacobian of the free unknowns.
-    jac_held : ndarray, shape (m, h)
-        Same for the held table parameters.
+    sensitivity : ndarray, shape (n, h)
+        How far the fit moves each free unknown per unit of each held parameter.
     free : ndarray of int, shape (n,)
-        Indices of the free unknowns in the parameter vector (table first: ``< N_DH``).
+        Indices of the free unknowns in the parameter vector.
     held : ndarray of int, shape (h,)
-        Indices of the held table parameters.
+        Indices of the held robot parameters considered.
     held_sigma : ndarray, shape (h,)
-        Their tolerance (1 sigma), internal units.
+        Their prior (1 sigma), internal units.
+    robot : ndarray of int, shape (r,), ascending
+        Indices of the robot's parameters in the parameter vector (the rest is setup).
 
     Returns
     -------
-    ndarray, shape (N_DH, N_DH)
-        Covariance of the table's error, internal units.
+    ndarray, shape (r, r)
+        Covariance of the robot's error (in the order of ``robot``), internal units.
     """
-    free, held = np.asarray(free), np.asarray(held)
-    table = free < N_DH
-    sensitivity = np.zeros((N_DH, held.size))
-    sensitivity[free[table]] = -(cov_free @ (jac_free.T @ jac_held))[table]
-    sensitivity[held, np.arange(held.size)] += 1.0
-    cov = np.zeros((N_DH, N_DH))
-    cov[np.ix_(free[table], free[table])] = cov_free[np.ix_(table, table)]
-    return cov + (sensitivity * held_sigma**2) @ sensitivity.T
+    free, held, robot = np.asarray(free), np.asarray(held, int), np.asarray(robot)
+    in_robot = np.isin(free, robot)
+    at_free, at_held = np.searchsorted(robot, free[in_robot]), np.searchsorted(robot, held)
+    total = np.zeros((robot.size, held.size))
+    total[at_free] = sensitivity[in_robot]
+    total[at_held, np.arange(held.size)] += 1.0
+    cov = np.zeros((robot.size, robot.size))
+    cov[np.ix_(at_free, at_free)] = cov_free[np.ix_(in_robot, in_robot)]
+    return cov + (total * held_sigma**2) @ total.T

@@ -1,11 +1,16 @@
 """The calibration pipeline on any measurement model: setup fit, identifiability, full robust fit.
 
-1. "before": the nominal table held, only the setup unknowns fitted (the contract's baseline);
+1. "before": the nominal robot held (the table as built, no joint-space terms), only the setup
+   unknowns fitted (the contract's baseline);
 2. identifiability at that point: the model's structural gauges are held, then a rank-revealing
-   selection over the column-scaled Jacobian (setup unknowns first, then the table joint by joint)
-   holds whatever else the data cannot tell apart;
-3. "after": LMLC over the identified table parameters and the setup unknowns, first with the linear
-   loss, then with the robust loss whose scale is re-estimated from the residuals (MAD, per group).
+   selection over the column-scaled Jacobian (setup unknowns first, then the table joint by joint,
+   then the joint-space terms) holds whatever else the data cannot tell apart;
+3. "after": LMLC over the identified robot parameters (table and terms) and the setup unknowns,
+   first with the linear loss, then with the robust loss whose scale is re-estimated from the
+   residuals (MAD, per group).
+
+The robot's parameters are everything of ``x`` that is not setup (``~model.setup_mask``): the table,
+then the terms (``calib.joint_terms``).
 """
 
 from __future__ import annotations
@@ -14,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calib.accuracy import table_covariance
-from calib.identifiability import redundancy_partners, select_columns, tolerance, weakly_determined
+from calib.accuracy import robot_covariance
+from calib.identifiability import redundancy_partners, select_columns, weakly_determined
 from calib.kinematics import N_DH
 from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
 from calib.models import GROUP_PRIOR, MeasurementModel
@@ -43,6 +48,7 @@ class WithPrior:
         self._k = np.flatnonzero(np.isfinite(sigma))
         self._inv = 1.0 / sigma[self._k]
         self.names, self.x0, self.setup_mask = model.names, model.x0, model.setup_mask
+        self.tool_mask = model.tool_mask
         self.groups = np.concatenate([model.groups, np.full(self._k.size, GROUP_PRIOR)])
         self.rows = np.concatenate([model.rows, np.full(self._k.size, -1)])
 
@@ -69,6 +75,9 @@ class CalibrationOptions:
         Where the robust loss starts to down-weight, in robust standard deviations of each group.
     rank_rtol : float
         Relative size below which a scaled Jacobian column counts as produced by the others.
+    hold_weak : bool
+        Hold a parameter the data determines no better than its prior (True), or estimate it under
+        its prior (False); exact redundancies are held either way.
     lm : LMOptions
         Solver options.
     """
@@ -76,6 +85,7 @@ class CalibrationOptions:
     loss: str = "cauchy"
     loss_threshold: float = 3.0
     rank_rtol: float = 1e-6
+    hold_weak: bool = False
     lm: LMOptions = field(default_factory=LMOptions)
 
 
@@ -90,15 +100,18 @@ class Calibration:
     before, after : LMResult
         The setup-only fit with the nominal table, and the full fit.
     identified : ndarray of bool, shape (n,)
-        Unknowns free in the final fit (identified table parameters and setup unknowns).
+        Unknowns free in the final fit (identified robot parameters and setup unknowns).
     held : dict of str to str
         Held parameters and why.
     sigma : ndarray, shape (n,)
         Standard deviation of each unknown, internal units; NaN where held.
     covariance : ndarray, shape (k, k)
         Covariance of the k free unknowns, internal units.
-    table_covariance : ndarray, shape (24, 24)
-        Covariance of the table with the held parameters considered at their tolerance.
+    robot_covariance : ndarray, shape (r, r)
+        Covariance of what the TCP's workspace error depends on (``workspace_mask``: the table, the
+        TCP where the model fits it, the terms), the held ones considered at their prior.
+    robot_index : ndarray of int, shape (r,)
+        Where ``robot_covariance``'s rows are in ``x``.
     scale : ndarray, shape (groups,)
         Fitted noise scale per residual group, in units of the stated noise.
     downweighted : ndarray of int
@@ -112,7 +125,8 @@ class Calibration:
     held: dict[str, str]
     sigma: np.ndarray
     covariance: np.ndarray
-    table_covariance: np.ndarray
+    robot_covariance: np.ndarray
+    robot_index: np.ndarray
     scale: np.ndarray
     downweighted: np.ndarray
 
@@ -168,14 +182,21 @@ def robust_fit(
 
 
 def identify(
-    model: MeasurementModel, x: np.ndarray, free_setup: np.ndarray, gauges: dict[str, str], rtol: float
+    model: MeasurementModel,
+    x: np.ndarray,
+    free_setup: np.ndarray,
+    gauges: dict[str, str],
+    rtol: float,
+    hold_weak: bool = True,
 ) -> tuple[np.ndarray, dict[str, str]]:
-    """The table parameters the data determines at ``x``, and why the others are held.
+    """The robot parameters (table and terms) the data determines at ``x``, and why the others are
+    held.
 
     Structural ``gauges`` are held first; a rank-revealing selection over the column-scaled
-    Jacobian (setup unknowns first, then the table joint by joint) holds what the data cannot tell
-    apart; then a parameter is held where the data pins it down no better than its manufacturing
-    tolerance.
+    Jacobian (setup unknowns first, then the table joint by joint, then the terms) holds what the
+    data cannot tell apart; then a parameter is held where the data pins it down no better than
+    what is known before measuring (``model.prior_sigma()``: a table parameter's manufacturing
+    tolerance, a term's prior).
 
     Parameters
     ----------
@@ -189,38 +210,63 @@ def identify(
         Parameters held by structure, with reasons.
     rtol : float
         Relative column size below which a scaled column counts as produced by the others.
+    hold_weak : bool
+        Whether to hold what the data determines no better than its prior (else it is estimated,
+        its prior keeping it near where the robot was built).
 
     Returns
     -------
-    table : ndarray of bool, shape (n,)
-        The identified table parameters.
+    robot : ndarray of bool, shape (n,)
+        The identified robot parameters.
     held : dict of str to str
         Every held parameter of ``model.names`` and why.
     """
     _, jac = model.residuals_and_jacobian(x)
     names = model.names
-    candidates = [k for k in range(N_DH) if names[k] not in gauges]
+    candidates = [k for k in np.flatnonzero(~model.setup_mask) if names[k] not in gauges]
     order = np.concatenate([np.flatnonzero(free_setup), candidates]).astype(int)
     kept = select_columns(jac, order, rtol)
     held = {n: r for n, r in gauges.items() if n in names}
+    norms = np.linalg.norm(jac, axis=0)
     for k in candidates:
-        if not kept[k]:
+        if kept[k]:
+            continue
+        if norms[k] <= 1e-9 * norms.max():
+            held[names[k]] = "it moves none of the measured points"
+        else:
             partners = ", ".join(redundancy_partners(jac, k, kept, names))
             held[names[k]] = f"the data cannot tell it apart from {partners}"
-    kept_table = [k for k in candidates if kept[k]]
-    tol = np.zeros(len(names))
-    tol[:N_DH] = tolerance(names[:N_DH])
-    weak = weakly_determined(jac, np.flatnonzero(free_setup | kept), set(kept_table), tol)
+    kept_robot = [k for k in candidates if kept[k]]
+    prior = model.prior_sigma()
+    weak = {}
+    if hold_weak:
+        weak = weakly_determined(jac, np.flatnonzero(free_setup | kept), set(kept_robot), prior)
     for k, sigma in weak.items():
-        unit = "deg" if names[k].endswith("_deg") else "mm"
-        shown = np.degrees(sigma) if unit == "deg" else sigma
-        held[names[k]] = (
-            f"the data determines it only to +-{shown:.3g} {unit}, no better than its "
-            f"manufacturing tolerance (+-{np.degrees(tol[k]) if unit == 'deg' else tol[k]:.3g} {unit})"
+        held[names[k]] = weak_reason(
+            names[k], sigma, prior[k], "manufacturing tolerance" if k < N_DH else "prior"
         )
-    table = np.zeros(len(names), bool)
-    table[[k for k in kept_table if k not in weak]] = True
-    return table, held
+    robot = np.zeros(len(names), bool)
+    robot[[k for k in kept_robot if k not in weak]] = True
+    return robot, held
+
+
+def weak_reason(name: str, sigma: float, prior: float, what: str) -> str:
+    """Why a parameter is held although the data sees it: its ``sigma`` from the data against its
+    ``prior`` (both internal units), ``what`` the prior is (a tolerance, a prior)."""
+    factor, unit = display_unit(name)
+    return (
+        f"the data determines it only to +-{sigma * factor:.3g} {unit}, no better than its "
+        f"{what} (+-{prior * factor:.3g} {unit})"
+    )
+
+
+def display_unit(name: str) -> tuple[float, str]:
+    """Factor from internal to display units, and the unit, of a parameter by its name's suffix."""
+    if name.endswith("_deg"):
+        return float(np.degrees(1.0)), "deg"
+    if name.endswith("_urad_per_Nm"):
+        return 1.0, "urad/(N m)"
+    return 1.0, "mm"
 
 
 @dataclass
@@ -263,7 +309,7 @@ def fit_setup(model: MeasurementModel, options: CalibrationOptions = Calibration
     free_setup = model.setup_mask & ~np.isin(model.names, list(gauges))
     prior = WithPrior(model, model.x0)
     before, _ = robust_fit(prior, model.x0, free_setup, options)
-    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol)
+    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol, options.hold_weak)
     return SetupFit(prior, before, free_setup | table, held)
 
 
@@ -287,7 +333,7 @@ def calibrate(
     """
     start = fit_setup(model, options)
     after, scale = robust_fit(start.prior, start.before.x, start.free, options, callback)
-    sigma, cov, table_cov = _uncertainty(start.prior, after, start.free, scale)
+    sigma, cov, robot_cov = _uncertainty(start.prior, after, start.free, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[start.free] = sigma
     return Calibration(
@@ -298,7 +344,8 @@ def calibrate(
         held=start.held,
         sigma=full_sigma,
         covariance=cov,
-        table_covariance=table_cov,
+        robot_covariance=robot_cov,
+        robot_index=np.flatnonzero(workspace_mask(model)),
         scale=scale,
         downweighted=_downweighted_rows(start.prior, after, scale, options),
     )
@@ -313,17 +360,43 @@ def _scale(result: LMResult, model) -> np.ndarray:
 
 
 def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np.ndarray):
-    """Standard deviations and covariance of the free unknowns and the table covariance, each
-    instrument's rows weighted by its fitted noise ``scale`` (per group) and the robust weights."""
-    noise = np.where(model.groups == GROUP_PRIOR, 1.0, scale[model.groups])
-    cov, table_cov = covariance(model, result.x, free, result.weights / noise)
-    return np.sqrt(np.diag(cov)), cov, table_cov
+    """Standard deviations and covariance of the free unknowns and the robot's covariance, of the
+    fit as it was weighted (stated noise, robust weights), each instrument's rows with the noise
+    the fit found (``scale``, per group)."""
+    cov, robot_cov = covariance(model, result.x, free, result.weights, row_noise(model, scale))
+    return np.sqrt(np.diag(cov)), cov, robot_cov
+
+
+def row_noise(model: WithPrior, scale: np.ndarray) -> np.ndarray:
+    """Each row's fitted noise in units of its stated noise (m,): its group's ``scale``; 1 for the
+    prior rows (what was known before measuring does not shrink because the instruments read
+    better than stated)."""
+    return np.where(model.groups == GROUP_PRIOR, 1.0, scale[model.groups])
 
 
 def covariance(
-    model: WithPrior, x: np.ndarray, free: np.ndarray, row_weights: np.ndarray | float = 1.0
+    model: WithPrior,
+    x: np.ndarray,
+    free: np.ndarray,
+    row_weights: np.ndarray | float = 1.0,
+    noise: np.ndarray | float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Covariance of the ``free`` unknowns and of the table, the held parameters considered.
+    """Covariance of the ``free`` unknowns and of the robot, the held parameters considered.
+
+    The fit minimised ``|W r|^2`` with ``r`` the rows whitened by their stated noise and ``W`` the
+    robust weights; the rows' actual noise is ``noise`` (stated units). Where the instruments read
+    otherwise than stated, that fit is not the best-weighted one, and its covariance is the
+    sandwich::
+
+        A = W J,   C = (A^T A)^-1 A^T diag(W^2 noise^2) A (A^T A)^-1
+
+    (``(A^T A)^-1`` when the noise is as stated). A held parameter moves the fit by
+    ``-(A^T A)^-1 A^T W J_held`` per unit (``accuracy.robot_covariance``). The robot here is what the
+    TCP's workspace error depends on (``workspace_mask``): the table, the terms and, where the model
+    fits it (``model.tool_mask``: a tracker's probe), the TCP in the flange frame; so a held
+    parameter the fitted TCP absorbs (any change of the last link, on a tracker) shifts the TCP
+    instead and leaves the measured point where it is. Each held robot parameter counts at its
+    prior (``model.prior_sigma()``).
 
     Parameters
     ----------
@@ -334,24 +407,38 @@ def covariance(
     free : ndarray of bool, shape (n,)
         The fitted unknowns (k of them).
     row_weights : ndarray, shape (m,), or float
-        Factors on the whitened rows (fitted against stated noise, robust weights); the prior rows
-        keep theirs: what was known before measuring does not shrink because the instruments read
-        better than stated.
+        The fit's robust weights ``W``.
+    noise : ndarray, shape (m,), or float
+        Each row's actual noise in units of its stated noise (``row_noise``).
 
     Returns
     -------
     covariance : ndarray, shape (k, k)
         Of the free unknowns, internal units.
-    table_covariance : ndarray, shape (24, 24)
-        Of the table, with the held table parameters considered at their tolerance.
+    robot_covariance : ndarray, shape (r, r)
+        Of ``workspace_mask(model)``'s entries, internal units, with the held ones considered.
     """
     _, jac = model.residuals_and_jacobian(x)
     jac = jac * np.broadcast_to(row_weights, model.groups.shape)[:, None]
-    held = np.flatnonzero(~free[:N_DH])
-    cov = np.linalg.pinv(jac[:, free].T @ jac[:, free])
-    held_sigma = tolerance([model.names[k] for k in held])
-    table_cov = table_covariance(cov, jac[:, free], jac[:, held], np.flatnonzero(free), held, held_sigma)
-    return cov, table_cov
+    a = jac[:, free]
+    gain = np.linalg.pinv(a.T @ a) @ a.T  # (k, m): the fit's response to its weighted rows
+    spread = (
+        gain * np.broadcast_to(row_weights, model.groups.shape) * np.broadcast_to(noise, model.groups.shape)
+    )
+    cov = spread @ spread.T
+    held = np.flatnonzero(~model.setup_mask & ~free)
+    robot = np.flatnonzero(workspace_mask(model))
+    robot_cov = robot_covariance(
+        cov, -gain @ jac[:, held], np.flatnonzero(free), held, model.model.prior_sigma()[held], robot
+    )
+    return cov, robot_cov
+
+
+def workspace_mask(model: MeasurementModel) -> np.ndarray:
+    """What the TCP's workspace error depends on, shape (n,) of bool: the robot's parameters (the
+    table, the terms) and the TCP's flange coordinates where the model fits them; in ``x``'s order,
+    which is table, TCP, terms (``accuracy.workspace_error_modes`` takes them so)."""
+    return ~model.setup_mask | model.tool_mask
 
 
 def _downweighted_rows(model, result: LMResult, scale, options: CalibrationOptions) -> np.ndarray:

@@ -139,12 +139,13 @@ def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.nd
 
     Returns
     -------
-    ndarray, shape (N_DH,)
+    ndarray, shape (r,)
         Workspace error mode variances [mm^2] (``accuracy.workspace_error_modes``).
     """
     prep = fit_setup(model, CalibrationOptions(loss="linear"))
-    _, table_cov = covariance(prep.prior, prep.before.x, prep.free)
-    return workspace_error_modes(dh_table(prep.before.x), model.tool, workspace_q, table_cov)
+    _, robot_cov = covariance(prep.prior, prep.before.x, prep.free)
+    x = prep.before.x
+    return workspace_error_modes(dh_table(x), model.tcp_in_flange(x), workspace_q, robot_cov, model.terms)
 
 
 def _valid(dh, tool, limits, q, err, tol: float = 1e-3) -> np.ndarray:

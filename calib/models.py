@@ -14,7 +14,8 @@ from typing import ClassVar, Protocol
 import numpy as np
 
 from calib.identifiability import structural_holds, tolerance
-from calib.kinematics import N_DH, dh_table, tcp_jacobian, tcp_position
+from calib.joint_terms import JointTerms
+from calib.kinematics import N_DH, dh_table, tcp_position
 from calib.lines import N_LINE_PARAMS, LineReference, fit_line, line_residual
 from calib.params import DH_NAMES
 
@@ -50,11 +51,17 @@ class MeasurementModel(Protocol):
     samples : SampleRows
         The N sample rows the model was built on.
     names : tuple of str
-        One name per entry of ``x``; the first ``N_DH`` are the D-H table (``calib.params.DH_NAMES``).
+        One name per entry of ``x``: the D-H table first (``calib.params.DH_NAMES``), then the setup
+        unknowns, then the joint-space terms (``terms.names``).
     x0 : ndarray, shape (n,)
-        The starting vector, internal units (rad, mm).
+        The starting vector, internal units (rad, mm); the terms start at 0.
     setup_mask : ndarray of bool, shape (n,)
-        The setup unknowns: everything that is not the robot's table.
+        The setup unknowns: everything that is not the robot's (table and terms).
+    tool_mask : ndarray of bool, shape (n,)
+        The setup unknowns that are the TCP's coordinates in the flange frame (a tracker's probe);
+        none where the TCP is given.
+    terms : JointTerms
+        The robot's joint-space terms beyond the table (``calib.joint_terms``; empty: geometry only).
     groups : ndarray of int, shape (m,)
         Per residual, the instrument it comes from (robust scales are estimated per group).
     rows : ndarray of int, shape (m,)
@@ -66,6 +73,8 @@ class MeasurementModel(Protocol):
     names: tuple[str, ...]
     x0: np.ndarray
     setup_mask: np.ndarray
+    tool_mask: np.ndarray
+    terms: JointTerms
     groups: np.ndarray
     rows: np.ndarray
 
@@ -86,11 +95,19 @@ class MeasurementModel(Protocol):
         ...
 
     def with_samples(self, samples) -> MeasurementModel:
-        """The same model (start, frame, noise) on other rows: a subset or a hold-out set."""
+        """The same model (start, frame, noise, terms) on other rows: a subset or a hold-out set."""
+        ...
+
+    def with_terms(self, terms: JointTerms) -> MeasurementModel:
+        """The same model (rows, start, frame, noise) with other joint-space terms."""
         ...
 
     def row_error_mm(self, x: np.ndarray) -> np.ndarray:
         """The contract's error of each sample row [mm], shape (N,), at ``x``."""
+        ...
+
+    def tcp_in_flange(self, x: np.ndarray) -> np.ndarray:
+        """The TCP (3,) [mm] in the flange frame at ``x``: the measured point."""
         ...
 
     def setup_estimate(self, x: np.ndarray):
@@ -258,10 +275,13 @@ def least_aligned_direction(directions: np.ndarray) -> np.ndarray:
 class DrawstringLineModel:
     """Drawstring distances to a ground anchor plus gauge-block line contacts (the paper's LMLC).
 
-    Unknowns ``x = [dh (24), anchor (3), length_offset (1), 4 per line]``. Residuals, in this order:
+    Unknowns ``x = [dh (24), anchor (3), length_offset (1), 4 per line, terms (K)]``. Residuals, in
+    this order:
 
     - drawstring, every row: ``(|p - anchor| - length_offset - Y) / sigma_length``
     - line, two per row on a line: ``sqrt(rho) * offset(p - dial * dial_axis, line) / sigma_line``
+
+    with ``p`` the TCP at the angles the links take (``calib.joint_terms``).
 
     Parameters
     ----------
@@ -275,24 +295,32 @@ class DrawstringLineModel:
         Starting table, internal units (rad, mm).
     tool : array_like, shape (3,)
         TCP in the flange frame [mm].
+    terms : JointTerms, optional
+        Joint-space terms beyond the table (default: none).
     """
 
     kind: ClassVar[str] = "drawstring"
 
-    def __init__(self, samples, setup: DrawstringSetup, frame: DrawstringFrame, dh0, tool):
+    def __init__(self, samples, setup: DrawstringSetup, frame: DrawstringFrame, dh0, tool, terms=None):
         self.samples, self.setup_values, self.frame = samples, setup, frame
         self.tool = np.asarray(tool, float)
+        self.terms = terms or JointTerms()
+        self._basis = self.terms.basis(samples.q)
         self.line_ids = sorted(frame.lines)
         self._line_cols = {
             lid: slice(N_DH + 4 + N_LINE_PARAMS * k, N_DH + 4 + N_LINE_PARAMS * (k + 1))
             for k, lid in enumerate(self.line_ids)
         }
         line_names = tuple(f"line{lid}.{n}" for lid in self.line_ids for n in ("c1_mm", "c2_mm", "b1", "b2"))
-        self.names = DH_NAMES + frame.anchor_names() + ("length_offset_mm",) + line_names
+        setup_names = frame.anchor_names() + ("length_offset_mm",) + line_names
+        self.names = DH_NAMES + setup_names + self.terms.names
+        self._terms_at = N_DH + len(setup_names)
         self.x0 = np.concatenate(
-            [np.ravel(dh0), np.zeros(3), [setup.length_offset], np.zeros(len(line_names))]
+            [np.ravel(dh0), np.zeros(3), [setup.length_offset], np.zeros(len(line_names) + len(self.terms))]
         )
-        self.setup_mask = np.arange(len(self.names)) >= N_DH
+        index = np.arange(len(self.names))
+        self.setup_mask = (index >= N_DH) & (index < self._terms_at)
+        self.tool_mask = np.zeros(len(self.names), bool)
         self._on_line = {lid: np.flatnonzero(samples.line == lid) for lid in self.line_ids}
         line_rows = np.concatenate([self._on_line[lid] for lid in self.line_ids] or [[]]).astype(int)
         n = len(samples)
@@ -312,21 +340,38 @@ class DrawstringLineModel:
 
     def prior_sigma(self) -> np.ndarray:
         """The table's manufacturing tolerance, the rough anchor's and offset's (half the stated
-        tolerances); the lines are free (inf)."""
+        tolerances), the terms' priors; the lines are free (inf)."""
         sigma = np.full(len(self.names), np.inf)
         sigma[:N_DH] = tolerance(self.names[:N_DH])
         sigma[N_DH : N_DH + 3] = self.setup_values.anchor_tolerance / 2
         sigma[N_DH + 3] = self.setup_values.offset_tolerance / 2
+        sigma[self._terms_at :] = self.terms.prior_sigma()
         return sigma
 
     def with_samples(self, samples: DrawstringSamples) -> DrawstringLineModel:
-        """The same model (frame, setup) on other rows, e.g. a hold-out set."""
-        return DrawstringLineModel(samples, self.setup_values, self.frame, self.x0[:N_DH], self.tool)
+        """The same model (frame, setup, terms) on other rows, e.g. a hold-out set."""
+        return DrawstringLineModel(
+            samples, self.setup_values, self.frame, self.x0[:N_DH], self.tool, self.terms
+        )
+
+    def with_terms(self, terms: JointTerms) -> DrawstringLineModel:
+        """The same model (rows, frame, setup) with other joint-space terms."""
+        return DrawstringLineModel(
+            self.samples, self.setup_values, self.frame, self.x0[:N_DH], self.tool, terms
+        )
 
     # -- unpacking ---------------------------------------------------------------------------
     def dh(self, x: np.ndarray) -> np.ndarray:
         """The D-H table (6, 4) in ``x``, internal units."""
         return dh_table(x)
+
+    def term_values(self, x: np.ndarray) -> np.ndarray:
+        """The joint-space terms' values (K,) in ``x``, internal units."""
+        return x[self._terms_at :]
+
+    def tcp_in_flange(self, x: np.ndarray) -> np.ndarray:
+        """The TCP (3,) [mm] in the flange frame: given, the cable is tied there."""
+        return self.tool
 
     def anchor(self, x: np.ndarray) -> np.ndarray:
         """The anchor (3,) [mm], base frame."""
@@ -362,6 +407,11 @@ class DrawstringLineModel:
         )
 
     # -- residuals ---------------------------------------------------------------------------
+    def tcp(self, x: np.ndarray) -> np.ndarray:
+        """The TCP of every row [mm], (N, 3), base frame, at the angles the links take."""
+        q = self.terms.link_angles(self.samples.q, self.term_values(x), self._basis)
+        return tcp_position(self.dh(x), q, self.tool)
+
     def row_error_mm(self, x: np.ndarray) -> np.ndarray:
         """Drawstring residuals ``Y - Y_model`` [mm], shape (N,) (the contract's metric).
 
@@ -375,8 +425,7 @@ class DrawstringLineModel:
         ndarray, shape (N,)
             Reading minus model length, ``Y - (|p - anchor| - length_offset)`` [mm].
         """
-        p = tcp_position(self.dh(x), self.samples.q, self.tool)
-        model = np.linalg.norm(p - self.anchor(x), axis=1) - self.length_offset(x)
+        model = np.linalg.norm(self.tcp(x) - self.anchor(x), axis=1) - self.length_offset(x)
         return self.samples.length - model
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -387,20 +436,28 @@ class DrawstringLineModel:
         """Whitened residuals (m,) and their analytic Jacobian (m, n), None unless ``jacobian``."""
         return self._evaluate(x, jacobian)
 
+    def _robot_jacobian(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """TCPs (N, 3) and their derivatives (N, 3, n) by ``x`` (zero in the setup columns)."""
+        p, jac_table, jac_terms = self.terms.tcp_jacobian(
+            self.dh(x), self.samples.q, self.tool, self.term_values(x), self._basis
+        )
+        dp = np.zeros((len(self.samples), 3, x.size))
+        dp[:, :, :N_DH], dp[:, :, self._terms_at :] = jac_table, jac_terms
+        return p, dp
+
     def _evaluate(self, x, jacobian):
         st = self.setup_values
         if jacobian:
-            p, dp = tcp_jacobian(self.dh(x), self.samples.q, self.tool)
+            p, dp = self._robot_jacobian(x)
         else:
-            p = tcp_position(self.dh(x), self.samples.q, self.tool)
+            p = self.tcp(x)
         rel = p - self.anchor(x)
         dist = np.linalg.norm(rel, axis=1)
         r_len = (dist - self.length_offset(x) - self.samples.length) / st.sigma_length
         parts, jparts = [r_len], []
         if jacobian:
             n = rel / dist[:, None]
-            j = np.zeros((len(self.samples), x.size))
-            j[:, :N_DH] = np.einsum("nk,nkj->nj", n, dp)
+            j = np.einsum("nk,nkj->nj", n, dp)
             j[:, N_DH : N_DH + 3] = -n @ self.frame.anchor_basis
             j[:, N_DH + 3] = -1.0
             jparts.append(j / st.sigma_length)
@@ -411,8 +468,7 @@ class DrawstringLineModel:
             r, dr_dp, dr_dl = line_residual(self.frame.lines[lid], x[self._line_cols[lid]], pc)
             parts.append(w_line * r.ravel())
             if jacobian:
-                j = np.zeros((rows.size, 2, x.size))
-                j[:, :, :N_DH] = np.einsum("nik,nkj->nij", dr_dp, dp[rows])
+                j = np.einsum("nik,nkj->nij", dr_dp, dp[rows])
                 j[:, :, self._line_cols[lid]] = dr_dl
                 jparts.append(w_line * j.reshape(2 * rows.size, x.size))
         r = np.concatenate(parts)

@@ -1,6 +1,6 @@
 """Position measurement model: TCP positions measured by an instrument (a laser tracker) in its frame.
 
-Unknowns ``x = [dh (24), tracker rotation (3), tracker translation (3), probe (3), compliance (k)]``:
+Unknowns ``x = [dh (24), tracker rotation (3), tracker translation (3), probe (3), terms (K)]``:
 
 - ``dh``: the D-H table, internal units (rad, mm);
 - the base-to-tracker transform, minimal about a fixed reference ``(R0, t0)`` (a Kabsch fit of the
@@ -9,10 +9,10 @@ Unknowns ``x = [dh (24), tracker rotation (3), tracker translation (3), probe (3
       tracker_from_base(w, t) = (exp([w]x) R0,  t0 + t),   w [rad] a rotation vector, t [mm];
 
 - ``probe``: the measured point in the flange frame [mm];
-- optionally one compliance per chosen joint [urad / (N m)]: the joint turns by ``c_j tau_j`` under
-  the gravity torque ``tau_j(q)`` of the links beyond it (computed once from the starting table).
+- the robot's joint-space terms beyond the table (``calib.joint_terms``: compliance, harmonics).
 
-Residuals, three per row, whitened: ``(tracker_from_base (p_TCP(q + 1e-6 c tau)) - m) / sigma``.
+Residuals, three per row, whitened: ``(tracker_from_base (p_TCP(q_link)) - m) / sigma``, with
+``q_link`` the angles the links take.
 """
 
 from __future__ import annotations
@@ -24,17 +24,18 @@ import numpy as np
 
 from calib.calibrate import CalibrationOptions, robust_fit
 from calib.identifiability import structural_holds, tolerance
-from calib.kinematics import N_DH, THETA, base_from_frames, dh_table, tcp_jacobian, tcp_position
+from calib.joint_terms import JointTerms
+from calib.kinematics import N_DH, base_from_frames, dh_table, tcp_position
 from calib.lm import LMResult
 from calib.metrics import rigid_fit
+from calib.models import MeasurementAdvice
 from calib.params import DH_NAMES
 
 GROUP_POSITION = 0
 TRACKER_NAMES = ("tracker.rot_x_deg", "tracker.rot_y_deg", "tracker.rot_z_deg")
 TRACKER_NAMES += ("tracker.x_mm", "tracker.y_mm", "tracker.z_mm")
 PROBE_NAMES = ("probe.x_mm", "probe.y_mm", "probe.z_mm")
-MICRO = 1e-6  # compliance unknowns are in urad / (N m)
-G_MS2 = 9.80665
+N_SETUP = len(TRACKER_NAMES) + len(PROBE_NAMES)
 ON_AXIS_MM = 1.0
 """A probe closer than this to joint 6's axis gives J5's tilt and turn a lever too short to see:
 1 mrad moves it by less than 1 um."""
@@ -79,33 +80,6 @@ class TrackerSetupEstimate:
 
     tracker_from_base: Transform
     probe_mm: np.ndarray
-
-
-@dataclass(frozen=True)
-class LinkMasses:
-    """Rigid-body masses for the gravity torques.
-
-    Attributes
-    ----------
-    mass_kg : ndarray, shape (6,)
-        Mass of each link [kg].
-    com_mm : ndarray, shape (6, 3)
-        Centre of mass of link i in D-H frame i [mm].
-    gravity : tuple of 3 float
-        Unit direction of gravity in the base frame.
-    """
-
-    mass_kg: np.ndarray
-    com_mm: np.ndarray
-    gravity: tuple[float, float, float] = (0.0, 0.0, -1.0)
-
-
-@dataclass(frozen=True)
-class Compliance:
-    """Joints (0-based) that yield under gravity and the link masses that load them."""
-
-    joints: tuple[int, ...]
-    links: LinkMasses
 
 
 def rotation_from_vector(w: np.ndarray) -> np.ndarray:
@@ -158,39 +132,6 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def gravity_torques(dh: np.ndarray, q: np.ndarray, links: LinkMasses, joints) -> np.ndarray:
-    """Gravity torque about each joint of ``joints`` from the links beyond it.
-
-    ``tau_j = z_j . sum_{k >= j} (c_k - o_j) x (m_k g)``, with ``c_k`` the centre of mass of link k
-    and ``z_j, o_j`` the axis and origin of D-H frame j.
-
-    Parameters
-    ----------
-    dh : ndarray, shape (6, 4)
-        D-H table, internal units (rad, mm).
-    q : ndarray, shape (N, 6)
-        Joint angles [rad].
-    links : LinkMasses
-        Masses [kg] and centres of mass [mm].
-    joints : sequence of int
-        0-based joints.
-
-    Returns
-    -------
-    ndarray, shape (N, len(joints))
-        Torques [N m].
-    """
-    frames = base_from_frames(dh, q)
-    com = np.einsum("nkij,kj->nki", frames[:, 1:, :3, :3], links.com_mm) + frames[:, 1:, :3, 3]
-    force = links.mass_kg[:, None] * G_MS2 * np.asarray(links.gravity, float)  # (6, 3) [N]
-    out = np.empty((q.shape[0], len(joints)))
-    for c, j in enumerate(joints):
-        z, o = frames[:, j, :3, 2], frames[:, j, :3, 3]
-        moment = np.cross(com[:, j:] - o[:, None, :], force[None, j:]).sum(axis=1)  # [N mm]
-        out[:, c] = np.einsum("ni,ni->n", z, moment) * 1e-3
-    return out
-
-
 @dataclass(frozen=True)
 class TrackerReference:
     """The reference base-to-tracker transform ``(rotation (3, 3), translation (3,) [mm])`` that the
@@ -235,8 +176,8 @@ class PositionModel:
         The fixed base-to-tracker reference (default: Kabsch at ``dh0``, ``probe0``).
     sigma_mm : float
         Position noise per axis [mm].
-    compliance : Compliance, optional
-        Joints that yield under gravity; None for a purely geometric model.
+    terms : JointTerms, optional
+        Joint-space terms beyond the table (default: none).
     """
 
     kind: ClassVar[str] = "position"
@@ -248,26 +189,28 @@ class PositionModel:
         probe0: np.ndarray,
         reference: TrackerReference | None = None,
         sigma_mm: float = 0.05,
-        compliance: Compliance | None = None,
+        terms: JointTerms | None = None,
     ):
         self.samples, self.sigma = samples, float(sigma_mm)
         self.dh0, self.probe0 = np.asarray(dh0, float), np.asarray(probe0, float)
         self.reference = reference or TrackerReference.kabsch(samples, self.dh0, self.probe0)
-        self.compliance = compliance
-        joints = compliance.joints if compliance else ()
-        self.torques = gravity_torques(self.dh0, samples.q, compliance.links, joints) if compliance else None
-        comp_names = tuple(f"J{j + 1}.compliance_urad_per_Nm" for j in joints)
-        self.names = DH_NAMES + TRACKER_NAMES + PROBE_NAMES + comp_names
-        self.x0 = np.concatenate([self.dh0.ravel(), np.zeros(6), self.probe0, np.zeros(len(joints))])
-        self.setup_mask = np.arange(len(self.names)) >= N_DH  # everything but the table (solver's view)
+        self.terms = terms or JointTerms()
+        self._basis = self.terms.basis(samples.q)
+        self.names = DH_NAMES + TRACKER_NAMES + PROBE_NAMES + self.terms.names
+        self.x0 = np.concatenate([self.dh0.ravel(), np.zeros(6), self.probe0, np.zeros(len(self.terms))])
+        index = np.arange(len(self.names))
+        self.setup_mask = (index >= N_DH) & (index < N_DH + N_SETUP)
+        self.tool_mask = (index >= N_DH + 6) & (index < N_DH + N_SETUP)
         n = len(samples)
         self.rows = np.repeat(np.arange(n), 3)
         self.groups = np.full(3 * n, GROUP_POSITION)
 
     def prior_sigma(self) -> np.ndarray:
-        """The table's manufacturing tolerance; the tracker placement and probe are free."""
+        """The table's manufacturing tolerance and the terms' priors; the tracker placement and
+        probe are free."""
         sigma = np.full(len(self.names), np.inf)
         sigma[:N_DH] = tolerance(self.names[:N_DH])
+        sigma[N_DH + N_SETUP :] = self.terms.prior_sigma()
         return sigma
 
     def gauges(self) -> dict[str, str]:
@@ -296,13 +239,17 @@ class PositionModel:
         return float(np.hypot(a6 + px, np.cos(alpha6) * py - np.sin(alpha6) * pz))
 
     def with_samples(self, samples: PositionSamples) -> PositionModel:
-        """The same model (start, reference, noise, compliance) on other rows measured from the same
+        """The same model (start, reference, noise, terms) on other rows measured from the same
         tracker placement, e.g. a hold-out set."""
-        return PositionModel(samples, self.dh0, self.probe0, self.reference, self.sigma, self.compliance)
+        return PositionModel(samples, self.dh0, self.probe0, self.reference, self.sigma, self.terms)
+
+    def with_terms(self, terms: JointTerms) -> PositionModel:
+        """The same model (rows, start, reference, noise) with other joint-space terms."""
+        return PositionModel(self.samples, self.dh0, self.probe0, self.reference, self.sigma, terms)
 
     def with_start(self, dh0: np.ndarray, probe0: np.ndarray) -> PositionModel:
         """The same rows started from another table and probe (new Kabsch reference)."""
-        return PositionModel(self.samples, dh0, probe0, None, self.sigma, self.compliance)
+        return PositionModel(self.samples, dh0, probe0, None, self.sigma, self.terms)
 
     # -- unpacking ---------------------------------------------------------------------------
     def dh(self, x: np.ndarray) -> np.ndarray:
@@ -318,29 +265,35 @@ class PositionModel:
         """The probe point (3,) [mm] in the flange frame."""
         return x[N_DH + 6 : N_DH + 9]
 
+    def tcp_in_flange(self, x: np.ndarray) -> np.ndarray:
+        """The TCP (3,) [mm] in the flange frame: the fitted probe point."""
+        return self.probe(x)
+
+    def term_values(self, x: np.ndarray) -> np.ndarray:
+        """The joint-space terms' values (K,) in ``x``, internal units."""
+        return x[N_DH + N_SETUP :]
+
     def setup_estimate(self, x: np.ndarray) -> TrackerSetupEstimate:
         """Base-to-tracker transform and probe at ``x`` (see ``TrackerSetupEstimate``)."""
         rot, t = self.tracker_from_base(x)
         return TrackerSetupEstimate(Transform(rot, t), self.probe(x))
 
     def joints(self, x: np.ndarray) -> np.ndarray:
-        """Joint angles the links take [rad]: readings plus the gravity deflection, (N, 6)."""
-        q = self.samples.q.copy()
-        if self.compliance is not None:
-            q[:, list(self.compliance.joints)] += MICRO * self.torques * x[N_DH + 9 :]
-        return q
+        """Joint angles the links take [rad], (N, 6): readings plus the terms' deflections."""
+        return self.terms.link_angles(self.samples.q, self.term_values(x), self._basis)
 
     # -- what the station asks ---------------------------------------------------------------
     def placement_ids(self) -> np.ndarray:
         """One tracker placement for every row: zeros (N,)."""
         return np.zeros(len(self.samples), int)
 
-    def measurement_advice(self, x: np.ndarray) -> None:
-        """No advice: a position set's predicted workspace error keeps a floor from the held
-        parameters considered at their tolerance (J6's, which the free probe offset absorbs: about
-        1.5 mm on a UR10) that no further pose lowers, so "fits well, predicts badly" holds for
-        every good tracker set and says nothing about what to measure."""
-        return None
+    def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice:
+        """More configurations, spread over the joints' ranges: a tracker sees every direction of
+        the measured point, so what is missing is variety of poses."""
+        return MeasurementAdvice(
+            f"its {len(self.samples)} poses",
+            "measure more configurations, spread over every joint's range",
+        )
 
     # -- residuals ---------------------------------------------------------------------------
     def predicted_mm(self, x: np.ndarray) -> np.ndarray:
@@ -377,7 +330,7 @@ class PositionModel:
         if not jacobian:
             p = tcp_position(dh, q, probe)
             return ((p @ rot.T + t - self.samples.position) / self.sigma).ravel(), None
-        p, dp = tcp_jacobian(dh, q, probe)
+        p, dp, dp_terms = self.terms.tcp_jacobian(dh, self.samples.q, probe, self.term_values(x), self._basis)
         rp = p @ rot.T
         r = (rp + t - self.samples.position) / self.sigma
         n = len(self.samples)
@@ -388,9 +341,7 @@ class PositionModel:
         j[:, :, N_DH + 3 : N_DH + 6] = np.eye(3)
         flange_rot = base_from_frames(dh, q)[:, 6, :3, :3]
         j[:, :, N_DH + 6 : N_DH + 9] = np.einsum("ij,njk->nik", rot, flange_rot)
-        if self.compliance is not None:
-            dq = j[:, :, [THETA + 4 * k for k in self.compliance.joints]]  # dp/dq_j = dp/dtheta_j
-            j[:, :, N_DH + 9 :] = dq * (MICRO * self.torques[:, None, :])
+        j[:, :, N_DH + N_SETUP :] = np.einsum("ij,njk->nik", rot, dp_terms)
         return r.ravel(), j.reshape(3 * n, x.size) / self.sigma
 
 
@@ -405,19 +356,19 @@ def _skew_batch(v: np.ndarray) -> np.ndarray:
 def register(
     model: PositionModel,
     dh: np.ndarray,
-    compliance: np.ndarray | None = None,
+    term_values: np.ndarray | None = None,
     options: CalibrationOptions | None = None,
 ) -> tuple[PositionModel, LMResult]:
-    """Fit a series' base-to-tracker transform and probe offset with the table held.
+    """Fit a series' base-to-tracker transform and probe offset with the robot held.
 
     Parameters
     ----------
     model : PositionModel
-        The series' rows (its probe start and compliance joints are kept).
+        The series' rows (its probe start and terms are kept).
     dh : ndarray, shape (6, 4)
         The table to hold, internal units (rad, mm).
-    compliance : ndarray, shape (k,), optional
-        Joint compliances [urad / (N m)] to hold, if the model has that term.
+    term_values : ndarray, shape (K,), optional
+        The model's joint-space terms' values to hold, internal units (default: 0).
     options : CalibrationOptions, optional
         Loss and solver options.
 
@@ -430,9 +381,7 @@ def register(
     """
     started = model.with_start(dh, model.probe0)
     x0 = started.x0.copy()
-    if compliance is not None:
-        x0[N_DH + 9 :] = compliance
-    free = np.zeros(len(started.names), bool)
-    free[N_DH : N_DH + 9] = True  # transform and probe only: the compliances are the robot's
-    result, _ = robust_fit(started, x0, free, options or CalibrationOptions())
+    if term_values is not None:
+        x0[N_DH + N_SETUP :] = term_values
+    result, _ = robust_fit(started, x0, started.setup_mask, options or CalibrationOptions())
     return started, result

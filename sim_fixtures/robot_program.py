@@ -197,7 +197,7 @@ class SimRobot:
 
     def _program_state(self, prog_s: float) -> tuple[np.ndarray, np.ndarray, int, bool]:
         """Joints, joint speeds, target index and dwelling flag at program time ``prog_s``."""
-        if self.hold or self.cycle_s == 0.0:
+        if self.hold or self.cycle_s == 0.0 or prog_s < 0:  # before the program starts: at target 0
             return self.targets_deg[0].copy(), np.zeros(6), 0, True
         tau = prog_s % self.cycle_s
         seg = self._segments[bisect.bisect_right(self._starts, tau) - 1]

@@ -85,7 +85,8 @@ class SimStation:
     """The simulated devices of a station configuration ``cfg`` (its device sections from
     ``drivers.config``, ``time_scale`` and ``sim``: seed and robot motion); ``start()`` returns one
     address dict per device and ``stop()`` ends them all (safe after a partial start).
-    ``plan_deg``/``plan_lines`` are the targets the simulated robot walks."""
+    ``plan_deg``/``plan_lines`` are the targets the simulated robot walks; it waits ``start_delay_s``
+    (real s) still at the first before it runs (an operator presses play once the station listens)."""
 
     def __init__(
         self,
@@ -93,6 +94,7 @@ class SimStation:
         hold: bool = False,
         faults: Sequence[RobotFault] = (),
         plan: tuple[np.ndarray, np.ndarray] | None = None,
+        start_delay_s: float = 0.0,
     ):
         if not isinstance(cfg.robot, RobotRtde):
             raise InputError(
@@ -100,7 +102,7 @@ class SimStation:
                 'controller only (kind = "rtde")'
             )
         self.cfg = cfg
-        self.clock = SimClock()
+        self.clock = SimClock(time.monotonic() + start_delay_s)
         if plan is None:
             cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
         else:

@@ -18,7 +18,9 @@ Units as a person measures them: mm and degrees. The nominal robot is the shippe
 - the instruments (:class:`Noise`, the one statement of the simulator's noise): the drawstring
   reads ``|p_TCP - anchor| - length_offset`` with N(0, 0.02 mm) noise and 1 um resolution; the dial
   N(0, 0.002 mm), 1 um; the controller's joint readings N(0, 0.0005 deg);
-- a gross reading (cable slip, bumped probe) adds 2-5 mm, either sign, to the drawstring.
+- a gross reading (cable slip, bumped probe) adds 2-5 mm, either sign, to the drawstring;
+- optionally (``JointError``) the joints read other than the links turn: a compliance under gravity,
+  a harmonic of the joint's angle, as ``calib.joint_terms`` models them.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import numpy as np
 
 import configs
 from calib import ik
+from calib.joint_terms import JointTerms
 from calib.kinematics import tcp_position
 from calib.params import DH_KEYS, dh_from_degrees
 from sim_fixtures.sources import Instrument
@@ -208,6 +211,25 @@ class SampleSet:
         np.savetxt(path, rows, fmt=fmt, delimiter=",", header=header, comments="")
 
 
+@dataclass(frozen=True)
+class JointError:
+    """Joints that read other than their links turn: ``terms`` (``calib.joint_terms.JointTerms``)
+    with their true ``values`` (internal units)."""
+
+    terms: JointTerms
+    values: np.ndarray
+
+    def readings_deg(self, q_link_deg: np.ndarray) -> np.ndarray:
+        """What the joints read [deg] (N, 6) when the links stand at ``q_link_deg`` (N, 6): the
+        reading ``q`` solves ``q + B(q) c = q_link`` (fixed point; the deflections are
+        milliradians, so each pass gains three orders)."""
+        q_link = np.radians(q_link_deg)
+        q = q_link
+        for _ in range(4):
+            q = q_link - (self.terms.link_angles(q, self.values, self.terms.basis(q)) - q)
+        return np.degrees(q)
+
+
 @dataclass
 class World:
     """The true cell. Build one with ``World.create(seed)``."""
@@ -218,6 +240,7 @@ class World:
     length_offset_mm: float
     lines: tuple[GaugeLine, ...]
     noise: Noise = field(default_factory=Noise)
+    joint_error: JointError | None = None
 
     @classmethod
     def create(cls, seed: int = 0, n_lines: int = 3, noise: Noise | None = None) -> World:
@@ -316,7 +339,8 @@ class World:
         n = q_true_deg.shape[0]
         length = self.true_length_mm(q_true_deg) + rng.normal(0, nz.length_mm, n)
         dial = self.true_dial_mm(q_true_deg, line_ids) + rng.normal(0, nz.dial_mm, n)
-        q_read = q_true_deg + rng.normal(0, nz.q_deg, q_true_deg.shape)
+        exact = q_true_deg if self.joint_error is None else self.joint_error.readings_deg(q_true_deg)
+        q_read = exact + rng.normal(0, nz.q_deg, q_true_deg.shape)
         # Gross readings drawn last, so a set with them shares every other draw with one without.
         outliers = np.sort(rng.choice(n, size=int(round(outlier_fraction * n)), replace=False))
         length[outliers] += rng.choice([-1.0, 1.0], outliers.size) * rng.uniform(2.0, 5.0, outliers.size)

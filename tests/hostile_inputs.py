@@ -75,13 +75,15 @@ class Kit:
 
 
 def make_kit(folder: Path) -> Kit:
-    """Write the valid files: a simulated 3-line cell (15 samples a line, 4 held out), a plan of
+    """Write the valid files: a simulated 3-line cell (15 samples a line, 4 held out; link masses and
+    a payload in its robot and setup files), a plan of
     its configurations, a station config with absent devices and one retry, a session folder with
     40 of the plan's 45 targets measured, an IPA series of 5 rows, and the simulated cell's setup
     with its gauge-line placements (for ``station plan``), the corrected table of the samples and a
     program of 8 rows (for ``station compensate``)."""
     folder = Path(folder)
     sc = write_scenario(folder, seed=1, n_lines=3, n_per_line=15, n_holdout_per_line=4)
+    _add_masses(sc.robot, sc.setup)
     plan = folder / "plan.csv"
     plan.write_text(Plan.of(sc.train.q_deg, sc.train.line).csv_text())
     config = folder / "station.toml"
@@ -103,6 +105,18 @@ def make_kit(folder: Path) -> Kit:
         folder, sc.robot, sc.setup, sc.samples, sc.holdout, plan, config, session, ipa, placements,
         corrected, program,
     )  # fmt: skip
+
+
+def _add_masses(robot: Path, setup: Path) -> None:
+    """Link masses in the robot file and a payload in the setup (the optional keys of the gravity
+    torques, so that they are mutated too)."""
+    data = tomllib.loads(robot.read_text())
+    for k, joint in enumerate(data["joints"]):
+        joint.update(mass_kg=30.0 - 4.0 * k, com_mm=[-50.0, 0.0, 10.0 * k])
+    robot.write_text(tomli_w.dumps(data))
+    data = tomllib.loads(setup.read_text())
+    data["payload"] = {"mass_kg": 2.5, "com_mm": [0.0, 0.0, 60.0]}
+    setup.write_text(tomli_w.dumps(data))
 
 
 def absent_devices() -> dict:

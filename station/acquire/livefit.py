@@ -1,48 +1,322 @@
-"""The live error: the drawstring reading against the length the current model predicts.
+"""The running calibration of a session: refits off the capture path, the live error of every
+sample against the latest refit, and the guidance its predicted workspace error gives.
 
-The model is the nominal robot table with the drawstring's anchor and offset refitted (least
-squares, 4 unknowns) to every sample so far, so the live error of a sample shows what the
-calibration will have to explain: the robot's geometric error, or a bad reading (a jump of
-millimetres against a trend of tenths). Until 4 samples are in, the setup's rough values serve.
+Refits run in a worker process (:class:`FitWorker`), one at a time: the session hands it every
+sample taken so far and carries on capturing; when it answers, the next refit starts on all
+samples taken by then, so refits coalesce when they fall behind the captures. A process and not
+a thread because the solver's Python loop holds the GIL: a refit thread would delay the capture
+path's reads by the interpreter's switch interval each time (``benchmarks/live_fit.py``).
+
+The live error of a sample is its reading minus the length the latest refit predicts, taken
+before the sample joins a fit. Once the samples determine the unknowns (``Refit.judged``) the
+prediction carries an uncertainty, and a reading more than ``SUSPECT_SIGMAS`` of it (and of the
+noise) off is called suspect. Guidance, once per gauge line: the line stops paying when its last
+``SATURATION_SAMPLES`` samples improved the predicted workspace error by less than
+``SATURATION_GAIN``; the message names the next placement (the plan's next line, else the
+planner's best new one, else the model's advice).
 """
 
 from __future__ import annotations
 
+import contextlib
+import multiprocessing
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
-from scipy.optimize import least_squares
 
 from calib.kinematics import tcp_position
 from calib.params import dh_from_degrees
 from station.formats.tables import RobotFile, SetupFile
+from station.jobs.planning import NextPlacement, next_placement
+from station.jobs.planning import vector_text as _vec
+from station.jobs.running import Refit, SessionSamples, refit
+
+SUSPECT_SIGMAS = 5.0
+WORKER_NICE = 10
+SATURATION_SAMPLES, SATURATION_GAIN = 10, 0.05
 
 
-class LiveFit:
-    """Nominal TCPs of the samples (mm) and the refitted ``anchor_mm`` / ``length_offset_mm``."""
+class FitFailed(Exception):
+    """A job the worker could not finish; the message says why."""
+
+
+def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples):
+    if kind == "refit":
+        return refit(robot, setup, samples)
+    return next_placement(robot, setup, samples.q_deg, samples.line)
+
+
+def _serve(conn, robot: RobotFile, setup: SetupFile) -> None:
+    """The worker process: answer each ``(kind, samples)`` with ``(kind, result)`` until the pipe
+    closes; a failed job answers with :class:`FitFailed`. Says ``("ready", None)`` first."""
+    _yield_cpu()
+    conn.send(("ready", None))
+    while True:
+        try:
+            kind, samples = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            result = _job(kind, robot, setup, samples)
+        except Exception as exc:  # noqa: BLE001 - reported to the session, which goes on
+            result = FitFailed(f"{type(exc).__name__}: {exc}")
+        conn.send((kind, result))
+
+
+def _yield_cpu() -> None:
+    """Leave the CPU to the capture path: niceness ``WORKER_NICE`` and, on Linux, an autogroup of
+    its own at that niceness (in the session's autogroup, the fit's CPU time counts against the
+    capture path's share of a loaded machine). Not the idle class: a browser showing the live view
+    on the same machine would starve the running calibration."""
+    try:
+        os.setsid()
+        with open("/proc/self/autogroup", "w") as fh:
+            fh.write(str(WORKER_NICE))
+    except (AttributeError, OSError):
+        pass
+    os.nice(WORKER_NICE)
+
+
+class FitWorker:
+    """Jobs (``"refit"``, ``"next"``) on a session's samples in a spawned worker process, one at a
+    time: :meth:`submit` never waits, :meth:`poll` returns a finished ``(kind, result)`` or None."""
 
     def __init__(self, robot: RobotFile, setup: SetupFile):
+        ctx = multiprocessing.get_context("spawn")  # no fork of a process with device threads
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_serve, args=(child, robot, setup), daemon=True, name="station-refit")
+        with _one_blas_thread():  # the spawned interpreter reads these as numpy loads
+            self._proc.start()
+        child.close()
+        self.busy = True  # until it says it is ready
+
+    def wait_ready(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for the worker to have started (imports take a second or two)."""
+        if self.busy and self._conn.poll(timeout_s):
+            self._conn.recv()
+            self.busy = False
+        return not self.busy
+
+    def submit(self, kind: str, samples: SessionSamples) -> None:
+        self._conn.send((kind, samples))
+        self.busy = True
+
+    def poll(self, timeout_s: float = 0.0):
+        """The finished job's ``(kind, result)``, waiting up to ``timeout_s``; None if none."""
+        if not self.busy or not self._conn.poll(timeout_s):
+            return None
+        self.busy = False
+        answer = self._conn.recv()
+        return None if answer[0] == "ready" else answer
+
+    def close(self) -> None:
+        self._conn.close()
+        self._proc.terminate()
+        self._proc.join(timeout=5)
+
+
+@contextlib.contextmanager
+def _one_blas_thread():
+    """The environment a worker starts in: one BLAS/OpenMP thread (one core for the fit; OpenBLAS
+    threads spin while they wait, taking a second core from the capture path)."""
+    keys = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    saved = {k: os.environ.get(k) for k in keys}
+    os.environ.update(dict.fromkeys(keys, "1"))
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k)
+            else:
+                os.environ[k] = v
+
+
+@dataclass(frozen=True)
+class LiveError:
+    """A sample against the running calibration: the length it predicted ``model_mm`` and the
+    ``error_mm`` (reading - model), None before the first refit; ``limit_mm``, the largest error
+    the prediction's uncertainty and the noise explain (``SUSPECT_SIGMAS`` of them), None while
+    the refit is not judged; ``suspect`` beyond it."""
+
+    model_mm: float | None = None
+    error_mm: float | None = None
+    limit_mm: float | None = None
+
+    @property
+    def suspect(self) -> bool:
+        return self.limit_mm is not None and abs(self.error_mm) > self.limit_mm
+
+
+@dataclass
+class LiveListener:
+    """What the running calibration reports: each ``refit``, ``message(text)`` for the operator,
+    and ``reached(text)`` once the ``until_mm`` goal is met."""
+
+    refit: Callable[[Refit], None] = lambda r: None
+    message: Callable[[str], None] = lambda text: None
+    reached: Callable[[str], None] = lambda text: None
+
+
+class RunningCalibration:
+    """The running calibration of a session on ``robot`` and ``setup`` following a plan with
+    gauge lines ``plan_lines`` (M,), refitting with ``worker``; ``until_mm`` is the 95 % workspace
+    bound that ends the session."""
+
+    def __init__(
+        self,
+        robot: RobotFile,
+        setup: SetupFile,
+        worker,
+        plan_lines: np.ndarray,
+        listener: LiveListener | None = None,
+        until_mm: float | None = None,
+    ):
+        self.robot, self.setup, self.worker = robot, setup, worker
+        self.listener = listener or LiveListener()
+        self.until_mm = until_mm
+        self.plan_lines = [int(v) for v in dict.fromkeys(plan_lines)]  # distinct, in plan order
         self.dh = dh_from_degrees(robot.table_deg())
         self.tool = np.asarray(robot.tool_mm, float)
-        self.x = np.r_[setup.drawstring.anchor_mm, setup.drawstring.length_offset_mm]
-        self.tcps: list[np.ndarray] = []
-        self.lengths: list[float] = []
+        self.samples = SessionSamples(np.empty((0, 6)), np.empty(0), np.empty(0), np.empty(0, int))
+        self.latest: Refit | None = None
+        self.history: list[tuple[Refit, dict[int, int]]] = []  # judged refits, samples per line
+        self.saturated: set[int] = set()
+        self.goal_met = False
+        self._want_next = False  # a planner suggestion is wanted and not yet started
 
-    def tcp_mm(self, q_deg) -> np.ndarray:
-        """Nominal TCPs (N, 3), mm, of configurations (N, 6) in degrees."""
+    def nominal_tcp_mm(self, q_deg) -> np.ndarray:
+        """Nominal TCPs (N, 3) [mm] of configurations (N, 6) [deg]."""
         return tcp_position(self.dh, np.radians(np.atleast_2d(q_deg)), self.tool)
 
-    def predict_mm(self, tcp_mm) -> np.ndarray:
-        return np.linalg.norm(np.atleast_2d(tcp_mm) - self.x[:3], axis=1) - self.x[3]
+    def live_error(self, q_deg, length_mm: float) -> LiveError:
+        """The sample against the latest refit (before it joins one)."""
+        fit = self.latest
+        if fit is None:
+            return LiveError()
+        model_mm, sigma_mm = fit.predict(q_deg, self.setup.drawstring.sigma_mm)
+        error = float(length_mm) - model_mm
+        limit = SUSPECT_SIGMAS * float(np.hypot(sigma_mm, fit.noise_mm)) if fit.judged else None
+        return LiveError(model_mm, error, limit)
 
-    def add(self, q_deg, length_mm: float) -> tuple[np.ndarray, float]:
-        """The sample's nominal TCP (3,) and the model's length for it (before refitting on it)."""
-        tcp = self.tcp_mm(q_deg)[0]
-        model = float(self.predict_mm(tcp)[0])
-        self.tcps.append(tcp)
-        self.lengths.append(float(length_mm))
-        if len(self.tcps) >= 4:
-            p, y = np.array(self.tcps), np.array(self.lengths)
-            self.x = least_squares(lambda x: np.linalg.norm(p - x[:3], axis=1) - x[3] - y, self.x).x
-        return tcp, model
+    def add(self, q_deg, length_mm: float, dial_mm: float, line: int) -> None:
+        """A stored sample: joins the next refit (started now if the worker is idle)."""
+        s = self.samples
+        self.samples = SessionSamples(
+            np.vstack([s.q_deg, np.asarray(q_deg, float)[None]]),
+            np.append(s.length_mm, float(length_mm)),
+            np.append(s.dial_mm, float(dial_mm)),
+            np.append(s.line, int(line)),
+        )
+        self._next_job()
+
+    def poll(self, timeout_s: float = 0.0) -> Refit | None:
+        """Look in on the worker (waiting up to ``timeout_s``): a finished refit is reported and
+        judged for guidance, and the next job starts. Returns the refit that arrived, if any."""
+        answer = self.worker.poll(timeout_s)
+        if answer is None:
+            return None
+        kind, result = answer
+        if isinstance(result, FitFailed):
+            self.listener.message(f"running calibration: {kind} failed: {result}")
+            self._next_job()
+            return None
+        if kind == "next":
+            self.listener.message(_next_text(result))
+            self._next_job()
+            return None
+        self._take(result)
+        self._next_job()
+        return result
+
+    def _next_job(self) -> None:
+        if self.worker.busy:
+            return
+        if self._want_next:
+            self.worker.submit("next", self.samples)
+            self._want_next = False
+            return
+        covered = 0 if self.latest is None else self.latest.n
+        if len(self.samples) > covered:
+            self.worker.submit("refit", self.samples)
+
+    def _take(self, fit: Refit) -> None:
+        self.latest = fit
+        self.listener.refit(fit)
+        if not fit.judged:
+            return
+        counts = _counts(self.samples.line[: fit.n])
+        self.history.append((fit, counts))
+        self._saturation(fit, counts)
+        bound = fit.workspace.predicted_rmse_95_mm
+        if self.until_mm is not None and not self.goal_met and bound <= self.until_mm:
+            self.goal_met = True
+            self.listener.reached(
+                f"accuracy reached: predicted workspace error {fit.workspace.predicted_rmse_mm:.3f} mm, "
+                f"95 % bound {bound:.3f} mm <= {self.until_mm:g} mm after {fit.n} samples"
+            )
+
+    def _saturation(self, fit: Refit, counts: dict[int, int]) -> None:
+        """Say once per line when its last samples stopped paying (see the module notes)."""
+        line = int(self.samples.line[fit.n - 1])
+        if line < 0 or line in self.saturated:
+            return
+        earlier = [f for f, c in self.history if c.get(line, 0) <= counts[line] - SATURATION_SAMPLES]
+        if not earlier:
+            return
+        before, now = earlier[-1].workspace.predicted_rmse_mm, fit.workspace.predicted_rmse_mm
+        gain = 1.0 - now / before
+        if gain >= SATURATION_GAIN:
+            return
+        self.saturated.add(line)
+        bound = fit.workspace.predicted_rmse_95_mm
+        change = f"improved it only {100 * gain:.0f} %" if gain > 0 else "did not improve it"
+        head = (
+            f"line {line} saturated at {now:.3g} mm predicted (95 %: {bound:.3g} mm): "
+            f"its last {SATURATION_SAMPLES} samples {change}"
+        )
+        self.listener.message(f"{head}; next: {self._next_placement(fit, counts)}")
+
+    def _next_placement(self, fit: Refit, counts: dict[int, int]) -> str:
+        """The plan's next unmeasured line; else the planner's best new line (asked of the worker,
+        reported when it answers) where the setup places its lines; else the model's advice."""
+        for lid in self.plan_lines:
+            if counts.get(lid, 0) == 0:
+                return _planned_line_text(self.setup, lid)
+        if all(ln.point_mm is not None and ln.direction is not None for ln in self.setup.lines) and (
+            self.setup.lines
+        ):
+            self._want_next = True
+            self._next_job()
+            return "the planner is placing a new line (a message follows)"
+        return fit.advice or "another gauge-line placement"
+
+    def close(self) -> None:
+        self.worker.close()
+
+
+def _counts(line: np.ndarray) -> dict[int, int]:
+    ids, counts = np.unique(line, return_counts=True)
+    return {int(i): int(c) for i, c in zip(ids, counts, strict=True)}
+
+
+def _planned_line_text(setup: SetupFile, lid: int) -> str:
+    placed = next((ln for ln in setup.lines if ln.id == lid), None)
+    if placed is None or placed.point_mm is None or placed.direction is None:
+        return f"line {lid} of the plan"
+    return f"line {lid} of the plan (through {_vec(placed.point_mm, 0)} mm along {_vec(placed.direction, 2)})"
+
+
+def _next_text(found: NextPlacement | None) -> str:
+    if found is None:
+        return "next placement: the planner found no better line near the present ones"
+    return (
+        f"next placement: a line along {_vec(found.direction, 2)} through {_vec(found.point_mm, 0)} mm, "
+        f"tool approach {_vec(found.approach, 2)}: the planner expects it to cut the predicted workspace "
+        f"error by {100 * found.gain:.0f} %"
+    )
 
 
 def line_segments(tcp_mm: np.ndarray, line_ids: np.ndarray) -> dict[int, np.ndarray]:

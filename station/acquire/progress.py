@@ -1,4 +1,6 @@
-"""Progress of a session for the operator: a bar on a terminal, one plain line per sample otherwise."""
+"""Progress of a session for the operator: a bar on a terminal, one plain line per sample otherwise
+(or only the messages); both carry the last live error and the running calibration's predicted
+workspace error."""
 
 from __future__ import annotations
 
@@ -7,35 +9,69 @@ import time
 
 
 class Progress:
-    """Samples taken of ``total``, capture rate (samples/s) and the last live error (mm)."""
+    """Samples taken of ``total``, capture rate (samples/s), the last live error (mm) and the
+    latest predicted workspace error (mm, with its 95 % bound)."""
 
-    def __init__(self, total: int, done: int = 0, stream=None, width: int = 30):
+    def __init__(
+        self,
+        total: int,
+        done: int = 0,
+        stream=None,
+        width: int = 30,
+        every_sample: bool = True,
+        clock=time.monotonic,
+    ):
         self.stream = stream or sys.stdout
+        self.clock = clock
         self.tty = self.stream.isatty()
+        self.every_sample = every_sample
         self.total, self.done, self.width = total, done, width
-        self.start_done, self.t0 = done, time.monotonic()
+        self.start_done, self.t0 = done, clock()
         self.last = ""
+        self.workspace = ""  # the latest prediction, as shown
+        self._shown = ""  # what the last plain line showed of it
+        self._error = ""
 
     @property
     def rate(self) -> float:
-        elapsed = time.monotonic() - self.t0
+        elapsed = self.clock() - self.t0
         return (self.done - self.start_done) / elapsed if elapsed > 0 else 0.0
 
-    def sample(self, row: dict, error_mm: float) -> None:
+    def sample(self, row: dict, live) -> None:
+        """A stored sample ``row`` and its ``live`` error (``error_mm``, ``limit_mm``: None where not
+        known yet)."""
         self.done += 1
+        error = _error_text(live)
         if self.tty:
-            filled = int(self.width * self.done / max(self.total, 1))
-            self.last = (
-                f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total}  "
-                f"{self.rate:.1f} samples/s  last error {error_mm:+.3f} mm"
-            )
-            self.stream.write("\r" + self.last)
-        else:
-            self.stream.write(
-                f"sample {row['sample']} target {row['target']} line {row['line']}: "
-                f"length {row['length_mm']:.3f} mm, error {error_mm:+.3f} mm "
-                f"({self.done}/{self.total}, {self.rate:.1f}/s)\n"
-            )
+            self._bar(error)
+            return
+        if not self.every_sample:
+            return
+        predicted = ""
+        if self.workspace != self._shown:
+            predicted, self._shown = f"; predicted workspace {self.workspace}", self.workspace
+        self.stream.write(
+            f"sample {row['sample']} target {row['target']} line {row['line']}: "
+            f"length {row['length_mm']:.3f} mm, {error} ({self.done}/{self.total}, {self.rate:.1f}/s)"
+            f"{predicted}\n"
+        )
+        self.stream.flush()
+
+    def refit(self, predicted_mm: float, bound_95_mm: float) -> None:
+        """The running calibration's latest predicted workspace error [mm] and 95 % bound [mm]."""
+        self.workspace = f"{predicted_mm:.3g} mm (95 %: {bound_95_mm:.3g} mm)"
+        if self.tty and self.last:
+            self._bar(self._error)
+
+    def _bar(self, error: str) -> None:
+        self._error = error
+        filled = int(self.width * self.done / max(self.total, 1))
+        workspace = f"  workspace {self.workspace}" if self.workspace else ""
+        self.last = (
+            f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total}  "
+            f"{self.rate:.1f} samples/s  {error}{workspace}"
+        )
+        self.stream.write("\r\033[K" + self.last)
         self.stream.flush()
 
     def message(self, text: str) -> None:
@@ -49,3 +85,10 @@ class Progress:
         if self.tty and self.last:
             self.stream.write("\n")
             self.stream.flush()
+
+
+def _error_text(live) -> str:
+    if live.error_mm is None:
+        return "error: no model yet"
+    limit = "" if live.limit_mm is None else f" (limit {live.limit_mm:.3f})"
+    return f"error {live.error_mm:+.3f} mm{limit}"

@@ -15,7 +15,7 @@ import configs
 from drivers.base import DeviceReplyError, DriverError, call_with_reconnect
 from errors import DeviceError, InputError
 from station.acquire.capture import Devices, Rules
-from station.acquire.livefit import LiveFit, line_segments
+from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
 from station.config import StationConfig, load_station_config, station_config
@@ -23,7 +23,12 @@ from station.formats.base import read_toml, validate
 from station.formats.plan import Plan, load_plan
 from station.formats.session_folder import SessionFolder, SessionHeader
 from station.formats.tables import RobotFile, SetupFile, load_robot, load_setup
+from station.jobs.running import Refit
 from station.view.live import LiveView
+
+WORKER_START_S = 30.0  # the session waits this long at most for the running calibration's worker
+RESUME_FIT_S = 120.0  # a resumed session waits this long at most for the refit of its samples
+FINAL_FIT_S = 30.0  # the session's end waits this long at most for the refit on every sample
 
 
 @dataclass
@@ -115,63 +120,142 @@ def open_devices(cfg: StationConfig) -> Devices:
     return devices
 
 
+@dataclass
+class SessionRun:
+    """How a session run ended: its ``state``, the ``view`` (open: the caller closes it), the
+    running calibration's ``refit`` on every sample (None if it never answered) and the largest
+    live error [mm] of the run (None before any prediction)."""
+
+    state: State
+    view: LiveView
+    refit: Refit | None
+    worst_error_mm: float | None
+
+
 def run(
-    inputs: SessionInputs, *, viewer: bool = False, web: bool = False, stream=None
-) -> tuple[State, LiveView]:
-    """Run the session to its end; the live view stays open for a calibration to log into (the
-    caller closes it). Devices are opened first: an unreachable one fails before anything else."""
-    devices = open_devices(inputs.cfg)
+    inputs: SessionInputs,
+    *,
+    viewer: bool = False,
+    web: str | None = None,
+    until_mm: float | None = None,
+    stream=None,
+    every_sample: bool = True,
+) -> SessionRun:
+    """Run the session to its end; the live view stays open for a calibration to log into. ``web``
+    is the address to serve the web viewer on; ``until_mm`` ends the session once the running
+    calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
+    progress to the messages. Devices are opened first: an unreachable one fails before anything
+    else."""
+    worker = FitWorker(inputs.robot, inputs.setup)  # starts while the devices open
     view = None
     try:
-        view = LiveView(inputs.folder.rrd, viewer=viewer, web=web)
-        state = _run_session(inputs, devices, view, stream)
+        devices = open_devices(inputs.cfg)
+        try:
+            view = LiveView(inputs.folder.rrd, viewer=viewer, web=web, resume=bool(inputs.folder.rows))
+            progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream, every_sample=every_sample)
+            live = Live(inputs.robot, inputs.setup, inputs.plan.line, worker, view, progress, until_mm)
+            state = _run_session(inputs, devices, live)
+        finally:
+            devices.close()
     except BaseException:
         if view is not None:
             view.close()
         raise
     finally:
-        devices.close()
+        worker.close()
     inputs.folder.update_header(last_state=state.value, samples=len(inputs.folder.rows))
-    return state, view
+    return SessionRun(state, view, live.running.latest, live.worst_mm)
 
 
-def _run_session(inputs: SessionInputs, devices: Devices, view: LiveView, stream) -> State:
-    """The session with its live fit, live view and progress wired to it; Ctrl-C stops it."""
-    fit = LiveFit(inputs.robot, inputs.setup)
+class Live:
+    """The running calibration of a session on ``robot`` and ``setup`` following a plan with gauge
+    lines ``plan_lines``, refitting with ``worker``, wired to the session (:meth:`listener`), the
+    view and the progress line; ``until_mm`` as in :func:`run`."""
+
+    def __init__(self, robot, setup, plan_lines, worker, view: LiveView, progress: Progress, until_mm):
+        self.view, self.progress = view, progress
+        self.ids: list[int] = []  # sample ids in the order the running calibration got them
+        self.worst_mm: float | None = None
+        self.session: Session | None = None
+        listener = LiveListener(self.refit, self.message, self.reached)
+        self.running = RunningCalibration(robot, setup, worker, plan_lines, listener, until_mm)
+
+    def listener(self) -> Listener:
+        """The session's listener: each sample judged and handed on; the worker looked in on at
+        every checkpoint, never waited for."""
+        return Listener(self.sample, self.message, self.running.poll)
+
+    def add(self, row: dict, q_deg, length_mm: float, dial_mm: float) -> None:
+        self.ids.append(int(row["sample"]))
+        self.running.add(q_deg, length_mm, dial_mm, int(row["line"]))
+
+    def sample(self, row: dict, cap) -> None:
+        live = self.running.live_error(cap.q_deg, cap.length_mm)
+        tcp = self.running.nominal_tcp_mm(cap.q_deg)[0]
+        self.view.sample(row["sample"], row["t_s"], tcp, cap.length_mm, cap.dial_mm, live)
+        self.progress.sample(row, live)
+        if live.error_mm is not None:
+            self.worst_mm = max(abs(live.error_mm), self.worst_mm or 0.0)
+        if live.suspect:
+            self.message(
+                f"sample {row['sample']}: reading {live.error_mm:+.3f} mm off the running calibration "
+                f"(it explains {live.limit_mm:.3f} mm): check the cable and the gauge contact"
+            )
+        self.add(row, cap.q_deg, cap.length_mm, cap.dial_mm)
+
+    def refit(self, fit) -> None:
+        if fit.workspace is None:
+            return
+        ws = fit.workspace
+        self.view.refit(self.ids[fit.n - 1], ws.predicted_rmse_mm, ws.predicted_rmse_95_mm)
+        self.progress.refit(ws.predicted_rmse_mm, ws.predicted_rmse_95_mm)
+
+    def message(self, text: str) -> None:
+        self.progress.message(text)
+        self.view.message(text)
+
+    def reached(self, text: str) -> None:
+        self.message(text)
+        if self.session is not None:
+            self.session.finish("accuracy reached")
+
+    def drain(self, timeout_s: float) -> None:
+        """Wait (up to ``timeout_s``) for the refit on every sample taken."""
+        deadline = time.monotonic() + timeout_s
+        while self.running.latest is None or self.running.latest.n < len(self.ids):
+            left = deadline - time.monotonic()
+            if left <= 0 or not self.running.worker.busy:
+                return
+            self.running.poll(left)
+
+
+def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
+    """The session with its running calibration, live view and progress wired to it; Ctrl-C stops
+    it. A resumed session's samples are refitted first, so its next capture is judged at once."""
+    view, progress, worker, plan = live.view, live.progress, live.running.worker, inputs.plan
     view.cell(
-        inputs.setup.drawstring.anchor_mm, line_segments(fit.tcp_mm(inputs.plan.q_deg), inputs.plan.line)
+        inputs.setup.drawstring.anchor_mm, line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line)
     )
-    _replay(inputs.folder, fit, view)
-    progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream=stream)
     for note in view.notes:
         progress.message(note)
-
-    def on_sample(row, cap) -> None:
-        tcp, model = fit.add(cap.q_deg, cap.length_mm)
-        view.sample(row["sample"], row["t_s"], tcp, cap.length_mm, model, cap.dial_mm)
-        progress.sample(row, cap.length_mm - model)
-
-    def on_message(text: str) -> None:
-        progress.message(text)
-        view.message(text)
-
+    worker.wait_ready(WORKER_START_S)
+    for row in inputs.folder.rows:
+        dial = float(row["dial_mm"]) if row["dial_mm"] else float("nan")
+        q = [float(row[f"q{i}_deg"]) for i in range(1, 7)]
+        live.add(row, q, float(row["length_mm"]), dial)
+    live.drain(RESUME_FIT_S)
     rules = Rules.from_config(inputs.cfg.session, inputs.cfg.time_scale)
-    session = Session(inputs.folder, inputs.plan, devices, rules, Listener(on_sample, on_message))
+    session = live.session = Session(inputs.folder, plan, devices, rules, live.listener())
+    if live.running.goal_met:
+        session.finish("accuracy reached")
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, lambda *_: session.request_stop()) if in_main else None
     try:
-        return session.run()
+        state = session.run()
+        if state is not State.STOPPED:
+            live.drain(FINAL_FIT_S)
+        return state
     finally:
         if in_main:
             signal.signal(signal.SIGINT, previous)
         progress.close()
-
-
-def _replay(folder: SessionFolder, fit: LiveFit, view: LiveView) -> None:
-    """Log the samples of a resumed session again, so its new .rrd holds the whole session."""
-    for row in folder.rows:
-        q = [float(row[f"q{i}_deg"]) for i in range(1, 7)]
-        length = float(row["length_mm"])
-        tcp, model = fit.add(q, length)
-        dial = float(row["dial_mm"]) if row["dial_mm"] else float("nan")
-        view.sample(int(row["sample"]), float(row["t_s"]), tcp, length, model, dial)

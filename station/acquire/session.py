@@ -3,16 +3,19 @@
 States: WAITING (for the robot to settle at an unfinished target) -> CAPTURING -> WAITING ...;
 SUSPENDED while a suspender holds (robot not running, a sensor out of its gate, a device not
 answering), back to WAITING by itself when it clears; and the ends DONE (every target measured),
-STOPPED (stop requested: Ctrl-C), TIMED_OUT (no capture for ``target_timeout_s``).
+STOPPED (stop requested: Ctrl-C), TIMED_OUT (no capture for ``target_timeout_s``); DONE also
+when asked to finish early (:meth:`Session.finish`: the running calibration reached its goal).
 
 The log names every fault: each suspension and each change of the condition holding it, and each
 transient failure retried (``drawstring: bad CRC in reply ...; retrying``); of the reconnects to a
 device the session is suspended for, only a failure of a new kind.
 
-Checkpoints sit between captures and between polls: a stop request is honoured there, so the
-sample in flight is always stored whole. A capture is assigned to the nearest target of the plan
-(joint space, max |dq| within ``match_deg``); if that target is finished already (the robot
-revisits it) nothing is captured, so a resumed session never duplicates a target.
+Checkpoints sit between captures and between polls: a stop or finish request is honoured there, so
+the sample in flight is always stored whole, and the listener's ``tick`` runs there (work that
+must never delay a capture looks in on its results there). A capture is assigned to the nearest
+target of the plan (joint space, max |dq| within ``match_deg``); if that target is finished
+already (the robot revisits it) nothing is captured, so a resumed session never duplicates a
+target.
 
 Time is read from the ``clock`` (s, monotonic) and waited with the ``sleep`` the session is given,
 so the engine runs on a simulated clock in the tests; the devices' readings carry their own stamps.
@@ -57,11 +60,13 @@ class State(enum.Enum):
 
 @dataclass
 class Listener:
-    """What a session reports: ``sample(row, capture)`` after each stored sample and
-    ``message(text)`` on every state change worth telling the operator."""
+    """What a session reports: ``sample(row, capture)`` after each stored sample,
+    ``message(text)`` on every state change worth telling the operator, and ``tick()`` at every
+    checkpoint (between polls, also while suspended)."""
 
     sample: Callable[[dict, Capture], None] = lambda row, cap: None
     message: Callable[[str], None] = lambda text: None
+    tick: Callable[[], None] = lambda: None
 
 
 class Session:
@@ -90,18 +95,26 @@ class Session:
         self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
         devices.on_retry = self._retrying
         self._stop = False
+        self._finish: str | None = None
         self._t0_wall = float(folder.header["start_wall_s"])
 
     def request_stop(self) -> None:
         """Stop at the next checkpoint (safe from a signal handler)."""
         self._stop = True
 
+    def finish(self, reason: str) -> None:
+        """End as DONE at the next checkpoint, saying ``reason``, with targets left unmeasured."""
+        self._finish = reason
+
     def run(self) -> State:
-        """Until every target is measured, a stop request, or the target timeout."""
+        """Until every target is measured, a stop or finish request, or the target timeout."""
         last_progress = self.clock()
         while self.pending:
+            self.listener.tick()
             if self._stop:
                 return self._end(State.STOPPED, "stopped on request")
+            if self._finish is not None:
+                return self._end(State.DONE, self._finish)
             try:
                 if self._step():
                     last_progress = self.clock()
@@ -175,8 +188,9 @@ class Session:
         self.listener.message(f"suspended: {first}")
         self._suspended_by = first
         why, silent_since = first, self.clock()
-        while not self._stop:
+        while not self._stop and self._finish is None:
             self.sleep(SUSPENDED_POLL_S)
+            self.listener.tick()
             try:
                 self._check_cleared(why)
                 break
@@ -193,7 +207,7 @@ class Session:
         self.state = State.WAITING
         self._suspended_by = None
         self._last_retry.clear()
-        if not self._stop:
+        if not self._stop and self._finish is None:
             self.listener.message("resumed")
 
     def _retrying(self, error: DriverError) -> None:

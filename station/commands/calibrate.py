@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from calib.methods import ALL_METHODS
+from calib.methods import ALL_METHODS, TERM_MODELS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
 
@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from station.formats.tables import RobotFile, SetupFile
     from station.jobs.report import CalibrationReport
 
-FLAGS = {"setup": "--setup", "method": "--method", "select": "--select"}
+FLAGS = {"setup": "--setup", "method": "--method", "select": "--select", "terms": "--model"}
 """The flag that sets each parameter of the calibration service."""
 
 
@@ -33,6 +33,14 @@ def register(sub) -> None:
         type=int,
         metavar="N",
         help="mcs-lmlc: configurations to select (default: where O1 flattens)",
+    )
+    p.add_argument(
+        "--model",
+        default="auto",
+        choices=TERM_MODELS,
+        help="terms beside the D-H table: geometric (none), compliance (load-bearing joints under "
+        "gravity), full (plus 1st and 2nd harmonics of every joint), auto (those of full that cut "
+        "the cross-validated error of the training rows by >= 5 %%; default)",
     )
     p.add_argument("--report", type=Path, help="report JSON to write")
     p.set_defaults(func=run)
@@ -56,8 +64,12 @@ def run(args) -> int:
             holdout=inputs.holdout,
             method=args.method,
             select=args.select,
+            terms=args.model,
         )
-    table = corrected_table(inputs.robot, outcome.calibration, inputs.samples, args.method)
+    payload = inputs.setup.payload if inputs.setup is not None else None
+    table = corrected_table(
+        inputs.robot, outcome.calibration, inputs.samples, args.method, model=args.model, payload=payload
+    )
     atomic_write(args.out, toml_text(table))
     if args.report:
         atomic_write(args.report, json.dumps(outcome.report.as_json(), indent=2) + "\n")
@@ -107,8 +119,13 @@ def summary(report: CalibrationReport) -> str:
         for when, m in (("before", before), ("after", after)):
             if m is not None:
                 lines.append(f"{part + ' ' + when:18}{m.rmse_mm:8.3f}{m.mean_mm:8.3f}{m.max_mm:8.3f}")
-    held = ", ".join(h.param for h in report.held)
+    from calib.joint_terms import TERM_KINDS
+
+    terms_held = sum(1 for h in report.held if h.param.partition(".")[2] in TERM_KINDS)
+    held = ", ".join(h.param for h in report.held if h.param.partition(".")[2] not in TERM_KINDS)
+    held += f"; {terms_held} joint-space terms (reasons in the report)" if terms_held else ""
     lines.append(f"identified {len(report.identified)} table parameters; held: {held}")
+    lines += terms_summary(report)
     if report.downweighted:
         lines.append(f"down-weighted rows: {list(report.downweighted)}")
     ws = report.workspace
@@ -118,3 +135,19 @@ def summary(report: CalibrationReport) -> str:
     )
     lines += [f"warning: {w}" for w in report.warnings]
     return "\n".join(lines)
+
+
+def terms_summary(report: CalibrationReport) -> list[str]:
+    """The model's joint-space terms with their sigmas and, for ``auto``, how they were chosen."""
+    lines = []
+    if report.cross_validation is not None:
+        cv = report.cross_validation
+        kept = [r for r in cv.rows if r.kept]
+        steps = " -> ".join(f"{r.added or 'table'} {r.rmse_mm:.3f}" for r in kept)
+        lines.append(f"model auto ({cv.folds}-fold cross-validated RMSE, mm): {steps}")
+    if report.terms:
+        terms = ", ".join(f"{n} {e.value:.4g} +- {e.sigma:.2g}" for n, e in report.terms.items())
+        lines.append(f"terms: {terms}")
+    else:
+        lines.append(f"model {report.model}: no joint-space terms")
+    return lines

@@ -46,7 +46,7 @@ def run(args) -> int:
     table, nominal = load_robot(args.table), load_robot(args.robot)
     check_same_robot(table, str(args.table), nominal, str(args.robot))
     check_same_tool(table, str(args.table), nominal, str(args.robot))
-    table.table_covariance(str(args.table))  # a malformed covariance is bad input before any work
+    table.covariance(str(args.table))  # a malformed covariance is bad input before any work
     outcome = compensation.run(
         program,
         table,

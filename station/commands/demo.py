@@ -1,11 +1,16 @@
-"""``station demo [--out DIR] [--viewer/--no-viewer]``: the operator's whole job on simulated devices.
+"""``station demo [--out DIR] [--viewer/--no-viewer]``: the operator's workflow on simulated devices.
 
-Starts the simulated devices (the machinery of ``station sim serve``: RTDE controller in a child
-process, Modbus TCP drawstring, serial dial on a pty) on the contract's addresses, or on free ones
-when those are taken; runs a session over the simulated cell's plan (3 gauge lines x 70 targets)
-with simulated time running ``TIME_SCALE`` times faster; calibrates the session folder (LMLC,
-and MCS-LMLC beside it when available) with a simulated hold-out set; writes ``DIR/session/``,
-``DIR/corrected.toml`` and ``DIR/report.json``; prints before -> after and the simulated truth.
+The steps a user takes at a real station, each with a one-line summary:
+
+1. plan: ``station plan`` on the shipped robot and the simulated setup's gauge lines -> ``plan.csv``;
+2. the simulated devices (the machinery of ``station sim serve``: RTDE controller in a child
+   process, Modbus TCP drawstring, serial dial on a pty) on the contract's addresses, or free ones
+   when those are taken; the simulated robot walks the plan, each pose moved onto its true line;
+3. session: ``station sample`` with the running calibration, simulated time ``TIME_SCALE`` times
+   faster -> ``session/`` (samples, ``session.rrd``);
+4. calibrate: LMLC and MCS-LMLC on the session, with a simulated hold-out set -> ``corrected.toml``,
+   ``report.json``, ``report-mcs-lmlc.json``, each with the simulated truth beside it;
+5. export: the corrected table as URDF beside ``corrected.toml``.
 """
 
 from __future__ import annotations
@@ -14,12 +19,19 @@ import argparse
 import json
 import random
 import socket
+import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from errors import DeviceError, InputError
-from station.commands.calibrate import summary
+
+if TYPE_CHECKING:
+    from station.acquire.runner import SessionRun
+    from station.formats.plan import Plan
 
 TIME_SCALE = 40.0
+START_S = 4.0  # the simulated robot waits at its first target while the session starts
+HOLDOUT_PER_LINE = 12
 CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial": "/tmp/station-sim/dial"}
 
 
@@ -33,7 +45,7 @@ def register(sub) -> None:
         help="open the Rerun viewer (needs a display; the .rrd is saved either way)",
     )
     p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
-    p.add_argument("--targets-per-line", type=int, default=70, help=argparse.SUPPRESS)
+    p.add_argument("--plan-size", type=int, help=argparse.SUPPRESS)  # MCS's N (tests: a short demo)
     p.set_defaults(func=run)
 
 
@@ -42,46 +54,93 @@ def run(args) -> int:
 
     from sim_fixtures.station_sim import SimStation
     from station.acquire import runner
-    from station.acquire.session import State
     from station.config import StationConfig
     from station.formats.base import atomic_write, check_writable
-    from station.formats.plan import Plan
 
     out = args.out
     if (out / "session").exists():
         raise InputError(f"{out / 'session'}: exists already; choose another --out or remove it")
     out.mkdir(parents=True, exist_ok=True)
     check_writable(out / "report.json", "--out")
-    raw, notes = demo_config(out, args.seed, args.targets_per_line)
+    raw, notes = demo_config(out, args.seed)
     for note in notes:
         print(note)
     config_path = out / "station.toml"
     atomic_write(config_path, tomli_w.dumps(raw))
-    sim = SimStation(StationConfig.model_validate(raw))
+    plan = _plan(out, config_path, args.plan_size)
+    sim = SimStation(StationConfig.model_validate(raw), plan=(plan.q_deg, plan.line), start_delay_s=START_S)
     try:
         sim.start()
     except (OSError, RuntimeError) as exc:
         raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
     try:
-        plan_path = out / "plan.csv"
-        atomic_write(plan_path, Plan.of(sim.plan_deg, sim.plan_lines).csv_text())
-        inputs = runner.new_session(out / "session", config_path, plan_path)
-        print(
-            f"session of {len(inputs.plan)} targets on 3 gauge lines -> {inputs.folder.path} "
-            f"(simulated time x{TIME_SCALE:g})"
-        )
-        state, view = runner.run(inputs, viewer=args.viewer)
+        inputs = runner.new_session(out / "session", config_path, out / "plan.csv")
+        session = _session(inputs, args.viewer)
     finally:
         sim.stop()
     try:
-        if state is not State.DONE:
-            print(f"session {state.value}: calibrating the {len(inputs.folder.rows)} samples taken")
-        return _calibrate(out, inputs, view, args.seed, args.targets_per_line)
+        outcome = _calibrate(out, inputs, session.view, args.seed)
     finally:
-        view.close()
+        session.view.close()
+    _export(out)
+    return outcome
 
 
-def demo_config(out: Path, seed: int, targets_per_line: int) -> tuple[dict, list[str]]:
+def _plan(out: Path, config_path: Path, plan_size: int | None) -> Plan:
+    """Step 1: ``station plan`` on the session's robot and setup (the shipped ones)."""
+    from station.acquire import runner
+    from station.config import load_station_config
+    from station.formats.base import atomic_write
+    from station.formats.tables import load_robot, load_setup
+    from station.jobs import planning
+
+    t0 = time.perf_counter()
+    cfg = load_station_config(config_path)
+    robot = load_robot(runner.resolve(cfg.session.robot_model, config_path))
+    setup_path = runner.resolve(cfg.session.setup, config_path)
+    setup = load_setup(setup_path)
+    design = planning.design(robot, setup, str(setup_path), n_select=plan_size, suggest=False)
+    atomic_write(out / "plan.csv", design.plan.csv_text())
+    promise = design.report["predicted"]["plan"]
+    print(
+        f"plan:      {len(design.plan)} poses on {len(set(design.plan.line.tolist()))} gauge lines, "
+        f"promising {promise['predicted_rmse_mm']:.3f} mm workspace error "
+        f"(95 %: {promise['predicted_rmse_95_mm']:.3f} mm) from single readings -> {out / 'plan.csv'} "
+        f"({time.perf_counter() - t0:.1f} s)",
+        flush=True,
+    )
+    return design.plan
+
+
+def _session(inputs, viewer: bool) -> SessionRun:
+    """Step 3: the session with its running calibration."""
+    from station.acquire import runner
+
+    t0 = time.perf_counter()
+    print(
+        f"session:   the simulated robot walks the plan (simulated time x{TIME_SCALE:g}); "
+        "live errors and predicted workspace error in the live view",
+        flush=True,
+    )
+    done = runner.run(inputs, viewer=viewer, every_sample=False)
+    n = len(inputs.folder.rows)
+    fit = done.refit
+    running = (
+        "no running calibration"
+        if fit is None or fit.workspace is None
+        else f"running calibration {fit.workspace.predicted_rmse_mm:.3f} mm predicted "
+        f"(95 %: {fit.workspace.predicted_rmse_95_mm:.3f} mm)"
+    )
+    worst = "" if done.worst_error_mm is None else f", worst live error {done.worst_error_mm:.2f} mm"
+    print(
+        f"session:   {done.state.value}, {n}/{len(inputs.plan)} samples in {time.perf_counter() - t0:.1f} s, "
+        f"{running}{worst} -> {inputs.folder.path}",
+        flush=True,
+    )
+    return done
+
+
+def demo_config(out: Path, seed: int) -> tuple[dict, list[str]]:
     """The demo's station config: contract addresses where free, else free ones (with a note)."""
     notes = []
     rtde_host = CONTRACT["rtde"][0]
@@ -111,7 +170,6 @@ def demo_config(out: Path, seed: int, targets_per_line: int) -> tuple[dict, list
             "speed_deg_s": 120.0,
             "accel_deg_s2": 480.0,
             "dwell_s": 2.5,
-            "targets_per_line": targets_per_line,
         },
     }
     return raw, notes
@@ -132,23 +190,23 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _calibrate(out: Path, inputs, view, seed: int, targets_per_line: int) -> int:
+def _calibrate(out: Path, inputs, view, seed: int) -> int:
+    """Step 4: LMLC and MCS-LMLC on the session, a simulated hold-out set, the truth beside each."""
     import numpy as np
 
-    from sim_fixtures.station_sim import make_cell
+    from sim_fixtures.world import World
     from station.formats.base import atomic_write, toml_text
     from station.formats.samples import load_samples
     from station.jobs import calibration
     from station.jobs.report import corrected_table
 
-    world = make_cell(seed, targets_per_line).world
+    world = World.create(seed)
     holdout_path = out / "holdout.csv"
-    world.sample_set(max(targets_per_line // 4, 2), np.random.default_rng([seed, 4])).to_csv(holdout_path)
+    world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([seed, 4])).to_csv(holdout_path)
     samples, holdout = load_samples(inputs.folder.samples_csv), load_samples(holdout_path)
     where = str(inputs.folder.path / "session.toml")
-    methods = [m for m in ("lmlc", "mcs-lmlc") if m in calibration.METHODS]
     outcomes = {}
-    for method in methods:
+    for method in ("lmlc", "mcs-lmlc"):
         outcome = calibration.calibrate_samples(
             samples, inputs.robot, inputs.setup, setup_where=where, holdout=holdout, method=method
         )
@@ -160,8 +218,7 @@ def _calibrate(out: Path, inputs, view, seed: int, targets_per_line: int) -> int
             outcome.model.row_error_mm(cal.x),
             [it.cost for it in cal.after.history],
         )
-        print(summary(outcome.report))
-        print(truth_line(world, outcome))
+        print(f"calibrate: {_one_line(outcome.report)}; {truth_line(world, outcome)}", flush=True)
     main_outcome = outcomes["lmlc"]
     table = corrected_table(inputs.robot, main_outcome.calibration, samples, "lmlc")
     atomic_write(out / "corrected.toml", toml_text(table))
@@ -170,8 +227,33 @@ def _calibrate(out: Path, inputs, view, seed: int, targets_per_line: int) -> int
         if method != "lmlc":
             report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
             atomic_write(out / f"report-{method}.json", report)
-    print(f"wrote {out / 'corrected.toml'}, {out / 'report.json'} and {inputs.folder.rrd}")
+    print(f"calibrate: wrote {out / 'corrected.toml'} and {out / 'report.json'} (lmlc)", flush=True)
     return 0
+
+
+def _one_line(report) -> str:
+    """A calibration's report in one line: method, hold-out before -> after, prediction, time."""
+    m = report.before.holdout, report.after.holdout
+    ws = report.workspace
+    return (
+        f"{report.method:8s} hold-out {m[0].rmse_mm:.3f} -> {m[1].rmse_mm:.3f} mm RMSE, predicted "
+        f"workspace {ws.predicted_rmse_mm:.3f} mm (95 %: {ws.predicted_rmse_95_mm:.3f}), "
+        f"{report.time_s:.2f} s"
+    )
+
+
+def _export(out: Path) -> None:
+    """Step 5: the corrected table as URDF beside it (what ``station export --format urdf`` writes)."""
+    from station.formats.base import atomic_write
+    from station.formats.tables import load_robot
+    from station.jobs import export as exporting
+
+    table = out / "corrected.toml"
+    urdf = out / "corrected.urdf"
+    result = exporting.export(load_robot(table), "urdf", source=str(table))
+    atomic_write(urdf, result.text)
+    notes = "".join(f"; note: {n}" for n in result.notes)
+    print(f"export:    {urdf} (URDF: base_link -> tcp, the corrected joint origins){notes}", flush=True)
 
 
 def truth_line(world, outcome) -> str:
@@ -192,4 +274,4 @@ def truth_line(world, outcome) -> str:
         )
         for x in (cal.before.x, cal.x)
     ]
-    return f"true workspace error over 1000 random poses (simulation): {rms[0]:.3f} -> {rms[1]:.3f} mm RMS"
+    return f"true workspace error (simulation, 1000 random poses) {rms[0]:.3f} -> {rms[1]:.3f} mm RMS"

@@ -1,12 +1,15 @@
-"""``station sample [--config F] [--plan P.csv] (--out DIR | --resume DIR) [--viewer] [--web]``.
+"""``station sample [--config F] [--plan P.csv] (--out DIR | --resume DIR) [--until-mm X] [--viewer]
+[--web [--web-bind ADDR]]``.
 
-Exit 0 when every target is measured, 130 after Ctrl-C (the sample in flight stored whole),
-1 when a device stays unreachable or no capture happens for the target timeout (the samples
-taken so far are kept: continue with ``--resume DIR``).
+Exit 0 when every target is measured or the running calibration's 95 % workspace bound reached
+``--until-mm`` (kept in the session: a resume goes on towards it), 130 after Ctrl-C (the sample in
+flight stored whole), 1 when a device stays unreachable or no capture happens for the target
+timeout (the samples taken so far are kept: continue with ``--resume DIR``).
 """
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import configs
@@ -28,8 +31,24 @@ def register(subparsers) -> None:
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--out", type=Path, help="new session folder")
     where.add_argument("--resume", type=Path, metavar="DIR", help="continue the session in DIR")
+    p.add_argument(
+        "--until-mm",
+        type=_positive_mm,
+        metavar="X",
+        help="end the session once the running calibration's 95 %% workspace bound is at or below X mm",
+    )
     p.add_argument("--viewer", action="store_true", help="stream to a native Rerun viewer")
-    p.add_argument("--web", action="store_true", help="serve a Rerun web viewer")
+    p.add_argument(
+        "--web",
+        action="store_true",
+        help="serve the live view to a browser; prints the http:// address to open",
+    )
+    p.add_argument(
+        "--web-bind",
+        metavar="ADDR",
+        help="address to serve --web on (default 127.0.0.1, this machine only; 0.0.0.0: every "
+        "machine that reaches this one, e.g. a tablet on the plant network)",
+    )
     p.set_defaults(func=run)
 
 
@@ -43,12 +62,17 @@ def run(args) -> int:
         print(f"resuming {args.resume}: {len(inputs.folder.rows)} of {len(inputs.plan)} targets measured")
     else:
         inputs = runner.new_session(args.out, args.config or configs.path("station.toml"), args.plan)
-    state, view = runner.run(inputs, viewer=args.viewer, web=args.web)
-    view.close()
+    until_mm = args.until_mm or inputs.folder.header.get("until_mm")
+    if args.until_mm:
+        inputs.folder.update_header(until_mm=args.until_mm)
+    web = (args.web_bind or "127.0.0.1") if args.web or args.web_bind else None
+    outcome = runner.run(inputs, viewer=args.viewer, web=web, until_mm=until_mm)
+    outcome.view.close()
+    state = outcome.state
     folder = inputs.folder
-    if view.incomplete:
+    if outcome.view.incomplete:
         raise OutputError(
-            f"{folder.rrd}: the recording could not be written whole ({view.incomplete}); the "
+            f"{folder.rrd}: the recording could not be written whole ({outcome.view.incomplete}); the "
             f"{len(folder.rows)} samples in {folder.samples_csv} are whole"
         )
     print(
@@ -56,3 +80,13 @@ def run(args) -> int:
         f"recording {folder.rrd}"
     )
     return EXIT[state.value]
+
+
+def _positive_mm(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (mm)") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{value:g} must be above 0 mm")
+    return value

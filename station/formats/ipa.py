@@ -2,8 +2,9 @@
 
 A series is a ``;``-separated CSV with decimal commas and a header row. Used columns: the joint
 readings ``shoulder_pan_joint`` ... ``wrist_3_joint`` [rad] and the tracker's measurement of the
-T-Mac probe ``measurement_x/y/z`` [mm, tracker frame]; the rest (goal poses in m / rad, rotations in
-degrees, standard deviations, temperature, time stamps) is not needed for positions. Beside it,
+T-Mac probe ``measurement_x/y/z`` [mm, tracker frame], and ``measurement_temperature`` [deg C] where
+the file has it; the rest (goal poses in m / rad, rotations in degrees, standard deviations, time
+stamps) is not needed for positions. Beside it,
 ``Trafo_TM_F_init.txt`` holds the initial T-Mac-to-flange transform, a 4x4 matrix [mm], whose
 inverse's translation is the probe point in the flange frame.
 """
@@ -27,17 +28,20 @@ JOINT_COLUMNS = (
     "wrist_3_joint",
 )
 POSITION_COLUMNS = ("measurement_x", "measurement_y", "measurement_z")
+TEMPERATURE_COLUMN = "measurement_temperature"
 PROBE_FILE = "Trafo_TM_F_init.txt"
 
 
 @dataclass(frozen=True)
 class IpaSeries:
-    """One measured series: joint readings ``q_rad`` (N, 6) and probe positions ``position_mm``
-    (N, 3) in the tracker frame, read from ``path``."""
+    """One measured series: joint readings ``q_rad`` (N, 6), probe positions ``position_mm``
+    (N, 3) in the tracker frame and the ambient ``temperature_c`` (N,) [deg C] (NaN where the file
+    has no such column), read from ``path``."""
 
     path: Path
     q_rad: np.ndarray
     position_mm: np.ndarray
+    temperature_c: np.ndarray
 
     def __len__(self) -> int:
         return self.q_rad.shape[0]
@@ -53,12 +57,14 @@ def read_series(path) -> IpaSeries:
     missing = [c for c in JOINT_COLUMNS + POSITION_COLUMNS if c not in header]
     if missing:
         raise InputError(f"{path}: missing column {missing[0]!r} (not an IPA series file?)")
-    cols = [header.index(c) for c in JOINT_COLUMNS + POSITION_COLUMNS]
-    rows = [_parse_row(path, k, line, len(header), cols) for k, line in enumerate(lines[1:], start=2)]
+    names = JOINT_COLUMNS + POSITION_COLUMNS + ((TEMPERATURE_COLUMN,) if TEMPERATURE_COLUMN in header else ())
+    cols = [header.index(c) for c in names]
+    rows = [_parse_row(path, k, line, len(header), cols, names) for k, line in enumerate(lines[1:], start=2)]
     if not rows:
         raise InputError(f"{path}: no data rows after the header")
     values = np.array(rows)
-    return IpaSeries(path, values[:, :6], values[:, 6:])
+    temperature = values[:, 9] if values.shape[1] > 9 else np.full(len(values), np.nan)
+    return IpaSeries(path, values[:, :6], values[:, 6:9], temperature)
 
 
 def read_probe_mm(path) -> np.ndarray:
@@ -96,18 +102,20 @@ def _read_lines(path: Path) -> list[str]:
 
 
 MAX_JOINT_RAD = float(np.radians(MAX_JOINT_DEG))
+POSITION_LIMIT = (MAX_LENGTH_MM, "mm")
+LIMITS = {**dict.fromkeys(JOINT_COLUMNS, (MAX_JOINT_RAD, "rad")), TEMPERATURE_COLUMN: (200.0, "deg C")}
+"""Range and unit of each column's numbers (the probe's positions: POSITION_LIMIT)."""
 
 
-def _parse_row(path: Path, lineno: int, line: str, n_fields: int, cols: list[int]) -> list[float]:
-    """Joints [rad] and probe position [mm] of one line: finite, within the station's ranges."""
+def _parse_row(path: Path, lineno: int, line: str, n_fields: int, cols: list[int], names) -> list[float]:
+    """The columns ``names`` (at ``cols``) of one line: finite, within the station's ranges."""
     fields = line.split(";")
     if len(fields) != n_fields:
         raise InputError(f"{path}: line {lineno}: {len(fields)} fields, the header has {n_fields}")
     out = []
-    for name, c in zip(JOINT_COLUMNS + POSITION_COLUMNS, cols, strict=True):
-        limit, unit = (MAX_JOINT_RAD, "rad") if name in JOINT_COLUMNS else (MAX_LENGTH_MM, "mm")
+    for name, c in zip(names, cols, strict=True):
         try:
-            out.append(number_cell(fields[c].strip().replace(",", "."), limit, unit))
+            out.append(number_cell(fields[c].strip().replace(",", "."), *LIMITS.get(name, POSITION_LIMIT)))
         except ValueError as exc:
             raise InputError(f"{path}: line {lineno}, column {name!r}: {exc}") from None
     return out

@@ -11,6 +11,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, NonNegativeFloat, model_validator
 
+from calib.joint_terms import TERM_KINDS, JointTerms, LinkMasses, Term
 from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees, display_factor
 from calib.robot_model import RobotModel
 from errors import InputError
@@ -29,14 +30,26 @@ from station.formats.base import (
     validate,
 )
 
+Mass = Annotated[float, Field(ge=0, le=1e4)]  # kg: a link or a payload, up to 10 t
+Compliance = Annotated[float, Field(ge=-1e6, le=1e6)]  # urad/(N m)
 
 class Joint(Strict):
+    """One D-H joint; optionally its link's mass and centre of mass (in D-H frame i) for the
+    gravity torques, and the joint-space terms a calibration identified (``calib.joint_terms``)."""
+
     alpha_deg: Angle
     a_mm: Length
     d_mm: Length
     theta_deg: Angle
     q_min_deg: JointAngle = -180.0
     q_max_deg: JointAngle = 180.0
+    mass_kg: Mass | None = None
+    com_mm: Vec3 | None = None
+    compliance_urad_per_Nm: Compliance | None = None
+    sin1_deg: Angle | None = None
+    cos1_deg: Angle | None = None
+    sin2_deg: Angle | None = None
+    cos2_deg: Angle | None = None
     sigma: dict[str, NonNegativeFloat] | None = None  # written by a calibration: per-parameter sigma
 
     @model_validator(mode="after")
@@ -46,13 +59,22 @@ class Joint(Strict):
         return self
 
 
+class Payload(Strict):
+    """What the flange carries: mass [kg] and centre of mass [mm] in the flange frame."""
+
+    mass_kg: Mass
+    com_mm: Vec3 = [0.0, 0.0, 0.0]
+
+
 class RobotFile(Strict):
-    """A robot model (contract: robot model TOML); a corrected table adds ``calibration``."""
+    """A robot model (contract: robot model TOML); a corrected table adds ``calibration`` and,
+    where it identified compliances, the ``payload`` they were identified with."""
 
     name: str
     convention: Literal["dh"] = "dh"
     tool_mm: Vec3 = [0.0, 0.0, 0.0]
     joints: Annotated[list[Joint], Field(min_length=6, max_length=6)]
+    payload: Payload | None = None
     calibration: dict | None = None
     controller_hash: str | None = None  # the controller's factory-calibration id (UR: ``hash``)
 
@@ -64,38 +86,72 @@ class RobotFile(Strict):
     def limits_deg(self) -> np.ndarray:
         return np.array([[j.q_min_deg, j.q_max_deg] for j in self.joints])
 
+    def link_masses(self, payload: Payload | None = None) -> LinkMasses | None:
+        """The links' masses with ``payload`` (default: the file's own) lumped into link 6; None
+        unless every joint gives ``mass_kg`` and ``com_mm``."""
+        if any(j.mass_kg is None or j.com_mm is None for j in self.joints):
+            return None
+        links = LinkMasses(
+            np.array([j.mass_kg for j in self.joints]), np.array([j.com_mm for j in self.joints])
+        )
+        payload = payload or self.payload
+        return links if payload is None else links.with_payload(payload.mass_kg, payload.com_mm)
+
+    def terms(self) -> list[Term]:
+        """The joint-space terms the file carries (``calib.joint_terms``), joint by joint."""
+        return [
+            Term(j, key)
+            for j, joint in enumerate(self.joints)
+            for key in TERM_KINDS
+            if getattr(joint, key) is not None
+        ]
+
     def model(self) -> RobotModel:
-        """The robot model the maths uses (internal units: rad, mm)."""
+        """The robot model the maths uses (internal units: rad, mm), with the terms it carries."""
+        dh, terms = dh_from_degrees(self.table_deg()), self.terms()
+        values = np.array([getattr(self.joints[t.joint], t.key) for t in terms], float)
+        values /= display_factor([t.name for t in terms])
         return RobotModel(
-            dh_from_degrees(self.table_deg()), np.array(self.tool_mm), np.radians(self.limits_deg())
+            dh,
+            np.array(self.tool_mm),
+            np.radians(self.limits_deg()),
+            JointTerms(terms, dh, self.link_masses()),
+            values,
         )
 
-    def table_covariance(self, where: str) -> np.ndarray | None:
-        """The calibration's (24, 24) table covariance in internal units (rad, mm), as a corrected
-        table carries it (``[calibration] covariance``, display units); None if it has none."""
+    def covariance(self, where: str) -> np.ndarray | None:
+        """The calibration's covariance of the robot's parameters, the table and then the terms in
+        ``model()``'s order, in internal units (rad, mm, urad/(N m)), as a corrected table carries it
+        (``[calibration] covariance`` in display units, rows named by ``covariance_parameters``);
+        None if it has none."""
         data = (self.calibration or {}).get("covariance")
         if data is None:
             return None
+        expected = list(DH_NAMES) + [t.name for t in self.terms()]
         names = (self.calibration or {}).get("covariance_parameters", list(DH_NAMES))
+        if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
+            raise InputError(f"{where}: calibration.covariance_parameters: expected a list of names")
         try:
             cov = np.array(data, float)
         except (TypeError, ValueError):
             raise InputError(f"{where}: calibration.covariance: not a table of numbers") from None
-        if names != list(DH_NAMES) or cov.shape != (24, 24) or not np.isfinite(cov).all():
+        n = len(expected)
+        if sorted(names) != sorted(expected) or cov.shape != (n, n) or not np.isfinite(cov).all():
             raise InputError(
-                f"{where}: calibration.covariance: expected 24 x 24 finite numbers in the order "
-                "J1.theta_deg, J1.d_mm, J1.a_mm, J1.alpha_deg, J2.theta_deg, ..."
+                f"{where}: calibration.covariance: expected {n} x {n} finite numbers, one per name of "
+                "calibration.covariance_parameters: J1.theta_deg, J1.d_mm, ... and each term the joints carry"
             )
         if not _is_covariance(cov):
             raise InputError(
                 f"{where}: calibration.covariance: not a covariance: it must be symmetric, without "
-                f"negative variances (eigenvalues), every entry within {MAX_COVARIANCE:g} mm^2 / deg^2"
+                f"negative variances (eigenvalues), every entry within {MAX_COVARIANCE:g} in display units"
             )
-        factor = display_factor(DH_NAMES)
-        return cov / np.outer(factor, factor)
+        order = [names.index(name) for name in expected]
+        factor = display_factor(expected)
+        return cov[np.ix_(order, order)] / np.outer(factor, factor)
 
 
-MAX_COVARIANCE = MAX_LENGTH_MM**2  # mm^2 (deg^2): a standard deviation of 100 m
+MAX_COVARIANCE = MAX_LENGTH_MM**2  # mm^2, deg^2: a standard deviation of 100 m
 
 
 def _is_covariance(cov: np.ndarray) -> bool:
@@ -132,10 +188,12 @@ class SetupLine(Strict):
 
 class SetupFile(Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
-    tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight."""
+    tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight;
+    ``payload``: what the flange carried while measuring (for the gravity torques)."""
 
     drawstring: SetupDrawstring | None = None
     dial: SetupDial | None = None
+    payload: Payload | None = None
     lines: list[SetupLine] = []
     line_sigma_mm: Sigma = 0.01
     rho: Annotated[float, Field(ge=1e-6, le=1e6)] = 1.0
@@ -177,7 +235,13 @@ def check_same_tool(table: RobotFile, table_where: str, nominal: RobotFile, nomi
 
 
 def load_robot(path) -> RobotFile:
-    return validate(RobotFile, read_toml(path), str(path))
+    robot = validate(RobotFile, read_toml(path), str(path))
+    compliant = [j for j, joint in enumerate(robot.joints) if joint.compliance_urad_per_Nm is not None]
+    if compliant and robot.link_masses() is None:
+        raise InputError(
+            f"{path}: joints.{compliant[0]}.compliance_urad_per_Nm needs mass_kg and com_mm on every joint"
+        )
+    return robot
 
 
 def load_setup(path) -> SetupFile:

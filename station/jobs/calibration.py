@@ -18,12 +18,19 @@ import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
 from calib.baselines import BaselineOptions, run_method
-from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate, covariance, fit_setup
-from calib.kinematics import N_DH, dh_table
+from calib.calibrate import (
+    Calibration,
+    CalibrationOptions,
+    WithPrior,
+    calibrate,
+    covariance,
+    fit_setup,
+    row_noise,
+)
+from calib.kinematics import dh_table
 from calib.methods import ALL_METHODS, BASELINES
 from calib.metrics import error_metrics
 from calib.models import (
-    GROUP_PRIOR,
     DrawstringFrame,
     DrawstringLineModel,
     DrawstringSamples,
@@ -33,11 +40,14 @@ from calib.models import (
 from calib.observability import MCSResult, select_configurations
 from calib.params import DH_NAMES, dh_from_degrees, display_factor
 from calib.position import PositionModel, PositionSamples
+from calib.selection import TermSelection
 from errors import InputError, ParameterError
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.report import (
     CalibrationReport,
+    CrossValidation,
+    CrossValidationRow,
     ErrorMetrics,
     Estimate,
     FitMetrics,
@@ -45,6 +55,7 @@ from station.jobs.report import (
     Selection,
     WorkspacePrediction,
 )
+from station.jobs.terms import MODELS, TermChoice, choose_terms
 
 METHODS = ALL_METHODS
 WORKSPACE_POSES = 1000
@@ -55,11 +66,13 @@ SHORT_OF_OPTIMUM_RATIO = 1.5
 
 MESSAGES = {
     "method": "{method} {value!r}: must be one of {choices}",
+    "terms": "{terms} {value!r}: must be one of {choices}",
     "needs_setup": "{samples}: a drawstring set needs {setup}",
     "select_needs_mcs": "{select} {value}: selecting configurations needs {method} mcs-lmlc",
     "select_range": "{select} {value}: must lie between the {unknowns} unknowns and the {n} samples",
 }
-"""Bad parameters; ``{method}``, ``{setup}``, ``{select}`` are parameter names (see ParameterError)."""
+"""Bad parameters; ``{method}``, ``{setup}``, ``{select}``, ``{terms}`` are parameter names (see
+ParameterError)."""
 
 WARNINGS = {
     "workspace": (
@@ -77,7 +90,7 @@ WARNINGS = {
 @dataclass(frozen=True)
 class CalibrationOutcome:
     """A finished calibration: the typed ``report``, ``calib``'s ``calibration`` (fits, covariance)
-    and the training ``model`` it ran on."""
+    and the training ``model`` it ran on (with the terms it fitted)."""
 
     report: CalibrationReport
     calibration: Calibration
@@ -104,20 +117,27 @@ def calibrate_samples(
     holdout: Samples | None = None,
     method: str = "lmlc",
     select: int | None = None,
+    terms: str = "geometric",
 ) -> CalibrationOutcome:
     """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows.
 
     ``method`` is one of ``METHODS``; ``mcs-lmlc`` first selects ``select`` configurations (default:
-    where O1 flattens). Raises ``InputError`` for too few samples and ``ParameterError`` for a bad
-    ``method``, ``select`` or a missing ``setup``.
+    where O1 flattens). ``terms`` is one of ``station.jobs.terms.MODELS``: the joint-space terms
+    fitted beside the table (``auto`` chooses them by cross-validation on ``samples`` alone).
+    Raises ``InputError`` for too few samples and ``ParameterError`` for a bad ``method``,
+    ``select``, ``terms`` or a missing ``setup``.
     """
     t0 = time.perf_counter()
     model = build_model(samples, robot, setup, setup_where)
     validate(model, samples.path, method, select)
-    fit = SOLVERS[method](model, method, select)
+    if terms not in MODELS:
+        raise ParameterError(MESSAGES["terms"], value=terms, choices=", ".join(MODELS))
+    payload = setup.payload if setup is not None else None
+    choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
+    fit = SOLVERS[method](choice.model, method, select)
     elapsed = time.perf_counter() - t0
-    report = _report(model, holdout_model(model, holdout), robot, method, fit, elapsed)
-    return CalibrationOutcome(report, fit.calibration, model)
+    report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms)
+    return CalibrationOutcome(report, fit.calibration, choice.model)
 
 
 # -- the model and its validation ---------------------------------------------------------------
@@ -257,8 +277,7 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
     start = calibrate(model, CalibrationOptions())
     found = run_method(method, model, start.before.x, start.identified, BaselineOptions())
     prior = WithPrior(model, model.x0)
-    noise = np.where(prior.groups == GROUP_PRIOR, 1.0, start.scale[prior.groups])
-    cov, table_cov = covariance(prior, found.x, start.identified, 1.0 / noise)
+    cov, robot_cov = covariance(prior, found.x, start.identified, 1.0, row_noise(prior, start.scale))
     sigma = np.full(len(model.names), np.nan)
     sigma[start.identified] = np.sqrt(np.diag(cov))
     after = dataclasses.replace(
@@ -269,7 +288,7 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
         after=after,
         sigma=sigma,
         covariance=cov,
-        table_covariance=table_cov,
+        robot_covariance=robot_cov,
         downweighted=np.array([], int),
     )
     return cal, start.x
@@ -277,18 +296,21 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
 
 # -- the report ---------------------------------------------------------------------------------
 def _report(
-    model: MeasurementModel,
+    choice: TermChoice,
     hold_model: MeasurementModel | None,
     robot: RobotFile,
     method: str,
     fit: MethodFit,
     elapsed: float,
+    terms: str,
 ) -> CalibrationReport:
-    cal = fit.calibration
+    model, cal = choice.model, fit.calibration
     after = metrics(model, hold_model, cal.x)
-    workspace = predicted_workspace(robot, cal)
-    messages = workspace_warnings(model, cal.x, after.train, workspace)
+    workspace = predicted_workspace(robot, cal, model)
+    messages = [choice.warning] if choice.warning else []
+    messages += workspace_warnings(model, cal.x, after.train, workspace)
     messages += short_of_optimum(model, cal.x, fit.optimum, method)
+    held = {**choice.held, **cal.held}
     return CalibrationReport(
         kind=model.kind,
         method=method,
@@ -296,14 +318,17 @@ def _report(
         after=after,
         setup=model.setup_estimate(cal.x),
         identified=tuple(n for k, n in enumerate(DH_NAMES) if cal.identified[k]),
-        held=tuple(HeldParameter(p, r) for p, r in cal.held.items()),
-        parameters=_parameters(cal),
+        held=tuple(HeldParameter(p, r) for p, r in held.items()),
+        parameters=_parameters(cal, DH_NAMES),
         downweighted=tuple(int(r) for r in cal.downweighted),
         workspace=workspace,
         warnings=tuple(messages),
         iterations=int(cal.after.nit),
         time_s=round(elapsed, 4),
         selection=None if fit.selection is None else _selection(fit.selection),
+        model=terms,
+        terms=_parameters(cal, model.terms.names),
+        cross_validation=None if choice.selection is None else _cross_validation(choice.selection),
     )
 
 
@@ -317,13 +342,15 @@ def _errors(model: MeasurementModel, x: np.ndarray) -> ErrorMetrics:
     return ErrorMetrics(**error_metrics(model.row_error_mm(x)))
 
 
-def predicted_workspace(robot: RobotFile, cal: Calibration) -> WorkspacePrediction:
-    """Expected RMS TCP error [mm] over random configurations within the joint limits, and the RMS
-    one calibration stays below with 95 % probability."""
+def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementModel) -> WorkspacePrediction:
+    """Expected RMS error [mm] of the measured point (the model's TCP) over random configurations
+    within the joint limits, and the RMS one calibration stays below with 95 % probability."""
     limits = np.radians(robot.limits_deg())
     q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
     dh = dh_table(cal.x)
-    modes = workspace_error_modes(dh, np.asarray(robot.tool_mm), q, cal.table_covariance)
+    modes = workspace_error_modes(
+        dh, model.tcp_in_flange(cal.x), q, cal.robot_covariance, model.terms, model.tool_mask.any()
+    )
     return WorkspacePrediction(
         predicted_workspace_rmse(modes), workspace_rmse_bound(modes, 0.95), WORKSPACE_POSES
     )
@@ -369,13 +396,19 @@ def _selection(mcs: MCSResult) -> Selection:
     return Selection(rows, int(mcs.n_select), "O1", mcs.selection.value)
 
 
-def _parameters(cal: Calibration) -> dict[str, Estimate]:
+def _parameters(cal: Calibration, names) -> dict[str, Estimate]:
+    """The identified parameters of ``names`` in display units, with their sigmas."""
     factor = display_factor(cal.names)
     return {
         name: Estimate(float(cal.x[k] * factor[k]), float(cal.sigma[k] * factor[k]))
-        for k, name in enumerate(cal.names[:N_DH])
-        if cal.identified[k]
+        for k, name in enumerate(cal.names)
+        if name in names and cal.identified[k]
     }
+
+
+def _cross_validation(selection: TermSelection) -> CrossValidation:
+    rows = tuple(CrossValidationRow(s.round, s.label, s.rmse_mm, s.gain, s.kept) for s in selection.table)
+    return CrossValidation(selection.folds, selection.min_gain, rows)
 
 
 def _unit(v) -> np.ndarray:

@@ -39,7 +39,7 @@ def run(
     status = [status_text(comp, i, options, calibrated.limits) for i in range(len(program))]
     text = program.csv_text(np.degrees(comp.q), comp.shift, status)
     ok = comp.status == Status.OK
-    cov = table.table_covariance(table_where)
+    cov = table.covariance(table_where)
     report = {
         "program": program.path,
         "table": table_where,
@@ -74,7 +74,7 @@ def predicted_accuracy(model, q: np.ndarray, cov: np.ndarray | None) -> dict | N
     None without a covariance or with fewer than 3 rows."""
     if cov is None or len(q) < 3:
         return None
-    modes = workspace_error_modes(model.dh, model.tool, q, cov)
+    modes = workspace_error_modes(model.dh, model.tool, q, cov, model.terms)
     return {
         "rmse_mm": predicted_workspace_rmse(modes),
         "rmse_95_mm": workspace_rmse_bound(modes, 0.95),

@@ -28,7 +28,25 @@ def export(
     robot: RobotFile, fmt: str, *, source: str, nominal: RobotFile | None = None, hash_: str | None = None
 ) -> Export:
     """``robot`` (read from ``source``) in format ``fmt``; ``nominal`` gives the dh-csv deltas and
-    a controller hash the robot file lacks; ``hash_`` overrides both."""
+    a controller hash the robot file lacks; ``hash_`` overrides both. No format holds the joint-space
+    terms (compliance, harmonics): a note says which the file leaves out."""
+    done = _geometry(robot, fmt, source, nominal, hash_)
+    terms = [t.name for t in robot.terms()]
+    if not terms:
+        return done
+    note = TERMS_LEFT_OUT.format(fmt=fmt, terms=", ".join(terms))
+    return Export(done.text, [*done.notes, note])
+
+
+TERMS_LEFT_OUT = (
+    "{fmt} holds the geometry only: the table's joint-space terms ({terms}) are left out, so a "
+    "controller running this model misses what they correct; `station compensate` applies them"
+)
+
+
+def _geometry(
+    robot: RobotFile, fmt: str, source: str, nominal: RobotFile | None, hash_: str | None
+) -> Export:
     if fmt == "urdf":
         return _urdf(robot, source)
     if fmt == "ur-yaml":

@@ -32,6 +32,24 @@ PLAN_SIZE = (
 """Too few candidates or a plan size out of range; ``{per_line}``, ``{n_select}`` are parameters."""
 
 
+@dataclass(frozen=True)
+class NextPlacement:
+    """A further gauge line: through ``point_mm`` [mm] along unit ``direction``, the tool meeting it
+    along ``approach``; the workspace error [mm] predicted with the present configurations alone
+    and with the line added (both from the stated noise, one reading per configuration)."""
+
+    point_mm: np.ndarray
+    direction: np.ndarray
+    approach: np.ndarray
+    present_rmse_mm: float
+    predicted_rmse_mm: float
+
+    @property
+    def gain(self) -> float:
+        """The fraction of the predicted workspace error the new line takes away."""
+        return 1.0 - self.predicted_rmse_mm / self.present_rmse_mm
+
+
 @dataclass
 class Design:
     """The chosen ``plan`` and the ``report`` (JSON-ready) of how it was chosen and what it promises."""
@@ -131,6 +149,32 @@ def design(
     return Design(plan, report)
 
 
+def next_placement(
+    robot: RobotFile, setup: SetupFile, q_deg: np.ndarray, line: np.ndarray, *, seed: int = 0
+) -> NextPlacement | None:
+    """The best further line placement for configurations ``q_deg`` (N, 6) [deg] measured on
+    gauge lines ``line`` (N,) of ``setup`` (whose ``[[lines]]`` give each placement); None if no
+    candidate line is reachable."""
+    dh, tool = robot_arrays(robot)
+    limits = np.radians(robot.limits_deg())
+    rng = np.random.default_rng(seed)
+    workspace_q = rng.uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    on_line = np.asarray(line) >= 0
+    q, line = np.radians(np.asarray(q_deg, float)[on_line]), np.asarray(line)[on_line]
+    ds_setup = drawstring_setup(setup, "setup")
+    lines = placements(setup, "setup")
+    found = _next_placements(dh, tool, limits, lines, q, line, ds_setup, workspace_q, rng, keep=1)
+    if not found:
+        return None
+    present = _promise(expected_modes(design_model(dh, tool, ds_setup, q, line), workspace_q))
+    best = found[0]
+    return NextPlacement(
+        *(np.array(best[k]) for k in ("point_mm", "direction", "approach")),
+        present["predicted_rmse_mm"],
+        best["predicted_rmse_mm"],
+    )
+
+
 def robot_arrays(robot: RobotFile) -> tuple[np.ndarray, np.ndarray]:
     """The nominal table (6, 4) in internal units and the TCP [mm]."""
     return dh_from_degrees(robot.table_deg()), np.asarray(robot.tool_mm, float)
@@ -153,8 +197,9 @@ def summary(design_: Design) -> str:
     for k, nxt in enumerate(r["next"][:3]):
         lead = "next placement" if k == 0 else "           or"
         out.append(
-            f"{lead}: point {_vec(nxt['point_mm'], 0)} mm, direction {_vec(nxt['direction'], 2)}, tool "
-            f"approach {_vec(nxt['approach'], 2)} -> {_fmt(nxt)} with the present lines"
+            f"{lead}: point {vector_text(nxt['point_mm'], 0)} mm, "
+            f"direction {vector_text(nxt['direction'], 2)}, "
+            f"tool approach {vector_text(nxt['approach'], 2)} -> {_fmt(nxt)} with the present lines"
         )
     return "\n".join(out)
 
@@ -232,7 +277,8 @@ def _fmt(promise: dict) -> str:
     return f"{promise['predicted_rmse_mm']:.3f} mm (95 %: below {promise['predicted_rmse_95_mm']:.3f} mm)"
 
 
-def _vec(v, digits: int) -> str:
+def vector_text(v, digits: int) -> str:
+    """A vector as a person reads it: ``[1.00, 0.00, 0.00]``."""
     return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"
 
 

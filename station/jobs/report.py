@@ -10,12 +10,13 @@ from datetime import datetime, timezone
 import numpy as np
 
 from calib.calibrate import Calibration
+from calib.joint_terms import TERM_KINDS
 from calib.kinematics import N_DH, dh_table
 from calib.models import DrawstringSetupEstimate
 from calib.params import DH_KEYS, DH_NAMES, dh_to_degrees, display_factor
 from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
-from station.formats.tables import RobotFile
+from station.formats.tables import Payload, RobotFile
 
 
 @dataclass(frozen=True)
@@ -77,10 +78,35 @@ class Selection:
 
 
 @dataclass(frozen=True)
+class CrossValidationRow:
+    """One line of ``--model auto``'s table: in ``round`` (0: the table alone), the model kept so
+    far plus ``added`` (None: nothing) predicts left-out rows to ``rmse_mm``, a relative ``gain``
+    over the round's starting model; ``kept`` whether it stayed."""
+
+    round: int
+    added: str | None
+    rmse_mm: float
+    gain: float
+    kept: bool
+
+
+@dataclass(frozen=True)
+class CrossValidation:
+    """How ``--model auto`` chose its terms: k ``folds`` of the training rows, the ``min_gain`` a
+    term must bring, and every score (``rows``)."""
+
+    folds: int
+    min_gain: float
+    rows: tuple[CrossValidationRow, ...]
+
+
+@dataclass(frozen=True)
 class CalibrationReport:
     """What a calibration found (the contract's "The report"); ``setup`` is the model's setup
     estimate (``calib.models.DrawstringSetupEstimate`` or ``calib.position.TrackerSetupEstimate``),
-    whose fields the JSON spreads at the top level."""
+    whose fields the JSON spreads at the top level. Beyond the contract's keys: ``model`` (the
+    ``--model``), ``terms`` (the identified joint-space terms, as ``parameters``) and, for
+    ``--model auto``, ``cross_validation``."""
 
     kind: str
     method: str
@@ -96,6 +122,9 @@ class CalibrationReport:
     iterations: int
     time_s: float
     selection: Selection | None = None
+    model: str = "geometric"
+    terms: dict[str, Estimate] = dataclasses.field(default_factory=dict)
+    cross_validation: CrossValidation | None = None
 
     def as_json(self) -> dict:
         """The contract's REPORT.json object (keys in the contract's order, plain JSON values)."""
@@ -116,6 +145,10 @@ class CalibrationReport:
         }
         if self.selection is not None:
             out["selection"] = {**dataclasses.asdict(self.selection), "rows": list(self.selection.rows)}
+        out["model"] = self.model
+        out["terms"] = {name: dataclasses.asdict(e) for name, e in self.terms.items()}
+        if self.cross_validation is not None:
+            out["cross_validation"] = _plain(dataclasses.asdict(self.cross_validation))
         return out
 
 
@@ -130,32 +163,64 @@ def _plain(value):
     return value
 
 
-def corrected_table(robot: RobotFile, cal: Calibration, samples: Samples, method: str) -> dict:
-    """The robot file with the calibrated table, per-joint sigmas and provenance (TOML-ready)."""
+def corrected_table(
+    robot: RobotFile,
+    cal: Calibration,
+    samples: Samples,
+    method: str,
+    *,
+    model: str = "geometric",
+    payload: Payload | None = None,
+) -> dict:
+    """The robot file with the calibrated table, the identified joint-space terms (each under its
+    joint, as ``calib.joint_terms`` names it), per-joint sigmas and provenance (TOML-ready); the
+    ``payload`` the compliances were identified with, where one was given."""
+    factor = display_factor(cal.names)
     table = dh_to_degrees(dh_table(cal.x))
-    factor = display_factor(DH_NAMES)
-    sigma = (cal.sigma[:N_DH] * factor).reshape(6, 4)
     cols = DH_KEYS
     joints = []
     for j, joint in enumerate(robot.joints):
-        entry = joint.model_dump(exclude={"sigma"})
-        entry.update(zip(cols, table[j], strict=True))
-        entry["sigma"] = {c: float(sigma[j, k]) for k, c in enumerate(cols) if np.isfinite(sigma[j, k])}
-        joints.append({k: float(v) if isinstance(v, np.floating) else v for k, v in entry.items()})
-    return {
+        entry = joint.model_dump(exclude={"sigma", *TERM_KINDS}, exclude_none=True)
+        entry.update(zip(cols, (float(v) for v in table[j]), strict=True))
+        entry["sigma"] = {}
+        for k, name in enumerate(cal.names):
+            joint_name, _, key = name.partition(".")
+            if joint_name == f"J{j + 1}" and np.isfinite(cal.sigma[k]):
+                if key in TERM_KINDS:
+                    entry[key] = float(cal.x[k] * factor[k])
+                entry["sigma"][key] = float(cal.sigma[k] * factor[k])
+        joints.append(entry)
+    out = {
         "name": robot.name,
         "convention": "dh",
         "tool_mm": list(robot.tool_mm),
         "calibration": {
             "method": method,
+            "model": model,
             "samples": samples.path,
             "n_samples": len(samples),
             "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
-            # the table's covariance in display units (deg, mm), held parameters considered
-            "covariance_parameters": list(DH_NAMES),
-            "covariance": (cal.table_covariance * np.outer(factor, factor)).tolist(),
+            **_covariance(cal),
         },
         **({"controller_hash": robot.controller_hash} if robot.controller_hash else {}),
         "joints": joints,
     }
+    if payload is not None and any(key in TERM_KINDS for j in joints for key in j):
+        out["payload"] = payload.model_dump()
+    return out
+
+
+def _covariance(cal: Calibration) -> dict:
+    """The covariance of the table and of the terms the file carries (the identified ones; a held
+    term is 0 and stays out), display units (deg, mm, urad/(N m)), held parameters considered;
+    a fitted TCP (a tracker's probe) is the setup's and stays out too."""
+    keep = [
+        i
+        for i, k in enumerate(cal.robot_index)
+        if k < N_DH or (cal.names[k].partition(".")[2] in TERM_KINDS and np.isfinite(cal.sigma[k]))
+    ]
+    index = cal.robot_index[keep]
+    factor = display_factor([cal.names[k] for k in index])
+    cov = cal.robot_covariance[np.ix_(keep, keep)] * np.outer(factor, factor)
+    return {"covariance_parameters": [cal.names[k] for k in index], "covariance": cov.tolist()}

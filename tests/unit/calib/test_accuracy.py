@@ -6,7 +6,7 @@ import pytest
 
 import configs
 from calib.accuracy import (
-    table_covariance,
+    robot_covariance,
     workspace_error_modes,
     workspace_rmse_bound,
 )
@@ -49,7 +49,9 @@ def test_an_exactly_redundant_held_parameter_adds_nothing_to_the_combination(rng
     a = rng.normal(size=(50, 3))
     cov_free = np.linalg.inv(a.T @ a)
     jac_held = a[:, :1]  # the held parameter acts exactly like free parameter 0
-    cov = table_covariance(cov_free, a, jac_held, np.array([0, 1, 2]), np.array([5]), np.array([2.0]))
+    robot = np.arange(N_DH)
+    sensitivity = -cov_free @ (a.T @ jac_held)
+    cov = robot_covariance(cov_free, sensitivity, np.array([0, 1, 2]), np.array([5]), np.array([2.0]), robot)
     together = np.zeros(N_DH)
     together[[0, 5]] = 1.0
     assert together @ cov @ together == pytest.approx(cov_free[0, 0], rel=1e-9)

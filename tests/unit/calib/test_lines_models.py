@@ -1,8 +1,12 @@
 import numpy as np
+import pytest
 
+import configs
+from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.lines import LineReference, fit_line, line_residual
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from sim_fixtures.world import JR680_FILE, Robot
+from station.formats.tables import load_robot
 
 
 def test_line_fit_and_residual_of_points_on_a_line(rng):
@@ -43,8 +47,16 @@ def test_line_residual_derivatives(rng):
         np.testing.assert_allclose(dr_dl[:, :, k], fd, atol=1e-4)
 
 
-def _model(rng, n_lines):
+# any masses will do: the test is of derivatives
+UR10_LINKS = load_robot(configs.path("robots/ur10.toml")).link_masses()
+
+
+def _model(rng, n_lines, with_terms=False):
     dh = Robot.from_file(JR680_FILE).dh
+    groups = [compliance_group(1), compliance_group(2)] + [
+        harmonic_group(j, h) for j in range(6) for h in (1, 2)
+    ]
+    terms = JointTerms([t for g in groups for t in g.terms], dh, UR10_LINKS) if with_terms else None
     n = 12 * n_lines
     q = np.radians([0, -50, -20, 0, -90, 0] + rng.normal(0, 10, (n, 6)))
     samples = DrawstringSamples(
@@ -57,12 +69,13 @@ def _model(rng, n_lines):
         rho=2.0,
     )
     frame = DrawstringFrame.from_nominal(samples, setup, dh, np.array([5.0, 0, 10]))
-    return DrawstringLineModel(samples, setup, frame, dh, np.array([5.0, 0, 10]))
+    return DrawstringLineModel(samples, setup, frame, dh, np.array([5.0, 0, 10]), terms)
 
 
-def test_model_jacobian_matches_finite_differences(rng):
+@pytest.mark.parametrize("with_terms", [False, True])
+def test_model_jacobian_matches_finite_differences(rng, with_terms):
     for n_lines in (1, 3):
-        model = _model(rng, n_lines)
+        model = _model(rng, n_lines, with_terms)
         x = model.x0 + rng.normal(0, 1e-3, model.x0.size)
         _, jac = model.residuals_and_jacobian(x)
         h = 1e-6

@@ -54,6 +54,7 @@ def test_a_drawstring_model_answers_the_station(drawstring):
     np.testing.assert_allclose(estimate.anchor_mm, [-800.0, 600.0, -600.0])
     assert estimate.length_offset_mm == 200.0 and [ln.id for ln in estimate.lines] == [0, 1]
     np.testing.assert_array_equal(model.placement_ids(), np.repeat([0, 1], 20))
+    np.testing.assert_array_equal(model.tcp_in_flange(model.x0), np.zeros(3))
     advice = model.measurement_advice(model.x0)
     assert advice.cover == "its own 2 lines" and "add a line placement along" in advice.next_measurement
     held_out = model.with_samples(model.samples.subset(np.arange(5, 15)))
@@ -72,6 +73,8 @@ def test_a_position_model_answers_the_station():
     np.testing.assert_allclose(estimate.tracker_from_base.translation_mm, shift, atol=1e-6)
     np.testing.assert_array_equal(estimate.probe_mm, probe)
     np.testing.assert_array_equal(model.placement_ids(), np.zeros(30))
-    assert model.measurement_advice(model.x0) is None
+    np.testing.assert_array_equal(model.tcp_in_flange(model.x0), probe)
+    advice = model.measurement_advice(model.x0)
+    assert advice.cover == "its 30 poses" and "more configurations" in advice.next_measurement
     held_out = model.with_samples(model.samples.subset(np.arange(10)))
     assert held_out.row_error_mm(model.x0).shape == (10,)

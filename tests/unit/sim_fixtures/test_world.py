@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import configs
-from sim_fixtures.world import JR680_FILE, Noise, Robot, World
+from calib.joint_terms import JointTerms, Term
+from sim_fixtures.world import JR680_FILE, JointError, Noise, Robot, World
 from station.formats.tables import load_robot, load_setup
 
 SIM_SETUP = configs.path("setups/sim.toml")
@@ -65,3 +66,16 @@ def test_ik_reports_a_pose_outside_the_joint_limits_as_not_reached():
     q_found, reached = robot.ik(targets, q + 2.0)
     np.testing.assert_allclose(q_found, q, atol=1e-6)
     assert reached.tolist() == [True, False]
+
+
+def test_joint_error_readings_put_the_links_where_the_truth_stands(rng):
+    """A joint error makes the joints read q such that the links, at q plus the terms' deflection
+    at q, stand at the true angles (to far below the joint noise, 0.0005 deg)."""
+    dh = World.create(0).nominal.dh
+    terms = JointTerms([Term(1, "sin1_deg"), Term(2, "cos2_deg"), Term(4, "sin2_deg")], dh)
+    error = JointError(terms, np.radians([0.05, -0.03, 0.02]))
+    q_true = rng.uniform(-90, 90, (20, 6))
+    q = np.radians(error.readings_deg(q_true))
+    links = terms.link_angles(q, error.values, terms.basis(q))
+    np.testing.assert_allclose(np.degrees(links), q_true, atol=1e-9)
+    assert np.abs(np.degrees(q) - q_true).max() > 0.01  # the readings do differ

@@ -109,8 +109,8 @@ def test_compensated_program_is_as_accurate_as_the_table(cell, tmp_path, capsys)
 
 def test_the_covariance_reads_back(cell):
     _, outcome, corrected, _, _ = cell
-    cov = load_robot(corrected).table_covariance(str(corrected))
-    np.testing.assert_allclose(cov, outcome.calibration.table_covariance, rtol=1e-12, atol=1e-300)
+    cov = load_robot(corrected).covariance(str(corrected))
+    np.testing.assert_allclose(cov, outcome.calibration.robot_covariance, rtol=1e-12, atol=1e-300)
 
 
 def test_a_table_without_covariance_compensates_and_says_so(cell, tmp_path, capsys):

@@ -216,3 +216,26 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(corrected_jr680, tmp
         assert code == 2, argv
         assert len(err.strip().splitlines()) == 1 and message in err, err
         assert not out.exists()
+
+
+@pytest.mark.parametrize("fmt", ["urdf", "ur-yaml", "dh-csv"])
+def test_a_table_with_terms_exports_its_geometry_and_says_what_is_left_out(tmp_path, capsys, fmt):
+    """No target format holds a compliance or a harmonic: the file is the same as without them and
+    the output names them."""
+    data = tomllib.loads(configs.path("robots/ur10.toml").read_text())
+    plain = tmp_path / "plain.toml"
+    plain.write_text(tomli_w.dumps(data))
+    data["joints"][1].update(compliance_urad_per_Nm=12.3, sin1_deg=0.02)
+    with_terms = tmp_path / "terms.toml"
+    with_terms.write_text(tomli_w.dumps(data))
+    texts = []
+    for src in (plain, with_terms):
+        out = tmp_path / f"{src.stem}.{fmt}"
+        hash_ = ["--hash", "calib_1"] if fmt == "ur-yaml" else []
+        code, text, _ = _cli(capsys, "export", src, "--format", fmt, "--out", out, *hash_)
+        assert code == 0
+        texts.append((text, out.read_text().replace(src.name, "")))
+    assert "left out" not in texts[0][0]
+    left_out = "the table's joint-space terms (J2.compliance_urad_per_Nm, J2.sin1_deg) are left out"
+    assert f"note: {fmt} holds the geometry only: {left_out}" in texts[1][0]
+    assert texts[0][1] == texts[1][1]

@@ -36,6 +36,16 @@ def test_reads_series_d_as_published():
     np.testing.assert_allclose(series.q_rad[0], [0.934319, -1.79251, 1.5196, 0.272862, 0.934269, -1.57075])
     np.testing.assert_allclose(series.position_mm[0], [2336.7643, -905.76441, -454.63664])
     np.testing.assert_allclose(read_probe_mm(probe_file_for(SERIES_D)), [0.0, 0.0, 109.0], atol=1e-3)
+    assert series.temperature_c[0] == pytest.approx(20.7425, abs=1e-6)
+    assert 20.7 < series.temperature_c.min() and series.temperature_c.max() < 20.9
+
+
+def test_temperature_is_read_where_the_file_has_it(tmp_path):
+    with_t, without = tmp_path / "t.csv", tmp_path / "n.csv"
+    with_t.write_text(HEADER + ";measurement_temperature\n" + ROW + ";21,5\n")
+    without.write_text(HEADER + "\n" + ROW + "\n")
+    assert read_series(with_t).temperature_c.tolist() == [21.5]
+    assert np.isnan(read_series(without).temperature_c).all()
 
 
 @needs_data
@@ -127,9 +137,8 @@ def test_station_calibrate_on_a_real_position_set(tmp_path):
 
 @needs_data
 def test_station_calibrate_on_the_first_30_rows_of_series_b(tmp_path):
-    """Few rows of a real tracker set: a position report (this once ended in ``KeyError: 'lines'``:
-    the predicted workspace error is far above the fit, and the drawstring's warning was asked of
-    a position report)."""
+    """Few rows of a real tracker set: a position report, whose 30 poses promise less over the
+    workspace than they fit (this once ended in ``KeyError: 'lines'``)."""
     full = tmp_path / "b.csv"
     assert main(["import-ipa", str(SERIES_B), "--out", str(full)]) == 0
     part = tmp_path / "b30.csv"
@@ -140,4 +149,4 @@ def test_station_calibrate_on_the_first_30_rows_of_series_b(tmp_path):
     assert main(argv + ["--report", str(report)]) == 0
     r = json.loads(report.read_text())
     assert r["kind"] == "position" and "tracker_from_base" in r and "lines" not in r
-    assert r["workspace"]["predicted_rmse_mm"] > 10 * r["after"]["train"]["rmse_mm"]
+    assert r["workspace"]["predicted_rmse_mm"] > 2 * r["after"]["train"]["rmse_mm"]

@@ -25,7 +25,7 @@ from drivers.base import (
     Reading,
 )
 from errors import DeviceError
-from station.acquire.capture import RUNNING, Devices, Rules
+from station.acquire.capture import RUNNING, Capture, Devices, Rules
 from station.acquire.session import SUSPENDED_POLL_S, Listener, Session, State
 from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
@@ -151,8 +151,15 @@ class Cell:
     """A robot on a script, a drawstring reading ``ANCHOR_MM + q1`` and a dial reading 0.25 mm,
     each overridable; ``run()`` runs a session on them and keeps its messages."""
 
-    def __init__(self, tmp_path, clock: FakeClock, robot: Script, folder: SessionFolder | None = None):
-        self.clock = clock
+    def __init__(
+        self,
+        tmp_path,
+        clock: FakeClock,
+        robot: Script,
+        folder: SessionFolder | None = None,
+        plan: Plan = PLAN,
+    ):
+        self.clock, self.plan = clock, plan
         self.robot = ScriptedDriver("robot", ROBOT_FIELDS, robot, clock)
         self.drawstring = ScriptedDriver(
             "drawstring", {"length_mm": Field("mm")}, self.length_from_pose, clock
@@ -161,13 +168,14 @@ class Cell:
         header = {"start_wall_s": T0_WALL, "station": {"time_scale": 1.0}}
         self.folder = folder or SessionFolder.create(tmp_path / "sess", header)
         self.messages: list[str] = []
-        self.on_sample: Callable[[dict], None] = lambda row: None
+        self.on_sample: Callable[[dict, Capture], None] = lambda row, cap: None
         self.on_message: Callable[[str], None] = lambda text: None
+        self.on_tick: Callable[[], None] = lambda: None
 
     def length_from_pose(self, t: float) -> dict:
         return {"length_mm": ANCHOR_MM + self.robot.script(t)["q_deg"][0]}
 
-    def session(self) -> Session:
+    def session(self, listener: Listener | None = None) -> Session:
         drivers = {"robot": self.robot, "drawstring": self.drawstring, "dial": self.dial}
         devices = Devices(drivers, BACKOFF, sleep=self.clock.sleep)
 
@@ -175,8 +183,10 @@ class Cell:
             self.messages.append(text)
             self.on_message(text)
 
-        listener = Listener(lambda row, cap: self.on_sample(row), message)
-        return Session(self.folder, PLAN, devices, RULES, listener, clock=self.clock, sleep=self.clock.sleep)
+        listener = listener or Listener(lambda row, cap: self.on_sample(row, cap), message, self.on_tick)
+        return Session(
+            self.folder, self.plan, devices, RULES, listener, clock=self.clock, sleep=self.clock.sleep
+        )
 
     def run(self) -> State:
         return self.session().run()
@@ -191,7 +201,7 @@ class Cell:
 def stop_after_the_first_sample(cell: Cell) -> State:
     """Run a session on ``cell`` whose first stored sample requests a stop (as Ctrl-C would)."""
     session = cell.session()
-    cell.on_sample = lambda row: session.request_stop()
+    cell.on_sample = lambda row, cap: session.request_stop()
     return session.run()
 
 
@@ -413,3 +423,25 @@ def test_a_new_kind_of_failure_of_a_silent_device_is_named(tmp_path, clock):
         "suspended: dial not answering: unreachable after 2 attempts (unparseable reply b'#')",
     ]
     assert cell.targets() == [0, 1, 2]
+
+
+def test_a_finish_request_ends_the_session_done_with_its_reason_and_targets_left(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    session = cell.session()
+    cell.on_sample = lambda row, cap: session.finish("accuracy reached")
+    assert session.run() is State.DONE
+    assert cell.targets() == [0]
+    assert cell.messages[-1].startswith("done: accuracy reached; 1 samples")
+
+
+def test_the_listener_ticks_at_every_checkpoint_also_while_suspended(tmp_path, clock):
+    q = PLAN.q_deg[0]
+    cell = Cell(
+        tmp_path, clock, timeline((0.5, moving(q)), (3.0, still(q, mode=5)), *walk(PLAN.q_deg, start_s=3.0))
+    )
+    ticks = []
+    cell.on_tick = lambda: ticks.append(clock())
+    assert cell.run() is State.DONE
+    suspended = [t for t in ticks if 0.5 < t < 3.0]
+    assert len(suspended) >= (2.5 - RULES.settle_s) / SUSPENDED_POLL_S - 2  # each suspended poll
+    assert np.max(np.diff(ticks)) < SUSPENDED_POLL_S + RULES.readings * 4 * READ_S + 0.01

@@ -1,0 +1,178 @@
+"""``station calibrate --model``: a corrected table carries the terms it identified and reads back
+as a robot model, ``auto`` cross-validates on the training rows alone (a hold-out set changes
+nothing of its choice), and a bad ``--model`` or a compliance without masses is one line."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib.joint_terms import JointTerms, Term
+from calib.kinematics import tcp_position
+from calib.params import dh_from_degrees
+from calib.position import rotation_from_vector
+from calib.selection import kfold
+from errors import InputError
+from sim_fixtures.world import JointError
+from station.cli import main
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot
+from station.jobs import calibration
+
+ROBOT = Path(__file__).resolve().parents[3] / "configs/robots/ur10.toml"
+HEADER = "sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"
+COMPLIANCE = {1: 15.0, 2: 10.0}  # the simulated UR10's joints 2 and 3 [urad / (N m)]
+
+
+def write_compliant_set(path: Path, n: int, seed: int) -> None:
+    """A UR10 with machining errors and joints 2-3 yielding under gravity (the robot file's masses),
+    ``n`` random poses seen by a tracker with 0.02 mm noise."""
+    rng = np.random.default_rng(seed)
+    robot = load_robot(ROBOT)
+    nominal = dh_from_degrees(robot.table_deg())
+    true = nominal + np.column_stack(
+        [np.radians(rng.normal(0, 0.15, 6)), rng.normal(0, 0.75, (6, 2)), np.radians(rng.normal(0, 0.15, 6))]
+    )
+    terms = JointTerms([Term(j, "compliance_urad_per_Nm") for j in COMPLIANCE], nominal, robot.link_masses())
+    q_links = rng.uniform(-180, 180, (n, 6))
+    q = JointError(terms, np.array(list(COMPLIANCE.values()))).readings_deg(q_links)
+    p = tcp_position(true, np.radians(q_links), np.array([0.0, 0.0, 100.0]))
+    p = p @ rotation_from_vector(np.array([0.1, -0.2, 2.5])).T + [2500.0, -1000.0, 200.0]
+    p += rng.normal(0, 0.02, p.shape)
+    rows = [HEADER] + [",".join(map(str, [k, *q[k], *p[k]])) for k in range(n)]
+    path.write_text("\n".join(rows) + "\n")
+
+
+@pytest.fixture(scope="module")
+def compliant(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("compliant")
+    write_compliant_set(folder / "train.csv", 150, seed=1)
+    write_compliant_set(folder / "test.csv", 60, seed=2)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def corrected(compliant):
+    """``station calibrate --model compliance`` of the training set: the corrected table and report."""
+    out, report = compliant / "c.toml", compliant / "r.json"
+    argv = ["calibrate", str(compliant / "train.csv"), "--robot", str(ROBOT), "--model", "compliance"]
+    assert main(argv + ["--out", str(out), "--report", str(report)]) == 0
+    return out, report
+
+
+def test_the_corrected_table_carries_the_terms_and_reads_back(corrected, capsys):
+    out, report = corrected
+    r = json.loads(report.read_text())
+    assert r["model"] == "compliance" and set(r["terms"]) == {
+        f"J{j + 1}.compliance_urad_per_Nm" for j in COMPLIANCE
+    }
+    corrected = load_robot(out)  # reads back as a robot model, with its terms
+    model = corrected.model()
+    assert model.terms.names == tuple(r["terms"])
+    np.testing.assert_allclose(model.term_values, [e["value"] for e in r["terms"].values()])
+    for j, truth in COMPLIANCE.items():
+        estimate = r["terms"][f"J{j + 1}.compliance_urad_per_Nm"]
+        assert abs(estimate["value"] - truth) < 3 * estimate["sigma"]
+        assert corrected.joints[j].sigma["compliance_urad_per_Nm"] == estimate["sigma"]
+    assert corrected.joints[1].mass_kg == load_robot(ROBOT).joints[1].mass_kg  # the masses travel along
+
+
+def test_compensate_uses_the_terms(corrected, tmp_path, capsys):
+    """The compensated joints bring the corrected model, joints yielding, to the nominal poses; the
+    covariance with the terms reads back for the predicted accuracy."""
+    out, _ = corrected
+    q = np.random.default_rng(3).uniform(-170, 170, (40, 6))
+    program, result = tmp_path / "p.csv", tmp_path / "o.csv"
+    rows = ["q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg"] + [",".join(f"{v:.6f}" for v in qi) for qi in q]
+    program.write_text("\n".join(rows) + "\n")
+    argv = ["compensate", str(program), "--table", str(out), "--robot", str(ROBOT), "--out", str(result)]
+    assert main(argv + ["--report", str(tmp_path / "r.json")]) == 0
+    assert json.loads((tmp_path / "r.json").read_text())["predicted"] is not None
+    lines = result.read_text().splitlines()
+    header = lines[0].split(",")
+    cols = [header.index(f"q{i}_deg") for i in range(1, 7)]
+    body = [line.split(",") for line in lines[1:]]
+    done = np.array([r[header.index("status")] == "ok" for r in body])
+    q_comp = np.radians([[float(r[c]) for c in cols] for r in body])[done]
+    meant = load_robot(ROBOT).model().tool_frames(np.radians(q[done]))[0]
+    model = load_robot(out).model()
+    assert done.sum() > 20 and len(model.terms) == 2
+    np.testing.assert_allclose(model.tool_frames(q_comp)[0], meant, atol=1e-3)
+
+
+def test_auto_never_looks_at_the_holdout(compliant):
+    """The choice and its cross-validation table are the same with the real hold-out and with a
+    hold-out of nonsense (every position 100 mm off): nothing but the training rows enters."""
+    robot, train = load_robot(ROBOT), load_samples(compliant / "train.csv")
+    test = load_samples(compliant / "test.csv")
+    nonsense = type(test)(test.path, test.kind, test.q_deg, test.measured + 100.0, test.dial_mm, test.line)
+    runs = [
+        calibration.calibrate_samples(train, robot, None, holdout=h, terms="auto")
+        for h in (None, test, nonsense)
+    ]
+    tables = [r.report.cross_validation for r in runs]
+    assert tables[0] == tables[1] == tables[2]
+    assert runs[0].report.terms == runs[1].report.terms == runs[2].report.terms
+    assert "J2.compliance_urad_per_Nm" in runs[0].report.terms  # and it found what is there
+    assert runs[2].report.after.holdout.rmse_mm > 50  # the nonsense was evaluated, after the fit
+
+
+def test_folds_are_contiguous_blocks_of_every_placement():
+    placements = np.array([0] * 10 + [1] * 7 + [-1] * 3)
+    folds = kfold(placements, 5)
+    np.testing.assert_array_equal(np.sort(np.concatenate(folds)), np.arange(20))
+    for rows in folds:
+        for pid in (0, 1):
+            mine = rows[placements[rows] == pid]
+            assert mine.size >= 1 and np.all(np.diff(mine) == 1)
+
+
+def test_a_bad_model_is_one_line(compliant, capsys):
+    argv = [
+        "calibrate",
+        str(compliant / "train.csv"),
+        "--robot",
+        str(ROBOT),
+        "--out",
+        str(compliant / "x.toml"),
+    ]
+    with pytest.raises(SystemExit):
+        main(argv + ["--model", "everything"])
+    assert "invalid choice: 'everything'" in capsys.readouterr().err
+
+
+def test_a_compliance_without_masses_is_bad_input(tmp_path):
+    text = ROBOT.read_text()
+    no_masses = "\n".join(line for line in text.splitlines() if not line.startswith(("mass_kg", "com_mm")))
+    path = tmp_path / "r.toml"
+    path.write_text(
+        no_masses.replace("d_mm = 0.0\ntheta_deg", "d_mm = 0.0\ncompliance_urad_per_Nm = 12.0\ntheta_deg", 1)
+    )
+    with pytest.raises(InputError) as err:
+        load_robot(path)
+    assert (
+        str(err.value) == f"{path}: joints.1.compliance_urad_per_Nm needs mass_kg and com_mm on every joint"
+    )
+
+
+def test_without_masses_the_compliance_is_held_with_the_reason(compliant):
+    robot = load_robot(ROBOT)
+    bare = robot.model_copy(update={"joints": [j.model_copy(update={"mass_kg": None}) for j in robot.joints]})
+    out = calibration.calibrate_samples(load_samples(compliant / "train.csv"), bare, None, terms="compliance")
+    held = {h.param: h.reason for h in out.report.held}
+    assert "no link masses" in held["J2.compliance_urad_per_Nm"] and out.report.terms == {}
+
+
+def test_the_setups_payload_loads_the_joints_and_travels_with_the_table(compliant, corrected):
+    """A payload in the setup joins the links' gravity torques (the compliance fitted to the same
+    deflections comes out smaller) and the corrected table records it for compensation."""
+    setup = compliant / "payload.toml"
+    setup.write_text("[payload]\nmass_kg = 10.0\ncom_mm = [0.0, 0.0, 150.0]\n")
+    out = compliant / "p.toml"
+    argv = ["calibrate", str(compliant / "train.csv"), "--robot", str(ROBOT), "--model", "compliance"]
+    assert main(argv + ["--setup", str(setup), "--out", str(out)]) == 0
+    loaded, plain = load_robot(out), load_robot(corrected[0])
+    assert loaded.payload.mass_kg == 10.0 and loaded.payload.com_mm == [0.0, 0.0, 150.0]
+    assert plain.payload is None
+    assert loaded.joints[1].compliance_urad_per_Nm < 0.8 * plain.joints[1].compliance_urad_per_Nm

@@ -1,0 +1,192 @@
+"""The running calibration on simulated sessions: live errors against the refits (no jump at a new
+line, noise-level within a line, a bad reading called suspect), the predicted workspace error as
+the lines grow, the saturation message and the --until-mm goal; and, on the session engine's
+simulated clock, that a slow refit never delays a capture (refits coalesce instead).
+
+The refits are the real pipeline (``station.jobs.running.refit``), run in this process by stand-in
+workers that answer late: ``LaggingWorker`` a few samples after a job starts (as the demo's worker
+does), ``ClockedWorker`` after a time on the session's clock.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+import configs
+from sim_fixtures.world import World
+from station.acquire import runner
+from station.acquire.livefit import LiveListener, RunningCalibration
+from station.acquire.progress import Progress
+from station.acquire.session import State
+from station.formats.plan import Plan
+from station.formats.tables import load_robot, load_setup
+from station.jobs.running import refit
+from station.view.live import LiveView
+from tests.unit.station.test_session_engine import RULES, T0_WALL, Cell, clock, timeline, walk  # noqa: F401
+
+ROBOT = load_robot(configs.path("robots/hsr_jr680.toml"))
+SETUP = load_setup(configs.path("setups/sim.toml"))
+PER_LINE = (70, 25, 25)  # samples on lines 0, 1, 2, in this order
+BAD = PER_LINE[0] + PER_LINE[1] + 10  # this sample's drawstring reads 0.3 mm long (cable slip), on line 2
+NOISE_MM = 0.02  # the simulated drawstring, one reading per sample
+LAG = 3  # samples taken while a refit runs
+GOAL_MM = 1.0  # --until-mm
+
+
+class LaggingWorker:
+    """Runs each job at once but answers only after ``lag`` more samples were added."""
+
+    def __init__(self, lag: int):
+        self.lag, self.busy, self.jobs = lag, False, []
+        self._answer, self._due = None, 0
+        self.added = 0
+
+    def submit(self, kind, samples):
+        self.jobs.append((kind, len(samples)))
+        self._answer = (kind, _run(kind, samples))
+        self._due, self.busy = self.added + self.lag, True
+
+    def poll(self, timeout_s: float = 0.0):
+        if not self.busy or self.added < self._due:
+            return None
+        self.busy = False
+        return self._answer
+
+    def close(self):
+        pass
+
+
+def _run(kind, samples):
+    assert kind == "refit"  # the plan here always has a next line to name
+    return refit(ROBOT, SETUP, samples)
+
+
+@pytest.fixture(scope="module")
+def session():
+    """A simulated session fed sample by sample: live errors, suspects, refits and messages."""
+    world = World.create(0)
+    q, lines = world.line_configurations(max(PER_LINE), np.random.default_rng(1))
+    keep = np.concatenate([np.flatnonzero(lines == k)[:n] for k, n in enumerate(PER_LINE)])
+    s = world.measure(q[keep], lines[keep], np.random.default_rng(2))
+    s.length_mm[BAD] += 0.3
+    out = {"messages": [], "refits": [], "reached": []}
+    listener = LiveListener(out["refits"].append, out["messages"].append, out["reached"].append)
+    worker = LaggingWorker(LAG)
+    running = RunningCalibration(ROBOT, SETUP, worker, np.repeat([0, 1, 2], 4), listener, until_mm=GOAL_MM)
+    live = []
+    for i in range(len(s)):
+        live.append(running.live_error(s.q_deg[i], s.length_mm[i]))
+        running.add(s.q_deg[i], s.length_mm[i], s.dial_mm[i], s.line[i])
+        worker.added += 1
+        running.poll()
+    out.update(live=live, line=s.line, worker=worker)
+    return out
+
+
+def _errors(session) -> np.ndarray:
+    return np.array([np.nan if e.error_mm is None else e.error_mm for e in session["live"]])
+
+
+def test_live_error_has_no_jump_at_a_new_line_and_is_at_the_noise_within_a_line(session):
+    errors, line = _errors(session), session["line"]
+    known = np.isfinite(errors)
+    assert not known[0] and known[4:].all()  # the first refit answers 3 samples later
+    assert np.nanmax(np.abs(errors)) < 10.0
+    firsts = [int(np.flatnonzero(line == k)[0]) for k in (1, 2)]
+    assert all(abs(errors[i]) < 10.0 for i in firsts)
+    # once the refits hold ten samples of a line (3 more were taken while they ran), the prediction
+    # is good to the noise (0.02 mm): a 0.1 mm error stands out
+    settled = [i for i in range(len(line)) if i != BAD and np.sum(line[:i] == line[i]) >= 10 + LAG]
+    assert np.max(np.abs(errors[settled])) < 5 * NOISE_MM
+
+
+def test_a_bad_reading_is_suspect_and_no_good_one_is(session):
+    suspects = [i for i, e in enumerate(session["live"]) if e.suspect]
+    assert suspects == [BAD]
+    assert session["live"][BAD].limit_mm < 10 * NOISE_MM
+
+
+def test_predicted_workspace_error_shrinks_from_one_line_to_three(session):
+    judged = [(f.n, f.workspace.predicted_rmse_mm) for f in session["refits"] if f.workspace is not None]
+    first_n, first = judged[0]
+    assert first_n <= PER_LINE[0] and first > 1.0  # one line: millimetres
+    assert judged[-1][1] < first / 5  # three lines
+    assert all(f.workspace is None for f in session["refits"] if f.n < f.needed)
+
+
+def test_a_line_that_stopped_paying_is_named_once_with_the_plans_next_line(session):
+    said = [m for m in session["messages"] if "saturated" in m]
+    assert len(said) == 1 and said[0].startswith("line 0 saturated at ")
+    assert "next: line 1 of the plan (through [-1050, -450, 450] mm along [1.00, 0.00, 0.00])" in said[0]
+
+
+def test_the_goal_is_reached_once_with_the_bound_met(session):
+    assert len(session["reached"]) == 1
+    first_met = next(
+        f
+        for f in session["refits"]
+        if f.workspace is not None and f.workspace.predicted_rmse_95_mm <= GOAL_MM
+    )
+    assert f"after {first_met.n} samples" in session["reached"][0]
+
+
+def test_refits_coalesce_when_they_fall_behind(session):
+    counts = [n for _, n in session["worker"].jobs]
+    assert counts == sorted(set(counts)) and counts[0] == 1
+    assert np.all(np.diff(counts)[1:] == LAG)  # each refit takes every sample stored while the last ran
+
+
+class ClockedWorker:
+    """Runs each job at once but answers ``fit_s`` seconds of the session's clock later."""
+
+    def __init__(self, session_clock, fit_s: float):
+        self.clock, self.fit_s = session_clock, fit_s
+        self.busy, self.jobs = False, []
+
+    def submit(self, kind, samples):
+        self.jobs.append((self.clock(), len(samples)))
+        self._answer, self._due, self.busy = (
+            (kind, refit(ROBOT, SETUP, samples)),
+            self.clock() + self.fit_s,
+            True,
+        )
+
+    def poll(self, timeout_s: float = 0.0):
+        if self.busy and self.clock() < self._due <= self.clock() + timeout_s:
+            self.clock.sleep(self._due - self.clock())  # a caller that waits: on the session's time
+        if not self.busy or self.clock() < self._due:
+            return None
+        self.busy = False
+        return self._answer
+
+    def close(self):
+        pass
+
+
+def test_a_slow_refit_never_delays_a_capture(tmp_path, clock):  # noqa: F811
+    """The station's wiring (``runner.Live``) on the session engine: captures land as with no
+    refit while each refit takes 6 s of session time; a wiring that waited for refits would not."""
+    world = World.create(0)
+    q, lines = world.line_configurations(4, np.random.default_rng(1))
+    plan = Plan.of(q, lines)
+    cell = Cell(tmp_path, clock, timeline(*walk(plan.q_deg)), plan=plan)
+    cell.drawstring.script = lambda t: {"length_mm": world.true_length_mm(cell.robot.script(t)["q_deg"])[0]}
+    worker = ClockedWorker(clock, fit_s=6.0)  # a refit takes over two targets' time
+    view = LiveView(tmp_path / "session.rrd")
+    live = runner.Live(
+        ROBOT, SETUP, plan.line, worker, view, Progress(len(plan), stream=io.StringIO(), clock=clock), None
+    )
+    assert cell.session(live.listener()).run() is State.DONE
+    view.close()
+    # every capture settle_s after the robot arrives, as with no refit (2.5 s a target, 0.5 s moving)
+    arrived = 0.5 + 2.5 * np.arange(len(plan))
+    t_s = np.array([float(r["t_s"]) for r in cell.folder.rows])
+    late_s = t_s - arrived - RULES.settle_s
+    assert np.all((late_s >= 0) & (late_s < 3 * RULES.poll_s))
+    # refits coalesced: each took every sample stored when it started, one at a time
+    starts = np.array([t for t, _ in worker.jobs]) - (T0_WALL - cell.folder.header["start_wall_s"])
+    assert [n for _, n in worker.jobs] == [int(np.searchsorted(t_s, t, side="right")) for t in starts]
+    assert np.all(np.diff(starts) >= worker.fit_s) and 1 < len(worker.jobs) < len(plan)
