@@ -97,8 +97,9 @@ def make_kit(folder: Path) -> Kit:
     placements = folder / "placements.toml"
     shutil.copy(configs.path("setups/sim.toml"), placements)
     corrected = folder / "corrected.toml"
-    cli.main(["calibrate", str(sc.samples), "--robot", str(sc.robot), "--setup", str(sc.setup), "--out",
-              str(corrected)])  # fmt: skip
+    with contextlib.redirect_stdout(io.StringIO()):
+        cli.main(["calibrate", str(sc.samples), "--robot", str(sc.robot), "--setup", str(sc.setup),
+                  "--out", str(corrected)])  # fmt: skip
     program = folder / "program.csv"
     program.write_text(_program(sc.train.q_deg[:8]))
     return Kit(
