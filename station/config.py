@@ -7,7 +7,6 @@ naming the file, the key and what is wrong.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -16,11 +15,6 @@ from pydantic import Field, ValidationError, model_validator
 from drivers.config import DialConfig, DrawstringConfig, Name, Reconnect, RobotConfig, Section, error_key
 from errors import InputError
 from station.formats.base import MAX_DIAL_MM, MAX_LENGTH_MM, DialReading, Length, read_toml
-
-if sys.version_info >= (3, 11):
-    pass
-else:  # pragma: no cover
-    pass
 
 Seconds = Annotated[float, Field(gt=0, le=86400)]  # a time of the capture rule, s: up to a day
 
