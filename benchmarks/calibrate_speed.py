@@ -7,7 +7,11 @@
 - the whole in-process pipeline (setup fit, identification, robust LMLC, uncertainty, workspace);
 - MCS choosing 72 of 200 configurations;
 - the whole ``station calibrate`` process (lmlc and mcs-lmlc with the table alone, and lmlc with
-  ``--model auto``, the default: terms chosen by cross-validation), interpreter start included.
+  ``--model auto``, the default: terms chosen by cross-validation), interpreter start included;
+- responsiveness (issue 15), in the same run: ``station --help``, and ``station calibrate`` on
+  210 samples (3 lines; the default ``--model auto`` and the table alone, ``--model geometric``)
+  against a bare ``python -c "import numpy, scipy.optimize, scipy.linalg"`` (medians of
+  ``--process-repeats`` runs each, interleaved so that the machine's load hits all alike).
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ def median_time(fn, repeats: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--process-repeats", type=int, default=7)
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp())
     sc = write_scenario(folder, seed=0, n_lines=1, n_per_line=200)
@@ -97,6 +102,37 @@ def main() -> None:
         ]
         t = median_time(lambda cmd=cmd: subprocess.run(cmd, check=True, capture_output=True), 3)
         print(f"| whole `station calibrate --method {method} --model {terms}` process | {t:.2f} s | |")
+    responsiveness(folder, args.process_repeats)
+
+
+def responsiveness(folder: Path, repeats: int) -> None:
+    """``station --help`` and ``station calibrate`` on 210 samples against the bare scientific
+    imports, each command's runs interleaved with the others'."""
+    sc = write_scenario(folder / "three", seed=0, n_lines=3, n_per_line=70)
+    station = [sys.executable, "-m", "station.cli"]
+    calibrate = [
+        *station, "calibrate", str(sc.samples), "--robot", str(sc.robot), "--setup", str(sc.setup),
+        "--out", str(folder / "three.toml"),
+    ]  # fmt: skip
+    commands = {
+        "bare": [sys.executable, "-c", "import numpy, scipy.optimize, scipy.linalg"],
+        "help": [*station, "--help"],
+        "calibrate": calibrate,
+        "geometric": [*calibrate, "--model", "geometric"],
+    }
+    times: dict[str, list[float]] = {name: [] for name in commands}
+    for _ in range(repeats):
+        for name, cmd in commands.items():
+            t0 = time.perf_counter()
+            subprocess.run(cmd, check=True, capture_output=True)
+            times[name].append(time.perf_counter() - t0)
+    t = {name: statistics.median(v) for name, v in times.items()}
+    print(f"medians of {repeats} runs each, interleaved")
+    print(f"| `station --help` | {t['help']:.3f} s | <= 0.25 s |")
+    print(f"| bare `import numpy, scipy.optimize, scipy.linalg` | {t['bare']:.3f} s | |")
+    for name, what in (("calibrate", "(default: --model auto)"), ("geometric", "--model geometric")):
+        print(f"| `station calibrate {what}` on 210 samples (3 lines) | {t[name]:.3f} s | |")
+        print(f"| ratio to the bare import | {t[name] / t['bare']:.2f}x | <= 1.7x |")
 
 
 if __name__ == "__main__":

@@ -41,6 +41,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, dual_annealing
 
 from calib.calibrate import CalibrationOptions, robust_fit
+from calib.methods import METHODS
 from calib.models import MeasurementModel
 from calib.params import display_factor
 
@@ -56,9 +57,6 @@ HALF_WIDTH_RULES = (
     ("J", "_deg", 0.5),
     ("J", "_mm", 3.0),
 )
-
-BASELINES = ("pso", "ekf", "ukf", "gn", "sa", "pf", "de")
-METHODS = BASELINES + ("lmlc",)
 
 
 def search_half_widths(names) -> np.ndarray:

@@ -158,18 +158,21 @@ def call_with_reconnect(
     call: Callable[[], T],
     backoff: Backoff = Backoff(),
     sleep: Callable[[float], None] = time.sleep,
+    on_retry: Callable[[DriverError], None] = lambda exc: None,
 ) -> T:
     """``call()``, retried on transient failures with a reconnect of ``driver`` in between.
 
     Between attempts the driver is closed, ``sleep`` waits the next backoff delay, and the driver is
-    reopened (a failed reopen counts as a failed attempt). :class:`DeviceReplyError` and non-driver
-    errors pass straight through. After the last attempt raises :class:`DeviceUnreachable`
-    naming the device, the number of attempts and the last cause.
+    reopened (a failed reopen counts as a failed attempt); ``on_retry(error)`` hears of each failure
+    that a retry follows. :class:`DeviceReplyError` and non-driver errors pass straight through.
+    After the last attempt raises :class:`DeviceUnreachable` naming the device, the number of
+    attempts and the last cause.
     """
     last: DriverError | None = None
     for delay in (None, *backoff.delays()):
         try:
             if delay is not None:
+                on_retry(last)
                 driver.close()
                 sleep(delay)
                 driver.open()

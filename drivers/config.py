@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import serial
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 from drivers.base import Backoff, Driver
@@ -20,31 +20,48 @@ from drivers.drawstring import ENCODINGS, AsciiDrawstring, ModbusDrawstring, Reg
 from drivers.robot import JOINT_ENCODINGS, JointRegisterMap, ModbusJointSource, RtdeJointSource
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class Section(BaseModel):
+    """A section of the station config: unknown keys, NaN and infinity are refused."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
-class Registers(_Section):
+Name = Annotated[str, Field(min_length=1, pattern=r"^[^\x00]*$")]
+"""A host name or a path: not empty, no NUL character (which no system call accepts)."""
+Timeout = Annotated[float, Field(gt=0, le=60)]  # s
+
+
+def _scale(value: float) -> float:
+    if not 1e-6 <= abs(value) <= 1e6:
+        raise ValueError(f"{value:g}: the scale must lie within 1e-6 .. 1e6 (or the same negative)")
+    return value
+
+
+Scale = Annotated[float, AfterValidator(_scale)]
+"""What a raw register value is multiplied by (after the encoding's unit)."""
+
+
+class Registers(Section):
     """Modbus layout of the length: defaults are holding register 0, INT32 micrometres, high
     word first, scale 1 (``length_mm = raw * unit_per_count * scale``)."""
 
     address: int = Field(0, ge=0, le=65535)
     encoding: Literal[tuple(ENCODINGS)] = "int32_um"  # type: ignore[valid-type]
     word_order: Literal["big", "little"] = "big"
-    scale: float = 1.0
+    scale: Scale = 1.0
     table: Literal["holding", "input"] = "holding"
 
     def register_map(self, device_id: int) -> RegisterMap:
         return RegisterMap(device_id=device_id, **self.model_dump())
 
 
-class SerialLine(_Section):
+class SerialLine(Section):
     """A serial port: path (``/dev/ttyUSB0``, or a simulated ``/tmp/station-sim/<name>`` link),
     line speed (baud) and the reply timeout (s)."""
 
-    port: str
-    baudrate: int = Field(9600, gt=0)
-    timeout_s: float = Field(0.2, gt=0)
+    port: Name
+    baudrate: int = Field(9600, gt=0, le=10_000_000)
+    timeout_s: Timeout = 0.2
 
     def serial_port(self) -> serial.Serial:
         """The unopened pyserial port (the driver opens it)."""
@@ -57,12 +74,12 @@ class SerialLine(_Section):
         )
 
 
-class DrawstringModbusTcp(_Section):
+class DrawstringModbusTcp(Section):
     kind: Literal["modbus_tcp"]
-    host: str = "127.0.0.1"
+    host: Name = "127.0.0.1"
     port: int = Field(5020, gt=0, le=65535)
     device_id: int = Field(1, ge=0, le=255)
-    timeout_s: float = Field(0.3, gt=0)
+    timeout_s: Timeout = 0.3
     registers: Registers = Registers()
 
     def build(self) -> Driver:
@@ -72,9 +89,9 @@ class DrawstringModbusTcp(_Section):
 
 class DrawstringModbusRtu(SerialLine):
     kind: Literal["modbus_rtu"]
-    baudrate: int = Field(115200, gt=0)
+    baudrate: int = Field(115200, gt=0, le=10_000_000)
     device_id: int = Field(1, ge=0, le=255)
-    timeout_s: float = Field(0.3, gt=0)
+    timeout_s: Timeout = 0.3
     registers: Registers = Registers()
 
     def build(self) -> Driver:
@@ -103,31 +120,31 @@ class DialConfig(SerialLine):
         return DialIndicator(self.serial_port(), self.dialect)
 
 
-class RobotRtde(_Section):
+class RobotRtde(Section):
     """A UR controller's RTDE interface (port 30004 is fixed by the protocol)."""
 
     kind: Literal["rtde"]
-    host: str = "127.0.0.1"
-    frequency_hz: float = Field(500.0, gt=0, le=500)
+    host: Name = "127.0.0.1"
+    frequency_hz: float = Field(500.0, ge=1, le=500)
 
     def build(self) -> Driver:
         return RtdeJointSource(self.host, self.frequency_hz)
 
 
-class RobotModbusTcp(_Section):
+class RobotModbusTcp(Section):
     """A controller publishing its six joints in Modbus registers (e.g. the HSR JR680): from
     ``address`` on, joint 1 first, ``encoding`` with ``word_order``, times ``scale``."""
 
     kind: Literal["modbus_tcp"]
-    host: str = "127.0.0.1"
+    host: Name = "127.0.0.1"
     port: int = Field(502, gt=0, le=65535)
     device_id: int = Field(1, ge=0, le=255)
     address: int = Field(0, ge=0, le=65535)
     encoding: Literal[tuple(JOINT_ENCODINGS)] = "int32_mdeg"  # type: ignore[valid-type]
     word_order: Literal["big", "little"] = "big"
-    scale: float = 1.0
+    scale: Scale = 1.0
     table: Literal["holding", "input"] = "holding"
-    timeout_s: float = Field(0.3, gt=0)
+    timeout_s: Timeout = 0.3
 
     def build(self) -> Driver:
         client = ModbusTcpClient(self.host, port=self.port, timeout=self.timeout_s, retries=0)
@@ -138,14 +155,14 @@ class RobotModbusTcp(_Section):
 RobotConfig = Annotated[RobotRtde | RobotModbusTcp, Field(discriminator="kind")]
 
 
-class Reconnect(_Section):
+class Reconnect(Section):
     """Retries after a transient failure: ``attempts`` in all, waits growing from ``initial_s``
     by ``factor`` up to ``max_s`` (s)."""
 
-    attempts: int = Field(4, ge=1)
-    initial_s: float = Field(0.05, ge=0)
-    factor: float = Field(2.0, ge=1)
-    max_s: float = Field(1.0, ge=0)
+    attempts: int = Field(4, ge=1, le=100)
+    initial_s: float = Field(0.05, ge=0, le=60)
+    factor: float = Field(2.0, ge=1, le=10)
+    max_s: float = Field(1.0, ge=0, le=600)
 
     def backoff(self) -> Backoff:
         return Backoff(**self.model_dump())

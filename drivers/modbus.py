@@ -10,6 +10,7 @@ exception code.
 
 from __future__ import annotations
 
+import logging
 from typing import ClassVar
 
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -28,6 +29,10 @@ from drivers.base import (
 from drivers.registers import RegisterLayout
 
 FUNCTION_CODES = {"holding": 3, "input": 4}  # Modbus read holding / read input registers
+
+# pymodbus logs every failure itself ("No response received ...", "Repeating....") on stderr; the
+# driver raises each one, named, and the session logs it: its own lines would only add noise.
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
 class ModbusRegisterDriver(Driver):

@@ -11,6 +11,11 @@ class DeviceError(Exception):
     """A device stays unreachable or answers garbage after retries: exit code 1."""
 
 
+class OutputError(Exception):
+    """A result could not be written (disk full, file too large): exit code 1, one line saying what
+    was kept and how to go on. What was written before it stays whole."""
+
+
 class ParameterError(InputError):
     """A bad value of a named parameter of a job: exit code 2 like any bad input.
 

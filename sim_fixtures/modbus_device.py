@@ -100,7 +100,29 @@ class ModbusDevice:
             return b""
         return data
 
+    def unplug(self) -> None:
+        """Pull the cable until :meth:`replug`: RTU, the station's end of the link disappears; TCP,
+        the open connections are reset and new ones refused (the server stops listening)."""
+        if self.cable:
+            self.cable.unplug()
+            return
+        asyncio.run_coroutine_threadsafe(self._stop_serving(), self._loop).result(START_TIMEOUT_S)
+
+    def replug(self) -> None:
+        """Plug the cable back in: the same link (RTU) or the same address (TCP)."""
+        if self.cable:
+            self.cable.replug()
+        elif self._server is None:
+            asyncio.run_coroutine_threadsafe(self._serve(), self._loop).result(START_TIMEOUT_S)
+
+    async def _stop_serving(self) -> None:
+        if self._server is not None:
+            self._unplug()
+            server, self._server = self._server, None
+            await server.shutdown()
+
     def _unplug(self) -> None:
+        """The ``unplug`` fault: the RTU cable pulled, or the TCP connections reset."""
         if self.cable:
             self.cable.unplug()
             return
@@ -125,6 +147,7 @@ class ModbusDevice:
         await self._server.serve_forever(background=True)
         if not self.cable:
             host, port = self._server.transport.sockets[0].getsockname()[:2]
+            self._tcp = (host, port)  # a replug serves the same address, also when port 0 chose it
             self.address = {"protocol": "modbus-tcp", "host": host, "port": port}
         self.address["device_id"] = self.registers.device_id
 

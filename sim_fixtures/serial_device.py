@@ -18,6 +18,7 @@ import os
 import pty
 import select
 import threading
+import time
 import tty
 from collections.abc import Callable
 from pathlib import Path
@@ -30,11 +31,13 @@ POLL_S = 0.05  # how often a device thread looks at its stop flag, s
 
 
 class FaultPlan:
-    """Faults queued for the next requests, oldest first (thread-safe)."""
+    """Faults queued for the next requests, oldest first (thread-safe); ``applied`` lists the
+    faults taken so far as ``(time.monotonic(), kind)``."""
 
     def __init__(self):
         self._queue: collections.deque[str] = collections.deque()
         self._lock = threading.Lock()
+        self.applied: list[tuple[float, str]] = []
 
     def inject(self, kind: str, count: int = 1) -> None:
         """Apply fault ``kind`` (one of :data:`FAULTS`) to the next ``count`` requests."""
@@ -43,10 +46,20 @@ class FaultPlan:
         with self._lock:
             self._queue.extend([kind] * count)
 
+    @property
+    def pending(self) -> int:
+        """Faults queued and not yet applied."""
+        with self._lock:
+            return len(self._queue)
+
     def take(self) -> str | None:
         """The fault for the request being answered, or None."""
         with self._lock:
-            return self._queue.popleft() if self._queue else None
+            if not self._queue:
+                return None
+            kind = self._queue.popleft()
+            self.applied.append((time.monotonic(), kind))
+            return kind
 
 
 def link_to(link: Path, target: str) -> None:
@@ -157,8 +170,12 @@ class SerialAsciiDevice:
         self._loop.stop()
         self.port.unplug()
 
+    def unplug(self) -> None:
+        """Pull the device's cable: the link disappears until :meth:`replug`."""
+        self.port.unplug()
+
     def replug(self) -> None:
-        """Bring the device back after an ``unplug`` fault, at the same link."""
+        """Bring the device back after an unplug, at the same link."""
         if not self.port.plugged:
             self._buffer = b""
             self.port.replug()

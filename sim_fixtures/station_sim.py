@@ -8,7 +8,9 @@ the simulated true robot's pose implies at the instant they are asked:
 - the drawstring serves over the configured transport (Modbus TCP, Modbus RTU on a linked pty
   pair, or serial ASCII on a pty) and the dial on a pty at ``[dial] port``;
 - instrument noise: the world's (:class:`~sim_fixtures.world.Noise`: drawstring 0.02 mm, dial
-  0.002 mm, 1 um resolution), each from its own generator seeded by ``[sim] seed``.
+  0.002 mm, 1 um resolution), each from its own generator seeded by ``[sim] seed``;
+- a slack cable (:meth:`SimStation.slacken`): the cable off the tool, the drawstring reading
+  ``SLACK_MM`` (uniform) instead of the distance.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from sim_fixtures.sources import CellSource, SimClock
 from sim_fixtures.world import World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
+SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
 
 
 @dataclass(frozen=True)
@@ -116,12 +119,22 @@ class SimStation:
         )
         self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
         self.source = CellSource(self.robot, cell)
-        rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in range(2)]
+        rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in (0, 1, 6)]
         self._length = cell.world.noise.drawstring(rngs[0])
         self._dial = cell.world.noise.dial(rngs[1])
+        self._slack_rng, self._slack_until, self.slack_read = rngs[2], 0.0, 0
         self.devices: dict[str, object] = {}
 
+    def slacken(self, seconds: float) -> None:
+        """The cable comes off the tool for ``seconds`` (real): the drawstring reads ``SLACK_MM``;
+        ``slack_read`` counts the readings given meanwhile (reset here)."""
+        self._slack_until = time.monotonic() + seconds
+        self.slack_read = 0
+
     def measure_length(self) -> float:
+        if time.monotonic() < self._slack_until:
+            self.slack_read += 1
+            return self._length.measure(self._slack_rng.uniform(*SLACK_MM))
         return self._length.measure(self.source.state(self.clock.now()).length_mm)
 
     def measure_dial(self) -> float:

@@ -6,10 +6,13 @@ import argparse
 import importlib
 import sys
 
-from errors import DeviceError, InputError
+from errors import DeviceError, InputError, OutputError
 
 # One module per command; each exposes ``register(subparsers)``, which adds its parser with
-# ``func`` set to the module's one entry ``run(args)`` (returns the exit code).
+# ``func`` set to the module's one entry ``run(args)`` (returns the exit code). A command module
+# imports at its top only what its parser needs (the standard library, ``errors``, names): numpy,
+# scipy, pydantic, the drivers, Rerun and matplotlib are imported in ``run``, where they are used,
+# so that ``station --help`` answers at once and each command loads only its own libraries.
 COMMANDS = (
     "demo",
     "calibrate",
@@ -42,6 +45,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except DeviceError as exc:
         print(f"station: device error: {exc}", file=sys.stderr)
+        return 1
+    except OutputError as exc:
+        print(f"station: cannot write: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("station: interrupted", file=sys.stderr)

@@ -8,10 +8,10 @@ shared ``time_scale``):
    a jump), the dial inside ``dial_range_mm`` (the indicator touches the gauge edge) -- a failed
    gate suspends the session rather than recording garbage;
 3. ``readings`` (K) rounds, each reading the robot, the drawstring and the dial once, all inside
-   ``window_s``, and a closing robot reading; rejected if the joints spread more than
-   ``still_deg`` or a joint moved faster than the settle speed (the robot moved), or the
-   drawstring spread more than ``jump_mm`` or the dial more than ``dial_stable_mm`` (a sensor
-   jumped);
+   ``window_s``, and a closing robot reading; rejected if a reading fails its gate (the cable
+   slackened after the check), the joints spread more than ``still_deg`` or a joint moved faster
+   than the settle speed (the robot moved), or the drawstring spread more than ``jump_mm`` or the
+   dial more than ``dial_stable_mm`` (a sensor jumped);
 4. the sample is the mean of the K rounds, with the standard deviation of each quantity and the
    timestamp of every reading.
 """
@@ -61,10 +61,12 @@ class Rules:
 
 
 class Suspend(Exception):
-    """A condition that pauses the session until it clears; the message says which."""
+    """A condition that pauses the session until it clears; the message says which, ``cause``
+    names the condition (the same while it lasts, whatever the readings)."""
 
-    def __init__(self, reason: str, device: str | None = None):
+    def __init__(self, reason: str, cause: str, device: str | None = None):
         super().__init__(reason)
+        self.cause = cause
         self.device = device  # set when the device stopped answering
 
 
@@ -72,8 +74,8 @@ class Devices:
     """The session's opened drivers by name (``robot``, ``drawstring``, optional ``dial``).
 
     ``read(name)`` retries transient failures with a reconnect, waiting with ``sleep`` (s) between
-    attempts; a device that stays silent or answers with an error code raises :class:`Suspend`
-    naming it.
+    attempts and telling ``on_retry(error)`` of each failure retried; a device that stays silent or
+    answers with an error code raises :class:`Suspend` naming it.
     """
 
     def __init__(
@@ -82,6 +84,7 @@ class Devices:
         self.drivers = drivers
         self.backoff = backoff
         self.sleep = sleep
+        self.on_retry: Callable[[DriverError], None] = lambda exc: None
 
     def open(self) -> None:
         for driver in self.drivers.values():
@@ -94,13 +97,15 @@ class Devices:
     def read(self, name: str) -> Reading:
         driver = self.drivers[name]
         try:
-            return call_with_reconnect(driver, driver.read, self.backoff, self.sleep)
+            return call_with_reconnect(driver, driver.read, self.backoff, self.sleep, self.on_retry)
         except DeviceReplyError as exc:
             if name == "dial":
-                raise Suspend(f"dial out of range ({exc.cause})") from exc
-            raise Suspend(str(exc)) from exc
+                raise Suspend(f"dial out of range ({exc.cause})", "dial out of range") from exc
+            raise Suspend(str(exc), f"{name} error reply") from exc
         except DriverError as exc:
-            raise Suspend(f"{name} not answering: {exc.cause}", device=name) from exc
+            last = exc.__cause__ if isinstance(exc.__cause__, DriverError) else exc  # the last attempt's
+            cause = f"{name} silent ({type(last).__name__})"  # a new kind of failure is a new cause
+            raise Suspend(f"{name} not answering: {exc.cause}", cause, device=name) from exc
 
 
 class Settle:
@@ -138,20 +143,32 @@ class Settle:
 def check_running(robot: Reading) -> None:
     mode = robot.values["robot_mode"]
     if mode != RUNNING:
-        raise Suspend(f"robot not running (robot mode {mode}, {RUNNING} = RUNNING)")
+        raise Suspend(f"robot not running (robot mode {mode}, {RUNNING} = RUNNING)", "robot not running")
 
 
 def check_gates(devices: Devices, rules: Rules) -> None:
     """The sensor gates at a settled pose; a failed one raises :class:`Suspend`."""
     length = devices.read("drawstring").values["length_mm"]
-    low, high = rules.length_range_mm
-    if not low <= length <= high:
-        raise Suspend(f"drawstring reads {length:.3f} mm, outside {low:g}..{high:g} mm: cable slack or jump")
+    if why := length_outside(length, rules):
+        raise Suspend(f"drawstring reads {why}", "drawstring gate")
     if "dial" in devices.drivers:
         dial = devices.read("dial").values["dial_mm"]
-        low, high = rules.dial_range_mm
-        if not low <= dial <= high:
-            raise Suspend(f"dial reads {dial:.3f} mm, outside its gate {low:g}..{high:g} mm")
+        if why := dial_outside(dial, rules):
+            raise Suspend(f"dial reads {why}", "dial gate")
+
+
+def length_outside(length_mm: float, rules: Rules) -> str | None:
+    """Why a drawstring reading fails its gate (None: it passes)."""
+    low, high = rules.length_range_mm
+    if low <= length_mm <= high:
+        return None
+    return f"{length_mm:.3f} mm, outside {low:g}..{high:g} mm: cable slack or jump"
+
+
+def dial_outside(dial_mm: float, rules: Rules) -> str | None:
+    """Why a dial reading fails its gate (None: it passes)."""
+    low, high = rules.dial_range_mm
+    return None if low <= dial_mm <= high else f"{dial_mm:.3f} mm, outside its gate {low:g}..{high:g} mm"
 
 
 @dataclass(frozen=True)
@@ -205,15 +222,24 @@ def capture(devices: Devices, rules: Rules) -> Capture:
 
 
 def _check(rules: Rules, window, q, qd, length, dial) -> None:
+    """Raise :class:`Rejected` naming every way the capture broke the rule."""
     span = lambda a: float(np.ptp(a, axis=0).max())  # noqa: E731
+    broken = []
     if window > rules.window_s:
-        raise Rejected(f"readings took {window * 1e3:.1f} ms, over the {rules.window_s * 1e3:.1f} ms window")
+        broken.append(f"readings took {window * 1e3:.1f} ms, over the {rules.window_s * 1e3:.1f} ms window")
     if span(q) > rules.still_deg or qd >= rules.settle_speed_deg_s:
-        raise Rejected(f"robot moved (joints spread {span(q):.4f} deg, speed up to {qd:.3f} deg/s)")
+        broken.append(f"robot moved (joints spread {span(q):.4f} deg, speed up to {qd:.3f} deg/s)")
+    # the gates hold for every reading: a cable that slackens after the gate check is not a sample
+    for value, outside, what in ((length, length_outside, "drawstring"), (dial, dial_outside, "dial")):
+        why = next((w for v in value if np.isfinite(v) and (w := outside(float(v), rules))), None)
+        if why:
+            broken.append(f"{what} read {why}")
     if span(length) > rules.jump_mm:
-        raise Rejected(f"drawstring jumped ({span(length):.3f} mm within the capture)")
+        broken.append(f"drawstring jumped ({span(length):.3f} mm within the capture)")
     if np.all(np.isfinite(dial)) and span(dial) > rules.dial_stable_mm:
-        raise Rejected(f"dial not stable ({span(dial):.4f} mm within the capture)")
+        broken.append(f"dial not stable ({span(dial):.4f} mm within the capture)")
+    if broken:
+        raise Rejected("; ".join(broken))
 
 
 def _raw_row(k: int, rnd: list[Reading]) -> dict:

@@ -18,10 +18,10 @@ from station.acquire.capture import Devices, Rules
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
-from station.config import StationConfig, load_station_config
-from station.formats.base import validate
+from station.config import StationConfig, load_station_config, station_config
+from station.formats.base import read_toml, validate
 from station.formats.plan import Plan, load_plan
-from station.formats.session_folder import SessionFolder
+from station.formats.session_folder import SessionFolder, SessionHeader
 from station.formats.tables import RobotFile, SetupFile, load_robot, load_setup
 from station.jobs.running import Refit
 from station.view.live import LiveView
@@ -88,17 +88,16 @@ def new_session(out: Path, config_path: Path, plan_path: Path | None) -> Session
 
 
 def resume_session(folder_path: Path, config_path: Path | None) -> SessionInputs:
-    """Reopen a session folder; its embedded config serves unless ``config_path`` is given."""
-    folder = SessionFolder.open(folder_path)
-    where = str(folder.path / "session.toml")
-    h = folder.header
-    for key in ("robot", "setup", "station", "plan", "start_wall_s"):
-        if key not in h:
-            raise InputError(f"{where}: missing key {key} (not written by station sample?)")
-    cfg = load_station_config(config_path) if config_path else validate(StationConfig, h["station"], where)
-    robot = validate(RobotFile, h["robot"], f"{where} [robot]")
-    setup = validate(SetupFile, h["setup"], f"{where} [setup]")
-    return SessionInputs(folder, cfg, Plan.from_rows(h["plan"]), robot, setup)
+    """Reopen a session folder; its embedded config serves unless ``config_path`` is given. All of
+    ``session.toml`` is validated before the folder is opened (and repaired)."""
+    where = Path(folder_path) / "session.toml"
+    header = validate(SessionHeader, read_toml(where), str(where))
+    if config_path:
+        cfg = load_station_config(config_path)
+    else:
+        cfg = station_config(header.station, f"{where} [station]")
+    plan = Plan.from_rows(header.plan, str(where))
+    return SessionInputs(SessionFolder.open(folder_path), cfg, plan, header.robot, header.setup)
 
 
 def open_devices(cfg: StationConfig) -> Devices:

@@ -6,6 +6,10 @@ answering), back to WAITING by itself when it clears; and the ends DONE (every t
 STOPPED (stop requested: Ctrl-C), TIMED_OUT (no capture for ``target_timeout_s``); DONE also
 when asked to finish early (:meth:`Session.finish`: the running calibration reached its goal).
 
+The log names every fault: each suspension and each change of the condition holding it, and each
+transient failure retried (``drawstring: bad CRC in reply ...; retrying``); of the reconnects to a
+device the session is suspended for, only a failure of a new kind.
+
 Checkpoints sit between captures and between polls: a stop or finish request is honoured there, so
 the sample in flight is always stored whole, and the listener's ``tick`` runs there (work that
 must never delay a capture looks in on its results there). A capture is assigned to the nearest
@@ -26,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drivers.base import DriverError
 from errors import DeviceError
 from station.acquire.capture import (
     Capture,
@@ -86,6 +91,9 @@ class Session:
         self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
         self.settle = Settle(rules)
         self.rejected = 0
+        self._suspended_by: Suspend | None = None
+        self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
+        devices.on_retry = self._retrying
         self._stop = False
         self._finish: str | None = None
         self._t0_wall = float(folder.header["start_wall_s"])
@@ -178,6 +186,7 @@ class Session:
         A device silent for longer than ``unreachable_s`` ends the session (DeviceError)."""
         self.state = State.SUSPENDED
         self.listener.message(f"suspended: {first}")
+        self._suspended_by = first
         why, silent_since = first, self.clock()
         while not self._stop and self._finish is None:
             self.sleep(SUSPENDED_POLL_S)
@@ -186,7 +195,9 @@ class Session:
                 self._check_cleared(why)
                 break
             except Suspend as still:
-                why = still
+                if still.cause != why.cause:  # another condition holds the session now: say which
+                    self.listener.message(f"suspended: {still}")
+                why = self._suspended_by = still
                 silent_since = silent_since if still.device else self.clock()
                 if self.clock() - silent_since > self.rules.unreachable_s:
                     raise DeviceError(
@@ -194,16 +205,28 @@ class Session:
                         f"{len(self.folder.rows)} samples kept)"
                     ) from still
         self.state = State.WAITING
+        self._suspended_by = None
+        self._last_retry.clear()
         if not self._stop and self._finish is None:
             self.listener.message("resumed")
 
+    def _retrying(self, error: DriverError) -> None:
+        """Name a transient device failure in the log; while the session waits for that device to
+        answer again, only a failure of another kind (its reconnects repeat the same one every poll)."""
+        waiting_for = self._suspended_by.device if self._suspended_by else None
+        if error.device == waiting_for and type(error) is self._last_retry.get(error.device):
+            return
+        self._last_retry[error.device] = type(error)
+        self.listener.message(f"{error}; retrying")
+
     def _check_cleared(self, why: Suspend) -> None:
-        """Raise :class:`Suspend` unless ``why`` has cleared: the silent device answers, the robot
-        runs, and, if the robot is settled, the sensor gates pass (a robot moving on clears them)."""
-        if why.device:
-            self.devices.read(why.device)
+        """Raise :class:`Suspend` unless ``why`` has cleared: the robot runs, the silent device
+        answers, and, if the robot is settled, the sensor gates pass (a robot moving on clears them).
+        The robot comes first: a controller stopped while a sensor is silent is told too."""
         robot = self.devices.read("robot")
         check_running(robot)
+        if why.device not in (None, "robot"):
+            self.devices.read(why.device)
         if self.settle.update(robot):
             check_gates(self.devices, self.rules)
 

@@ -5,17 +5,16 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from calib.joint_terms import TERM_KINDS
+from calib.methods import ALL_METHODS, TERM_MODELS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
-from station.formats.base import atomic_write, check_writable, toml_text
-from station.formats.samples import Samples, load_samples
-from station.formats.session_folder import load_robot_and_setup
-from station.formats.tables import RobotFile, SetupFile
-from station.jobs import calibration
-from station.jobs.report import CalibrationReport, corrected_table
-from station.jobs.terms import MODELS
+
+if TYPE_CHECKING:
+    from station.formats.samples import Samples
+    from station.formats.tables import RobotFile, SetupFile
+    from station.jobs.report import CalibrationReport
 
 FLAGS = {"setup": "--setup", "method": "--method", "select": "--select", "terms": "--model"}
 """The flag that sets each parameter of the calibration service."""
@@ -28,7 +27,7 @@ def register(sub) -> None:
     p.add_argument("--setup", type=Path, help="setup TOML (required for a drawstring CSV)")
     p.add_argument("--out", type=Path, required=True, help="corrected table TOML to write")
     p.add_argument("--holdout", type=Path, help="samples CSV evaluated with the training setup fit")
-    p.add_argument("--method", default="lmlc", choices=calibration.METHODS)
+    p.add_argument("--method", default="lmlc", choices=ALL_METHODS)
     p.add_argument(
         "--select",
         type=int,
@@ -38,7 +37,7 @@ def register(sub) -> None:
     p.add_argument(
         "--model",
         default="auto",
-        choices=MODELS,
+        choices=TERM_MODELS,
         help="terms beside the D-H table: geometric (none), compliance (load-bearing joints under "
         "gravity), full (plus 1st and 2nd harmonics of every joint), auto (those of full that cut "
         "the cross-validated error of the training rows by >= 5 %%; default)",
@@ -48,6 +47,10 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from station.formats.base import atomic_write, check_writable, toml_text
+    from station.jobs import calibration
+    from station.jobs.report import corrected_table
+
     check_writable(args.out, "--out")
     if args.report:
         check_writable(args.report, "--report")
@@ -89,6 +92,9 @@ class Inputs:
 def load_inputs(args) -> Inputs:
     """Samples (CSV or session folder), robot, setup and hold-out from ``args``; the flags override
     what a session folder embeds."""
+    from station.formats.samples import load_samples
+    from station.formats.session_folder import load_robot_and_setup
+
     session = args.samples if args.samples.is_dir() else None
     if session is None and args.robot is None:
         raise InputError(f"{args.samples}: a samples CSV needs --robot")
@@ -113,6 +119,8 @@ def summary(report: CalibrationReport) -> str:
         for when, m in (("before", before), ("after", after)):
             if m is not None:
                 lines.append(f"{part + ' ' + when:18}{m.rmse_mm:8.3f}{m.mean_mm:8.3f}{m.max_mm:8.3f}")
+    from calib.joint_terms import TERM_KINDS
+
     terms_held = sum(1 for h in report.held if h.param.partition(".")[2] in TERM_KINDS)
     held = ", ".join(h.param for h in report.held if h.param.partition(".")[2] not in TERM_KINDS)
     held += f"; {terms_held} joint-space terms (reasons in the report)" if terms_held else ""

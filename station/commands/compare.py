@@ -6,11 +6,9 @@ import argparse
 import json
 from pathlib import Path
 
-from calib.baselines import BaselineOptions
+from calib.methods import ALL_METHODS
 from station.commands.calibrate import FLAGS, load_inputs
 from station.commands.flags import parameters_as_flags
-from station.formats.base import atomic_write, check_writable
-from station.jobs import comparison
 
 
 def register(sub) -> None:
@@ -24,14 +22,18 @@ def register(sub) -> None:
     p.add_argument(
         "--methods",
         type=_methods,
-        default=comparison.COMPARED,
-        help=f"comma-separated subset of {','.join(comparison.COMPARED)} (default: all)",
+        default=ALL_METHODS,
+        help=f"comma-separated subset of {','.join(ALL_METHODS)} (default: all)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from calib.baselines import BaselineOptions
+    from station.formats.base import atomic_write, check_writable
+    from station.jobs import comparison
+
     for path, flag in ((args.report, "--report"), (args.plot, "--plot")):
         if path:
             check_writable(path, flag)
@@ -57,16 +59,17 @@ def run(args) -> int:
 
 
 def _write_plot(report: dict, path: Path) -> None:
+    from station.jobs.comparison import LABELS
     from station.view.plots import comparison_figure, write_png
 
-    write_png(lambda rep, file: comparison_figure(rep, file, comparison.LABELS), report, path)
+    write_png(lambda rep, file: comparison_figure(rep, file, LABELS), report, path)
 
 
 def _methods(text: str) -> tuple[str, ...]:
     names = tuple(m.strip() for m in text.split(",") if m.strip())
-    unknown = [m for m in names if m not in comparison.COMPARED]
+    unknown = [m for m in names if m not in ALL_METHODS]
     if unknown or not names:
         raise argparse.ArgumentTypeError(
-            f"unknown method {unknown[0] if unknown else text!r}; choose from {comparison.COMPARED}"
+            f"unknown method {unknown[0] if unknown else text!r}; choose from {ALL_METHODS}"
         )
     return names

@@ -6,14 +6,6 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
-from calib.compensation import CompensationOptions
-from station.formats.base import atomic_write, check_writable
-from station.formats.program import load_program
-from station.formats.tables import check_same_robot, check_same_tool, load_robot
-from station.jobs import compensate as compensation
-
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -39,6 +31,14 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    import numpy as np
+
+    from calib.compensation import CompensationOptions
+    from station.formats.base import atomic_write, check_writable
+    from station.formats.program import load_program
+    from station.formats.tables import check_same_robot, check_same_tool, load_robot
+    from station.jobs import compensate as compensation
+
     check_writable(args.out, "--out")
     if args.report:
         check_writable(args.report, "--report")

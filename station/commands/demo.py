@@ -21,24 +21,13 @@ import random
 import socket
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-import tomli_w
-
-from calib.kinematics import dh_table, tcp_position
-from calib.metrics import aligned_errors
 from errors import DeviceError, InputError
-from sim_fixtures.station_sim import SimStation
-from sim_fixtures.world import World
-from station.acquire import runner
-from station.config import StationConfig, load_station_config
-from station.formats.base import atomic_write, check_writable, toml_text
-from station.formats.plan import Plan
-from station.formats.samples import load_samples
-from station.formats.tables import load_robot, load_setup
-from station.jobs import calibration, planning
-from station.jobs import export as exporting
-from station.jobs.report import corrected_table
+
+if TYPE_CHECKING:
+    from station.acquire.runner import SessionRun
+    from station.formats.plan import Plan
 
 TIME_SCALE = 40.0
 START_S = 4.0  # the simulated robot waits at its first target while the session starts
@@ -61,6 +50,13 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    import tomli_w
+
+    from sim_fixtures.station_sim import SimStation
+    from station.acquire import runner
+    from station.config import StationConfig
+    from station.formats.base import atomic_write, check_writable
+
     out = args.out
     if (out / "session").exists():
         raise InputError(f"{out / 'session'}: exists already; choose another --out or remove it")
@@ -92,6 +88,12 @@ def run(args) -> int:
 
 def _plan(out: Path, config_path: Path, plan_size: int | None) -> Plan:
     """Step 1: ``station plan`` on the session's robot and setup (the shipped ones)."""
+    from station.acquire import runner
+    from station.config import load_station_config
+    from station.formats.base import atomic_write
+    from station.formats.tables import load_robot, load_setup
+    from station.jobs import planning
+
     t0 = time.perf_counter()
     cfg = load_station_config(config_path)
     robot = load_robot(runner.resolve(cfg.session.robot_model, config_path))
@@ -110,8 +112,10 @@ def _plan(out: Path, config_path: Path, plan_size: int | None) -> Plan:
     return design.plan
 
 
-def _session(inputs, viewer: bool) -> runner.SessionRun:
+def _session(inputs, viewer: bool) -> SessionRun:
     """Step 3: the session with its running calibration."""
+    from station.acquire import runner
+
     t0 = time.perf_counter()
     print(
         f"session:   the simulated robot walks the plan (simulated time x{TIME_SCALE:g}); "
@@ -188,6 +192,14 @@ def _free_port() -> int:
 
 def _calibrate(out: Path, inputs, view, seed: int) -> int:
     """Step 4: LMLC and MCS-LMLC on the session, a simulated hold-out set, the truth beside each."""
+    import numpy as np
+
+    from sim_fixtures.world import World
+    from station.formats.base import atomic_write, toml_text
+    from station.formats.samples import load_samples
+    from station.jobs import calibration
+    from station.jobs.report import corrected_table
+
     world = World.create(seed)
     holdout_path = out / "holdout.csv"
     world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([seed, 4])).to_csv(holdout_path)
@@ -232,6 +244,10 @@ def _one_line(report) -> str:
 
 def _export(out: Path) -> None:
     """Step 5: the corrected table as URDF beside it (what ``station export --format urdf`` writes)."""
+    from station.formats.base import atomic_write
+    from station.formats.tables import load_robot
+    from station.jobs import export as exporting
+
     table = out / "corrected.toml"
     urdf = out / "corrected.urdf"
     result = exporting.export(load_robot(table), "urdf", source=str(table))
@@ -242,6 +258,11 @@ def _export(out: Path) -> None:
 
 def truth_line(world, outcome) -> str:
     """Workspace TCP error against the simulated truth, nominal vs corrected (rigid base re-fit)."""
+    import numpy as np
+
+    from calib.kinematics import dh_table, tcp_position
+    from calib.metrics import aligned_errors
+
     q = world.random_configurations(1000, np.random.default_rng(7))
     p_true = world.true_tcp_mm(q)
     cal = outcome.calibration

@@ -5,9 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from errors import InputError
-from station.formats.base import atomic_write, check_writable
-from station.formats.tables import check_same_robot, load_robot
-from station.jobs import export as exporting
 
 
 def register(sub) -> None:
@@ -18,8 +15,8 @@ def register(sub) -> None:
     p.add_argument(
         "--format",
         required=True,
-        choices=exporting.FORMATS,
         dest="fmt",
+        metavar="FORMAT",
         help="urdf: a URDF chain base_link -> tcp; ur-yaml: Universal Robots' kinematics file; "
         "dh-csv: D-H rows (with --robot, the deltas)",
     )
@@ -34,6 +31,12 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from station.formats.base import atomic_write, check_writable
+    from station.formats.tables import check_same_robot, load_robot
+    from station.jobs import export as exporting
+
+    if args.fmt not in exporting.FORMATS:
+        raise InputError(f"--format {args.fmt!r}: must be one of {', '.join(exporting.FORMATS)}")
     check_writable(args.out, "--out")
     if args.hash_ is not None and args.fmt != "ur-yaml":
         raise InputError(f"--hash: only --format ur-yaml carries a controller hash, not {args.fmt}")

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from errors import InputError
-from station.formats.ipa import read_series
+
+if TYPE_CHECKING:
+    import numpy as np
 
 HEADER = "sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"
 
@@ -23,6 +24,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from station.formats.ipa import read_series
+
     series = read_series(args.series)
     write_position_csv(args.out, series.q_rad, series.position_mm)
     print(f"{len(series)} rows -> {args.out}")
@@ -31,6 +34,8 @@ def run(args) -> int:
 
 def write_position_csv(path: Path, q_rad: np.ndarray, position_mm: np.ndarray) -> None:
     """Joints in degrees (1e-9 deg), positions in mm (1e-6 mm); written whole or not at all."""
+    import numpy as np
+
     rows = np.column_stack([np.arange(len(q_rad)), np.degrees(q_rad), position_mm])
     tmp = path.with_name(path.name + ".tmp")
     try:

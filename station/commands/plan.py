@@ -9,9 +9,6 @@ from pathlib import Path
 
 from errors import InputError
 from station.commands.flags import parameters_as_flags
-from station.formats.base import atomic_write, check_writable
-from station.formats.session_folder import load_robot_and_setup
-from station.jobs import planning
 
 FLAGS = {"per_line": "--per-line", "n_select": "--select"}
 """The flag that sets each parameter of the plan design."""
@@ -35,6 +32,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from station.formats.base import atomic_write, check_writable
+    from station.jobs import planning
+
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
         if path:
             check_writable(path, flag)
@@ -64,6 +64,8 @@ def run(args) -> int:
 
 def _inputs(args):
     """Robot table, setup and the setup's name for messages: the session's, the flags overriding."""
+    from station.formats.session_folder import load_robot_and_setup
+
     robot, setup, where, _ = load_robot_and_setup(args.session, args.robot, args.setup)
     if robot is None or setup is None:
         raise InputError("station plan needs --robot and --setup (or a session folder)")

@@ -8,11 +8,9 @@ unreachable after the configured retries ends the command with exit 1, naming it
 from __future__ import annotations
 
 import json
-import logging
 
 import configs
 from drivers.base import Backoff, Driver, Reading, call_with_reconnect
-from station.config import load_station_config
 
 
 def register(subparsers) -> None:
@@ -51,8 +49,9 @@ def as_json(readings: dict[str, Reading]) -> dict:
 
 
 def run(args) -> int:
+    from station.config import load_station_config
+
     cfg = load_station_config(args.config)
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # failures are raised, named
     backoff = cfg.reconnect.backoff()
     readings = {name: read_once(section.build(), backoff) for name, section in cfg.devices().items()}
     print(json.dumps(as_json(readings)))

@@ -13,11 +13,10 @@ import argparse
 from pathlib import Path
 
 import configs
-from errors import InputError
-from station.acquire import runner
-from station.acquire.session import State
+from errors import InputError, OutputError
 
-EXIT = {State.DONE: 0, State.STOPPED: 130, State.TIMED_OUT: 1}
+EXIT = {"done": 0, "stopped": 130, "timed out": 1}
+"""Exit code by the state the session ended in."""
 
 
 def register(subparsers) -> None:
@@ -54,6 +53,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from station.acquire import runner
+
     if args.resume:
         if args.plan:
             raise InputError("--plan: a resumed session keeps the plan embedded in its session.toml")
@@ -69,11 +70,16 @@ def run(args) -> int:
     outcome.view.close()
     state = outcome.state
     folder = inputs.folder
+    if outcome.view.incomplete:
+        raise OutputError(
+            f"{folder.rrd}: the recording could not be written whole ({outcome.view.incomplete}); the "
+            f"{len(folder.rows)} samples in {folder.samples_csv} are whole"
+        )
     print(
         f"{state.value}: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "
         f"recording {folder.rrd}"
     )
-    return EXIT[state]
+    return EXIT[state.value]
 
 
 def _positive_mm(text: str) -> float:

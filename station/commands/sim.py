@@ -8,17 +8,16 @@ every device and removes the pty links.
 from __future__ import annotations
 
 import json
-import logging
 import signal
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import configs
 from errors import DeviceError
-from sim_fixtures.station_sim import SimStation
-from station.config import load_station_config
-from station.formats.base import atomic_write
-from station.formats.plan import Plan, load_plan
+
+if TYPE_CHECKING:
+    from station.formats.plan import Plan
 
 
 def register(subparsers) -> None:
@@ -40,8 +39,11 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from sim_fixtures.station_sim import SimStation
+    from station.config import load_station_config
+    from station.formats.plan import Plan, load_plan
+
     cfg = load_station_config(args.config)
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # faults are reported by drivers
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
     station = SimStation(cfg, hold=args.hold, plan=None if plan is None else (plan.q_deg, plan.line))
@@ -67,6 +69,8 @@ def run(args) -> int:
 
 def publish_plan(path: Path, plan: Plan) -> None:
     """Write the plan the simulated robot walks where ``station sample`` finds it by default."""
+    from station.formats.base import atomic_write
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(path, plan.csv_text())

@@ -1,15 +1,25 @@
 """What every file format of the station shares: TOML reading and validation with one-line errors
-naming the file and key, atomic writes, and the writability check before any work."""
+naming the file and key, the ranges a value may take, number cells of a CSV, atomic writes, and the
+writability check before any work.
+
+Ranges: a number a file gives must be finite and within what a robot cell can hold (lengths within
+``MAX_LENGTH_MM``, dial readings within ``MAX_DIAL_MM``, joint angles within ``MAX_JOINT_DEG``, noise
+between ``MIN_SIGMA_MM`` and ``MAX_SIGMA_MM``). Values beyond them are typing or unit mistakes, and
+they make the maths overflow far from the file (a 1e308 mm length, a 1e-300 mm sigma, a dial
+reading of a metre): the loader refuses them, naming the key.
+"""
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import tempfile
 from pathlib import Path
+from typing import Annotated
 
 import tomli_w
-from pydantic import BaseModel, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from errors import InputError
 
@@ -17,6 +27,39 @@ if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
+
+
+MAX_LENGTH_MM = 1e5  # 100 m: any length, position or reading of a robot cell
+MAX_DIAL_MM = 100.0  # the longest dial indicators' travel
+MAX_JOINT_DEG = 3600.0  # ten turns: joint readings and limits
+MAX_ANGLE_DEG = 360.0  # D-H table angles
+MIN_SIGMA_MM, MAX_SIGMA_MM = 1e-6, 100.0  # instrument noise: a nanometre to 100 mm
+MAX_ID = 10**9  # sample, target and line ids: whole numbers 0 .. MAX_ID
+
+Length = Annotated[float, Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)]
+DialReading = Annotated[float, Field(ge=-MAX_DIAL_MM, le=MAX_DIAL_MM)]
+PositiveLength = Annotated[float, Field(gt=0, le=MAX_LENGTH_MM)]
+Angle = Annotated[float, Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
+JointAngle = Annotated[float, Field(ge=-MAX_JOINT_DEG, le=MAX_JOINT_DEG)]
+Sigma = Annotated[float, Field(ge=MIN_SIGMA_MM, le=MAX_SIGMA_MM)]
+Id = Annotated[int, Field(ge=0, le=MAX_ID)]
+Vec3 = Annotated[list[Length], Field(min_length=3, max_length=3)]
+
+
+def _non_zero(v: list[float]) -> list[float]:
+    if math.hypot(*v) < 1e-9:
+        raise ValueError("must be a direction, not the zero vector")
+    return v
+
+
+Direction = Annotated[Vec3, AfterValidator(_non_zero)]
+"""A direction (normalised where used): three numbers, not all zero."""
+
+
+class Strict(BaseModel):
+    """A table of a station file: unknown keys, NaN and infinity are refused."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 def read_toml(path: Path) -> dict:
@@ -29,8 +72,14 @@ def read_toml(path: Path) -> dict:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise InputError(f"{path}: is a directory, expected a TOML file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not valid TOML: not UTF-8 text") from None
+    except RecursionError:
+        raise InputError(f"{path}: not valid TOML: nested too deeply") from None
 
 
 def validate(schema: type[BaseModel], data: dict, where: str):
@@ -40,11 +89,38 @@ def validate(schema: type[BaseModel], data: dict, where: str):
     except ValidationError as exc:
         err = exc.errors()[0]
         key = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        if err["type"] in ("too_short", "too_long") and key.endswith("joints"):
-            raise InputError(f"{where}: joints: expected 6 joints, got {len(err['input'])}") from None
         if err["type"] in ("too_short", "too_long"):
-            raise InputError(f"{where}: {key}: expected 3 numbers, got {len(err['input'])}") from None
-        raise InputError(f"{where}: {key}: {err['msg']}") from None
+            expected = err["ctx"]["min_length" if err["type"] == "too_short" else "max_length"]
+            items = "joints" if key.endswith("joints") else "numbers"
+            raise InputError(
+                f"{where}: {key}: expected {expected} {items}, got {len(err['input'])}"
+            ) from None
+        raise InputError(f"{where}: {key}: {err['msg'].removeprefix('Value error, ')}") from None
+
+
+def number_cell(cell: str, limit: float, unit: str) -> float:
+    """The number in a CSV cell, finite and within ``-limit .. limit`` (``unit`` for the message);
+    ValueError saying what is wrong with the cell."""
+    try:
+        value = float(cell)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise ValueError(f"{cell or '(empty)'!r} is not a finite number")
+    if abs(value) > limit:
+        raise ValueError(f"{cell!r} is outside -{limit:g} .. {limit:g} {unit}")
+    return value
+
+
+def id_cell(cell: str, what: str) -> int:
+    """The id in a CSV cell: a whole number 0 .. ``MAX_ID``; ValueError naming ``what`` it is not."""
+    try:
+        value = float(cell)
+    except ValueError:
+        value = math.nan
+    if not (0 <= value <= MAX_ID and value == int(value)):
+        raise ValueError(f"{cell or '(empty)'!r} is not {what} (a whole number 0 .. {MAX_ID:.0e})")
+    return int(value)
 
 
 def atomic_write(path: Path, text: str) -> None:

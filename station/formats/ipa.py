@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from errors import InputError
+from station.formats.base import MAX_JOINT_DEG, MAX_LENGTH_MM, number_cell
 
 JOINT_COLUMNS = (
     "shoulder_pan_joint",
@@ -77,6 +78,10 @@ def read_probe_mm(path) -> np.ndarray:
         raise InputError(f"{path}: not a matrix of numbers ({exc})") from None
     if matrix.shape != (4, 4):
         raise InputError(f"{path}: expected a 4x4 matrix, got shape {matrix.shape}")
+    if not np.all(np.abs(matrix) <= MAX_LENGTH_MM):
+        raise InputError(
+            f"{path}: every entry must be a finite number within -{MAX_LENGTH_MM:g} .. {MAX_LENGTH_MM:g}"
+        )
     rot, t = matrix[:3, :3], matrix[:3, 3]
     if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-4):
         raise InputError(f"{path}: the upper-left 3x3 block is not a rotation")
@@ -96,17 +101,21 @@ def _read_lines(path: Path) -> list[str]:
     return [line for line in text.splitlines() if line.strip()]
 
 
+MAX_JOINT_RAD = float(np.radians(MAX_JOINT_DEG))
+POSITION_LIMIT = (MAX_LENGTH_MM, "mm")
+LIMITS = {**dict.fromkeys(JOINT_COLUMNS, (MAX_JOINT_RAD, "rad")), TEMPERATURE_COLUMN: (200.0, "deg C")}
+"""Range and unit of each column's numbers (the probe's positions: POSITION_LIMIT)."""
+
+
 def _parse_row(path: Path, lineno: int, line: str, n_fields: int, cols: list[int], names) -> list[float]:
+    """The columns ``names`` (at ``cols``) of one line: finite, within the station's ranges."""
     fields = line.split(";")
     if len(fields) != n_fields:
         raise InputError(f"{path}: line {lineno}: {len(fields)} fields, the header has {n_fields}")
     out = []
-    for c in cols:
+    for name, c in zip(names, cols, strict=True):
         try:
-            out.append(float(fields[c].strip().replace(",", ".")))
-        except ValueError:
-            name = names[cols.index(c)]
-            raise InputError(f"{path}: line {lineno}, column {name!r}: not a number: {fields[c]!r}") from None
-    if not np.all(np.isfinite(out)):
-        raise InputError(f"{path}: line {lineno}: non-finite value")
+            out.append(number_cell(fields[c].strip().replace(",", "."), *LIMITS.get(name, POSITION_LIMIT)))
+        except ValueError as exc:
+            raise InputError(f"{path}: line {lineno}, column {name!r}: {exc}") from None
     return out

@@ -11,10 +11,13 @@ import csv
 import io
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
+from pydantic import Field
 
 from errors import InputError
+from station.formats.base import MAX_JOINT_DEG, Id, JointAngle, Strict, id_cell, number_cell, validate
 from station.formats.samples import Q_COLUMNS
 
 PLAN_COLUMNS = ("target", "line", *Q_COLUMNS)
@@ -53,38 +56,63 @@ class Plan:
         return cls(np.arange(len(q_deg)), np.asarray(line, int), q_deg)
 
     @classmethod
-    def from_rows(cls, rows: list[dict]) -> Plan:
-        return cls(
-            np.array([r["target"] for r in rows], int),
-            np.array([r["line"] for r in rows], int),
-            np.array([r["q_deg"] for r in rows], float).reshape(-1, 6),
+    def from_rows(cls, rows, where: str) -> Plan:
+        """The plan from :meth:`rows` as read back from ``where`` (a session.toml), validated."""
+        table = validate(_PlanTable, {"plan": rows}, where)
+        if not table.plan:
+            raise InputError(f"{where}: plan: no targets")
+        plan = cls(
+            np.array([r.target for r in table.plan], int),
+            np.array([r.line for r in table.plan], int),
+            np.array([r.q_deg for r in table.plan], float).reshape(-1, 6),
         )
+        return _unique_targets(plan, where)
+
+
+class _PlanRow(Strict):
+    target: Id
+    line: Id
+    q_deg: Annotated[list[JointAngle], Field(min_length=6, max_length=6)]
+
+
+class _PlanTable(Strict):
+    plan: list[_PlanRow]
+
+
+def _unique_targets(plan: Plan, where) -> Plan:
+    ids, counts = np.unique(plan.target, return_counts=True)
+    if np.any(counts > 1):
+        raise InputError(f"{where}: target id {ids[counts > 1][0]} appears twice; target ids must be unique")
+    return plan
 
 
 def load_plan(path) -> Plan:
     """Read a plan CSV; any problem is an ``InputError`` naming the file, row and column."""
     path = Path(path)
     try:
-        rows = list(csv.DictReader(path.open(newline="")))
+        with path.open(newline="") as fh:
+            rows = list(csv.DictReader(fh))
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
-    except (IsADirectoryError, UnicodeDecodeError):
+    except (IsADirectoryError, UnicodeDecodeError, csv.Error):
         raise InputError(f"{path}: not a plan CSV file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     if not rows:
         raise InputError(f"{path}: no targets after the header row")
     missing = [c for c in PLAN_COLUMNS if c not in rows[0]]
     if missing:
         raise InputError(f"{path}: missing column {missing[0]}")
-    values = np.empty((len(rows), len(PLAN_COLUMNS)))
-    for i, row in enumerate(rows):
-        for j, col in enumerate(PLAN_COLUMNS):
-            try:
-                values[i, j] = float(row[col])
-            except (TypeError, ValueError):
-                raise InputError(
-                    f"{path}: row {i} (line {i + 2}): {col}: {row[col]!r} is not a number"
-                ) from None
-    target = values[:, 0].astype(int)
-    if len(set(target)) != len(target):
-        raise InputError(f"{path}: target ids must be unique")
-    return Plan(target, values[:, 1].astype(int), values[:, 2:])
+    values = np.array([[_cell(path, i, row, col) for col in PLAN_COLUMNS] for i, row in enumerate(rows)])
+    return _unique_targets(Plan(values[:, 0].astype(int), values[:, 1].astype(int), values[:, 2:]), path)
+
+
+def _cell(path: Path, i: int, row: dict, col: str) -> float:
+    """Column ``col`` of row ``i``: a target or line id, or a joint reading [deg]."""
+    cell = (row[col] or "").strip()  # None: the row is shorter than the header
+    try:
+        if col in ("target", "line"):
+            return id_cell(cell, f"a {col} id")
+        return number_cell(cell, MAX_JOINT_DEG, "deg")
+    except ValueError as exc:
+        raise InputError(f"{path}: row {i} (line {i + 2}): {col}: {exc}") from None

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from errors import InputError
+from station.formats.base import MAX_DIAL_MM, MAX_JOINT_DEG, MAX_LENGTH_MM, id_cell, number_cell
 
 Q_COLUMNS = tuple(f"q{i}_deg" for i in range(1, 7))
 XYZ_COLUMNS = ("x_mm", "y_mm", "z_mm")
@@ -68,8 +69,10 @@ def read_csv(path: Path, what: str) -> tuple[list[str], list[list[str]]]:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise InputError(f"{path}: is a directory, expected a CSV file") from None
-    except UnicodeDecodeError:
+    except (UnicodeDecodeError, csv.Error):
         raise InputError(f"{path}: not a text CSV file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     rows = [r for r in rows if any(cell.strip() for cell in r)]
     if not rows:
         raise InputError(f"{path}: empty file, expected a header row and {what}")
@@ -89,9 +92,14 @@ def _kind(path: Path, header: list[str]) -> str:
     return "drawstring" if has_len else "position"
 
 
+_LIMITS = {**dict.fromkeys(Q_COLUMNS, (MAX_JOINT_DEG, "deg")), "dial_mm": (MAX_DIAL_MM, "mm")}
+"""Range and unit of a column's numbers (the others are lengths)."""
+
+
 def parse_numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
-    """(N, len(cols)) finite numbers from columns ``cols`` (named ``names``) of the rows ``body``; a
-    bad cell is an InputError naming the file, the row and the column."""
+    """(N, len(cols)) numbers from columns ``cols`` (named ``names``) of the rows ``body``: joints
+    within MAX_JOINT_DEG, the dial within MAX_DIAL_MM, lengths within MAX_LENGTH_MM (an empty cell is
+    NaN where ``allow_empty``); a bad cell is an InputError naming the file, the row and the column."""
     out = np.empty((len(body), len(cols)))
     for i, row in enumerate(body):
         for j, (c, name) in enumerate(zip(cols, names, strict=True)):
@@ -100,13 +108,9 @@ def parse_numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
                 out[i, j] = math.nan
                 continue
             try:
-                value = float(cell)
-            except ValueError:
-                value = math.nan
-                cell = cell or "(empty)"
-            if not math.isfinite(value):
-                raise InputError(f"{path}: row {i} (line {i + 2}): {name}: {cell!r} is not a finite number")
-            out[i, j] = value
+                out[i, j] = number_cell(cell, *_LIMITS.get(name, (MAX_LENGTH_MM, "mm")))
+            except ValueError as exc:
+                raise InputError(f"{path}: row {i} (line {i + 2}): {name}: {exc}") from None
     return out
 
 
@@ -116,15 +120,8 @@ def _line_ids(path, body, c) -> np.ndarray:
     ids = np.empty(len(body), int)
     for i, row in enumerate(body):
         cell = row[c].strip() if c < len(row) else ""
-        if cell == "":
-            ids[i] = -1
-            continue
         try:
-            ids[i] = int(float(cell))
-            if ids[i] < 0 or ids[i] != float(cell):
-                raise ValueError
-        except ValueError:
-            raise InputError(
-                f"{path}: row {i} (line {i + 2}): line: {cell!r} is not a line id (a whole number >= 0)"
-            ) from None
+            ids[i] = -1 if cell == "" else id_cell(cell, "a line id")
+        except ValueError as exc:
+            raise InputError(f"{path}: row {i} (line {i + 2}): line: {exc}") from None
     return ids

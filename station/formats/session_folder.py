@@ -1,20 +1,40 @@
 """A sampling session's folder: ``session.toml`` (atomic), ``samples.csv`` and ``raw.csv`` (append-only).
 
 Each capture appends its raw readings to ``raw.csv`` and then its averaged row to ``samples.csv``,
-each as one ``write`` of whole lines followed by ``fsync``: a SIGKILL or a power cut leaves at most
-one partial last line, which :meth:`SessionFolder.open` cuts off (with any raw rows of a sample
-whose row never made it), so a resumed session continues at the next sample id without duplicates.
+each as whole lines followed by ``fsync``: a SIGKILL or a power cut leaves at most one partial last
+line, which :meth:`SessionFolder.open` cuts off (with any raw rows of a sample whose row never made
+it), so a resumed session continues at the next sample id without duplicates. An append that fails
+(disk full, file too large) takes back what it wrote of that capture and raises
+:class:`errors.OutputError`: both files still end with a whole row, and the session continues with
+``--resume`` once there is space. ``session.toml`` is rewritten atomically or not at all.
+
+A reopened folder is validated before anything in it is repaired: ``session.toml``'s tables, the
+plan, and every whole row of ``samples.csv`` and ``raw.csv`` (a problem names file, row, column).
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated
 
-from errors import InputError
-from station.formats.base import atomic_write, read_toml, toml_text, validate
+from pydantic import BaseModel, ConfigDict, Field
+
+from errors import InputError, OutputError
+from station.formats.base import (
+    MAX_DIAL_MM,
+    MAX_JOINT_DEG,
+    MAX_LENGTH_MM,
+    atomic_write,
+    id_cell,
+    number_cell,
+    read_toml,
+    toml_text,
+    validate,
+)
 from station.formats.samples import Q_COLUMNS
 from station.formats.tables import RobotFile, SetupFile, load_robot, load_setup
 
@@ -27,12 +47,34 @@ RAW_COLUMNS = (
 )  # fmt: skip
 
 
+class SessionHeader(BaseModel):
+    """What ``session.toml`` holds that a resumed session uses; other keys are kept as they are.
+    The station config (``station``) is validated by the caller, which knows its schema."""
+
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+
+    start_wall_s: Annotated[float, Field(ge=0)]
+    robot: RobotFile
+    setup: SetupFile
+    station: dict
+    plan: list
+
+
 def _append(path: Path, lines: list[str]) -> None:
-    """Append whole lines with one write, then fsync: nothing half-written survives a crash."""
+    """Append whole lines, then fsync: nothing half-written survives a crash. A write that fails
+    part way (disk full, file size limit) is taken back before the error is raised."""
+    data = "".join(lines).encode()
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     try:
-        os.write(fd, "".join(lines).encode())
-        os.fsync(fd)
+        size = os.fstat(fd).st_size
+        try:
+            written = 0
+            while written < len(data):  # a short write (the size limit reached) leaves the rest
+                written += os.write(fd, data[written:])
+            os.fsync(fd)
+        except OSError:
+            os.ftruncate(fd, size)
+            raise
     finally:
         os.close(fd)
 
@@ -45,13 +87,72 @@ def _cell(v) -> str:
     return f"{v:.6f}" if isinstance(v, float) else str(v)
 
 
-def _cut_torn_tail(path: Path) -> None:
-    """Truncate ``path`` after its last newline (a row cut by a crash is dropped)."""
-    data = path.read_bytes()
+def _whole_rows(path: Path, columns: tuple[str, ...]) -> tuple[list[dict], int]:
+    """The rows of a session CSV up to its last newline (a row torn by a crash is left out), and
+    the length in bytes they take; InputError unless the header is ``columns``."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file (not a session folder?)") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     keep = data.rfind(b"\n") + 1
-    if keep != len(data):
-        with path.open("r+b") as fh:
-            fh.truncate(keep)
+    try:
+        reader = csv.reader(io.StringIO(data[:keep].decode()))
+        header = next(reader, [])
+        rows = list(reader)
+    except (UnicodeDecodeError, csv.Error):
+        raise InputError(f"{path}: not a session CSV file") from None
+    if tuple(header) != columns:
+        raise InputError(f"{path}: the header is not {','.join(columns)} (not written by station sample?)")
+    for i, row in enumerate(rows):
+        if len(row) != len(columns):
+            raise InputError(
+                f"{path}: row {i} (line {i + 2}): {len(row)} fields, the header has {len(columns)}"
+            )
+    return [dict(zip(columns, row, strict=True)) for row in rows], keep
+
+
+def _check_cells(path: Path, rows: list[dict], checks: dict) -> None:
+    """Each column named in ``checks`` holds what its check accepts (a ValueError says why not);
+    ids are rewritten as plain whole numbers (``1e5`` -> ``100000``)."""
+    for i, row in enumerate(rows):
+        for column, check in checks.items():
+            try:
+                value = check(row[column].strip())
+            except ValueError as exc:
+                raise InputError(f"{path}: row {i} (line {i + 2}): {column}: {exc}") from None
+            if isinstance(value, int):
+                row[column] = str(value)
+
+
+def _time(cell: str) -> float:
+    return number_cell(cell, 1e12, "s")
+
+
+def _joint(cell: str) -> float:
+    return number_cell(cell, MAX_JOINT_DEG, "deg")
+
+
+def _length(cell: str) -> float:
+    return number_cell(cell, MAX_LENGTH_MM, "mm")
+
+
+def _optional_dial(cell: str) -> float | None:
+    return None if cell == "" else number_cell(cell, MAX_DIAL_MM, "mm")
+
+
+SAMPLE_CHECKS = {
+    "sample": lambda c: id_cell(c, "a sample id"),
+    "target": lambda c: id_cell(c, "a target id"),
+    "line": lambda c: id_cell(c, "a line id"),
+    **dict.fromkeys(Q_COLUMNS, _joint),
+    "length_mm": _length,
+    "dial_mm": _optional_dial,
+    "t_s": _time,
+}
+"""What a resumed session reads of ``samples.csv`` (the live view replays these columns)."""
+RAW_CHECKS = {"sample": lambda c: id_cell(c, "a sample id")}
 
 
 @dataclass
@@ -100,40 +201,55 @@ class SessionFolder:
 
     @classmethod
     def open(cls, path) -> SessionFolder:
-        """An existing session, repaired after a crash: torn last lines cut, orphan raw rows dropped."""
+        """An existing session, validated, then repaired after a crash: torn last lines cut, raw
+        rows of a sample whose row never made it dropped. InputError names what is wrong."""
         path = Path(path)
         header = read_toml(path / "session.toml")
         folder = cls(path, header)
         if not os.access(path, os.W_OK):
             raise InputError(f"{path}: folder is not writable, cannot resume there")
-        for f in (folder.samples_csv, folder.raw_csv):
-            if not f.exists():
-                raise InputError(f"{f}: no such file (not a session folder?)")
-            _cut_torn_tail(f)
-        with folder.samples_csv.open(newline="") as fh:
-            folder.rows = list(csv.DictReader(fh))
-        folder._drop_orphan_raw()
+        folder.rows, samples_end = _whole_rows(folder.samples_csv, SAMPLE_COLUMNS)
+        _check_cells(folder.samples_csv, folder.rows, SAMPLE_CHECKS)
+        raw, raw_end = _whole_rows(folder.raw_csv, RAW_COLUMNS)
+        _check_cells(folder.raw_csv, raw, RAW_CHECKS)
+        for f, end in ((folder.samples_csv, samples_end), (folder.raw_csv, raw_end)):
+            os.truncate(f, end)
+        keep = [r for r in raw if int(r["sample"]) < folder.next_sample]
+        if len(keep) != len(raw):
+            lines = [",".join(RAW_COLUMNS) + "\n"] + [_csv_line(RAW_COLUMNS, r) for r in keep]
+            atomic_write(folder.raw_csv, "".join(lines))
         return folder
 
-    def _drop_orphan_raw(self) -> None:
-        with self.raw_csv.open(newline="") as fh:
-            raw = list(csv.DictReader(fh))
-        keep = [r for r in raw if int(r["sample"]) < self.next_sample]
-        if len(keep) != len(raw):
-            atomic_write(
-                self.raw_csv,
-                "".join([",".join(RAW_COLUMNS) + "\n"] + [_csv_line(RAW_COLUMNS, r) for r in keep]),
-            )
-
     def append(self, row: dict, raw: list[dict]) -> None:
-        """Store one capture: its raw readings, then its sample row (each fsynced)."""
-        _append(self.raw_csv, [_csv_line(RAW_COLUMNS, r) for r in raw])
-        _append(self.samples_csv, [_csv_line(SAMPLE_COLUMNS, row)])
+        """Store one capture: its raw readings, then its sample row (each fsynced). If either
+        write fails, neither file keeps any of it (:class:`errors.OutputError`)."""
+        raw_size = self.raw_csv.stat().st_size
+        try:
+            _append(self.raw_csv, [_csv_line(RAW_COLUMNS, r) for r in raw])
+            try:
+                _append(self.samples_csv, [_csv_line(SAMPLE_COLUMNS, row)])
+            except OSError:
+                os.truncate(self.raw_csv, raw_size)
+                raise
+        except OSError as exc:
+            raise OutputError(
+                f"{self.path}: cannot store sample {row['sample']} ({exc.strerror or exc}); the "
+                f"{len(self.rows)} samples before it are kept: make room, then continue with "
+                f"--resume {self.path}"
+            ) from None
         self.rows.append({k: _cell(v) for k, v in row.items()})
 
     def update_header(self, **changes) -> None:
-        self.header.update(changes)
-        atomic_write(self.path / "session.toml", toml_text(self.header))
+        """Rewrite ``session.toml`` with ``changes`` (atomically: on failure the old file stays)."""
+        header = {**self.header, **changes}
+        try:
+            atomic_write(self.path / "session.toml", toml_text(header))
+        except OSError as exc:
+            raise OutputError(
+                f"{self.path / 'session.toml'}: cannot update ({exc.strerror or exc}); the previous "
+                f"one is kept, with the {len(self.rows)} samples in {self.samples_csv}"
+            ) from None
+        self.header = header
 
 
 def load_robot_and_setup(session: Path | None, robot: Path | None, setup: Path | None):
@@ -163,3 +279,8 @@ def load_session(folder: Path) -> tuple[RobotFile, SetupFile, Path]:
     robot = validate(RobotFile, data["robot"], f"{where} [robot]")
     setup = validate(SetupFile, data["setup"], f"{where} [setup]")
     return robot, setup, folder / "samples.csv"
+
+
+def session_header(folder: SessionFolder) -> SessionHeader:
+    """The validated ``session.toml`` of an opened folder (InputError naming the key)."""
+    return validate(SessionHeader, folder.header, str(folder.path / "session.toml"))

@@ -9,49 +9,64 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field, NonNegativeFloat, model_validator
 
 from calib.joint_terms import TERM_KINDS, JointTerms, LinkMasses, Term
 from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees, display_factor
 from calib.robot_model import RobotModel
 from errors import InputError
-from station.formats.base import read_toml, validate
+from station.formats.base import (
+    MAX_LENGTH_MM,
+    Angle,
+    Direction,
+    Id,
+    JointAngle,
+    Length,
+    PositiveLength,
+    Sigma,
+    Strict,
+    Vec3,
+    read_toml,
+    validate,
+)
 
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Mass = Annotated[float, Field(ge=0, le=1e4)]  # kg: a link or a payload, up to 10 t
+Compliance = Annotated[float, Field(ge=-1e6, le=1e6)]  # urad/(N m)
 
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class Joint(_Strict):
+class Joint(Strict):
     """One D-H joint; optionally its link's mass and centre of mass (in D-H frame i) for the
     gravity torques, and the joint-space terms a calibration identified (``calib.joint_terms``)."""
 
-    alpha_deg: float
-    a_mm: float
-    d_mm: float
-    theta_deg: float
-    q_min_deg: float = -180.0
-    q_max_deg: float = 180.0
-    mass_kg: float | None = Field(None, ge=0)
+    alpha_deg: Angle
+    a_mm: Length
+    d_mm: Length
+    theta_deg: Angle
+    q_min_deg: JointAngle = -180.0
+    q_max_deg: JointAngle = 180.0
+    mass_kg: Mass | None = None
     com_mm: Vec3 | None = None
-    compliance_urad_per_Nm: float | None = None
-    sin1_deg: float | None = None
-    cos1_deg: float | None = None
-    sin2_deg: float | None = None
-    cos2_deg: float | None = None
-    sigma: dict[str, float] | None = None  # written by a calibration: per-parameter sigma
+    compliance_urad_per_Nm: Compliance | None = None
+    sin1_deg: Angle | None = None
+    cos1_deg: Angle | None = None
+    sin2_deg: Angle | None = None
+    cos2_deg: Angle | None = None
+    sigma: dict[str, NonNegativeFloat] | None = None  # written by a calibration: per-parameter sigma
+
+    @model_validator(mode="after")
+    def _limits_ordered(self) -> Joint:
+        if not self.q_min_deg < self.q_max_deg:
+            raise ValueError(f"q_min_deg {self.q_min_deg:g} must be below q_max_deg {self.q_max_deg:g}")
+        return self
 
 
-class Payload(_Strict):
+class Payload(Strict):
     """What the flange carries: mass [kg] and centre of mass [mm] in the flange frame."""
 
-    mass_kg: float = Field(ge=0)
+    mass_kg: Mass
     com_mm: Vec3 = [0.0, 0.0, 0.0]
 
 
-class RobotFile(_Strict):
+class RobotFile(Strict):
     """A robot model (contract: robot model TOML); a corrected table adds ``calibration`` and,
     where it identified compliances, the ``payload`` they were identified with."""
 
@@ -114,6 +129,8 @@ class RobotFile(_Strict):
             return None
         expected = list(DH_NAMES) + [t.name for t in self.terms()]
         names = (self.calibration or {}).get("covariance_parameters", list(DH_NAMES))
+        if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
+            raise InputError(f"{where}: calibration.covariance_parameters: expected a list of names")
         try:
             cov = np.array(data, float)
         except (TypeError, ValueError):
@@ -124,35 +141,52 @@ class RobotFile(_Strict):
                 f"{where}: calibration.covariance: expected {n} x {n} finite numbers, one per name of "
                 "calibration.covariance_parameters: J1.theta_deg, J1.d_mm, ... and each term the joints carry"
             )
+        if not _is_covariance(cov):
+            raise InputError(
+                f"{where}: calibration.covariance: not a covariance: it must be symmetric, without "
+                f"negative variances (eigenvalues), every entry within {MAX_COVARIANCE:g} in display units"
+            )
         order = [names.index(name) for name in expected]
         factor = display_factor(expected)
         return cov[np.ix_(order, order)] / np.outer(factor, factor)
 
 
-class SetupDrawstring(_Strict):
+MAX_COVARIANCE = MAX_LENGTH_MM**2  # mm^2, deg^2: a standard deviation of 100 m
+
+
+def _is_covariance(cov: np.ndarray) -> bool:
+    """Symmetric and positive semi-definite (to rounding), entries within ``MAX_COVARIANCE``."""
+    scale = np.abs(cov).max()
+    if scale > MAX_COVARIANCE:
+        return False
+    tol = 1e-9 * scale
+    return bool(np.allclose(cov, cov.T, rtol=0, atol=tol) and np.linalg.eigvalsh(cov).min() >= -tol)
+
+
+class SetupDrawstring(Strict):
     anchor_mm: Vec3
-    length_offset_mm: float
-    sigma_mm: float = Field(0.02, gt=0)
+    length_offset_mm: Length
+    sigma_mm: Sigma = 0.02
 
 
-class SetupDial(_Strict):
-    axis: Vec3 | None = None
-    sigma_mm: float = Field(0.002, gt=0)
+class SetupDial(Strict):
+    axis: Direction | None = None
+    sigma_mm: Sigma = 0.002
 
 
-class SetupLine(_Strict):
+class SetupLine(Strict):
     """One gauge-block placement; ``point_mm``, ``direction`` (base frame), usable ``length_mm`` and
     the tool ``approach`` direction are needed only to plan measurements (``station plan``)."""
 
-    id: int
-    dial_axis: Vec3 | None = None
+    id: Id
+    dial_axis: Direction | None = None
     point_mm: Vec3 | None = None
-    direction: Vec3 | None = None
-    length_mm: float = Field(400.0, gt=0)
-    approach: Vec3 | None = None
+    direction: Direction | None = None
+    length_mm: PositiveLength = 400.0
+    approach: Direction | None = None
 
 
-class SetupFile(_Strict):
+class SetupFile(Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
     tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight;
     ``payload``: what the flange carried while measuring (for the gravity torques)."""
@@ -161,8 +195,15 @@ class SetupFile(_Strict):
     dial: SetupDial | None = None
     payload: Payload | None = None
     lines: list[SetupLine] = []
-    line_sigma_mm: float = Field(0.01, gt=0)
-    rho: float = Field(1.0, gt=0)
+    line_sigma_mm: Sigma = 0.01
+    rho: Annotated[float, Field(ge=1e-6, le=1e6)] = 1.0
+
+    @model_validator(mode="after")
+    def _line_ids_unique(self) -> SetupFile:
+        ids = [line.id for line in self.lines]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"line id {next(i for i in ids if ids.count(i) > 1)} appears twice in [[lines]]")
+        return self
 
 
 SAME_ROBOT_MM, SAME_ROBOT_DEG = 50.0, 10.0

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
-from calib.baselines import BASELINES, BaselineOptions, run_method
+from calib.baselines import BaselineOptions, run_method
 from calib.calibrate import (
     Calibration,
     CalibrationOptions,
@@ -28,6 +28,7 @@ from calib.calibrate import (
     row_noise,
 )
 from calib.kinematics import dh_table
+from calib.methods import ALL_METHODS, BASELINES
 from calib.metrics import error_metrics
 from calib.models import (
     DrawstringFrame,
@@ -56,7 +57,7 @@ from station.jobs.report import (
 )
 from station.jobs.terms import MODELS, TermChoice, choose_terms
 
-METHODS = BASELINES + ("lmlc", "mcs-lmlc")
+METHODS = ALL_METHODS
 WORKSPACE_POSES = 1000
 WORKSPACE_WARNING_RATIO, WORKSPACE_WARNING_FLOOR_MM = 10.0, 0.5
 """Warn when the predicted workspace error exceeds both this many times the training fit and this."""

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.baselines import METHODS, BaselineOptions, MethodResult, run_method
+from calib.baselines import BaselineOptions, MethodResult, run_method
 from calib.calibrate import calibrate
+from calib.methods import ALL_METHODS
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.calibration import build_model, check_enough, holdout_model, mcs_lmlc, metrics
@@ -32,7 +33,7 @@ LABELS = {
     "lmlc": "M8 LMLC",
     "mcs-lmlc": "M9 MCS-LMLC",
 }
-COMPARED = METHODS + ("mcs-lmlc",)
+COMPARED = ALL_METHODS
 
 
 @dataclass

@@ -29,10 +29,11 @@ from calib.joint_terms import (
     load_bearing_joints,
 )
 from calib.kinematics import N_JOINTS, dh_table
+from calib.methods import TERM_MODELS
 from calib.models import MeasurementModel
 from calib.selection import FOLDS, TermSelection, select_terms
 
-MODELS = ("geometric", "compliance", "full", "auto")
+MODELS = TERM_MODELS
 ARM_JOINTS = (1, 2)
 """Joints (0-based) named for compliance when the robot file gives no masses to find them by."""
 NO_MASSES = (

@@ -35,10 +35,15 @@ from pathlib import Path
 from urllib.parse import quote
 
 import numpy as np
-import rerun as rr
-import rerun.blueprint as rrb
+
+# Rerun logs a failing file sink (a full disk) on stderr itself, several lines, besides the error
+# that reaches us at flush: keep the station's one line (other warnings stay).
+os.environ.setdefault("RUST_LOG", "warn,re_log_encoding=off,re_sdk::recording_stream=off")
+import rerun as rr  # noqa: E402
+import rerun.blueprint as rrb  # noqa: E402
 
 GREEN, RED, GREY = (40, 200, 80), (230, 60, 50), (150, 150, 150)
+FLUSH_TIMEOUT_S = 10.0
 BLUE, ORANGE, PURPLE = (60, 120, 230), (240, 150, 30), (170, 80, 200)
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
@@ -85,6 +90,7 @@ class LiveView:
         rrd = Path(rrd)
         self.rec = rr.RecordingStream("station", recording_id=f"session-{rrd.parent.name}")
         self.notes: list[str] = []
+        self.incomplete: str | None = None
         self.web: WebViewer | None = None
         self._previous = rrd.with_name(rrd.stem + ".previous.rrd")  # loaders go by extension
         if resume and rrd.exists():
@@ -202,9 +208,16 @@ class LiveView:
             self.rec.log(f"calibration/cost/{method}", rr.Scalars(float(cost)))
 
     def close(self) -> None:
-        self.rec.flush()
-        self.rec.disconnect()
-        self._previous.unlink(missing_ok=True)  # now inside the new recording
+        """Flush and close the recording. One that could not be written whole (disk full) keeps
+        what it has; ``incomplete`` says why (None: complete)."""
+        try:
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError as exc:
+            self.incomplete = str(exc)
+        finally:
+            self.rec.disconnect()
+        if self.incomplete is None:
+            self._previous.unlink(missing_ok=True)  # now inside the new recording
         if self.web is not None:
             self.web.close()
 

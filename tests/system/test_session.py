@@ -12,6 +12,7 @@ import contextlib
 import csv
 import os
 import random
+import re
 import signal
 import socket
 import subprocess
@@ -127,6 +128,13 @@ def test_every_target_once_and_readings_match_the_simulated_truth(finished):
     rows = rows_of(folder)
     assert sorted(int(r["target"]) for r in rows) == list(range(N_TARGETS))
     assert [int(r["sample"]) for r in rows] == list(range(N_TARGETS))
+    assert_readings_match_the_truth(rows)
+    spreads = np.array([float(r["length_spread_mm"]) for r in rows])
+    assert 0 < np.median(spreads) < 3 * make_cell(0, PER_LINE).world.noise.length_mm
+
+
+def assert_readings_match_the_truth(rows: list[dict]) -> None:
+    """Every stored length and dial reading is the simulated truth at its joints, within noise."""
     world = make_cell(0, PER_LINE).world
     q = np.array([[float(r[f"q{i}_deg"]) for i in range(1, 7)] for r in rows])
     lines = np.array([int(r["line"]) for r in rows])
@@ -135,8 +143,6 @@ def test_every_target_once_and_readings_match_the_simulated_truth(finished):
     dial_err = np.array([float(r["dial_mm"]) for r in rows]) - world.true_dial_mm(q, lines)
     assert np.max(np.abs(length_err)) < 5 * world.noise.length_mm / np.sqrt(K) + 0.0005
     assert np.max(np.abs(dial_err)) < 5 * world.noise.dial_mm / np.sqrt(K) + 0.0005
-    spreads = np.array([float(r["length_spread_mm"]) for r in rows])
-    assert 0 < np.median(spreads) < 3 * world.noise.length_mm
 
 
 def test_a_designed_plan_is_walked_and_measured_target_by_target(tmp_path):
@@ -231,7 +237,9 @@ def _lines(folder: Path) -> list[str]:
     return path.read_text().splitlines() if path.exists() else []
 
 
-def test_unplugged_dial_suspends_the_session_which_continues_after_replug(tmp_path):
+def session_with(tmp_path, act) -> tuple[State, str]:
+    """A session on the simulated devices, run in a thread; once 2 samples are stored,
+    ``act(sim, folder, messages)`` does something to the cell. The end state and the log."""
     config = write_config(tmp_path)
     messages: list[str] = []
     with simulated(config) as sim:
@@ -244,19 +252,50 @@ def test_unplugged_dial_suspends_the_session_which_continues_after_replug(tmp_pa
         deadline = time.monotonic() + 30
         while len(inputs.folder.rows) < 2 and time.monotonic() < deadline:
             time.sleep(0.005)
-        sim.devices["dial"].port.unplug()
-        while not any("suspended: dial not answering" in m for m in messages) and time.monotonic() < deadline:
-            time.sleep(0.01)
-        unplugged_rows = len(inputs.folder.rows)
-        time.sleep(0.3)
-        assert len(inputs.folder.rows) == unplugged_rows  # nothing recorded while the dial is gone
-        sim.devices["dial"].replug()
+        act(sim, inputs.folder, messages)
         worker.join(30)
     done = result["out"]
     done.view.close()
-    text = "".join(messages)
-    assert "suspended: dial not answering" in text and "resumed" in text
-    assert done.state is State.DONE and len(rows_of(tmp_path / "sess")) == N_TARGETS
+    return done.state, "".join(messages)
+
+
+def unplug(device: str, says: str):
+    """Unplug ``device`` until the log ``says`` so; nothing is recorded meanwhile; replug it."""
+
+    def act(sim, folder, messages):
+        sim.devices[device].unplug()
+        deadline = time.monotonic() + 30
+        while not any(says in m for m in messages) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        unplugged_rows = len(folder.rows)
+        time.sleep(0.3)
+        assert len(folder.rows) == unplugged_rows  # nothing recorded while it is gone
+        sim.devices[device].replug()
+
+    return act
+
+
+def test_unplugged_dial_suspends_the_session_which_continues_after_replug(tmp_path):
+    state, log = session_with(tmp_path, unplug("dial", "suspended: dial not answering"))
+    assert "suspended: dial not answering" in log and "resumed" in log
+    assert state is State.DONE and len(rows_of(tmp_path / "sess")) == N_TARGETS
+
+
+def test_unplugged_modbus_drawstring_suspends_the_session_which_continues_after_replug(tmp_path):
+    # Modbus TCP: the connection is reset and new ones refused until the cable is back
+    state, log = session_with(tmp_path, unplug("drawstring", "suspended: drawstring not answering"))
+    assert "drawstring: link lost to 127.0.0.1" in log  # the fault, named as it happened
+    assert "suspended: drawstring not answering: unreachable after 2 attempts" in log and "resumed" in log
+    assert state is State.DONE and len(rows_of(tmp_path / "sess")) == N_TARGETS
+    assert_readings_match_the_truth(rows_of(tmp_path / "sess"))
+
+
+def test_a_slack_cable_suspends_the_session_and_no_slack_reading_is_stored(tmp_path):
+    # the cable off the tool for 1 s (real): the robot visits a few targets meanwhile
+    state, log = session_with(tmp_path, lambda sim, folder, messages: sim.slacken(1.0))
+    assert re.search(r"drawstring reads? \d+\.\d+ mm, outside 50\.\.5000 mm: cable slack or jump", log), log
+    assert state is State.DONE and len(rows_of(tmp_path / "sess")) == N_TARGETS
+    assert_readings_match_the_truth(rows_of(tmp_path / "sess"))
 
 
 def test_robot_that_never_settles_times_out_with_a_clear_message(tmp_path, capsys):

@@ -11,8 +11,9 @@ import json
 import numpy as np
 import pytest
 
-from calib.baselines import BASELINES, METHODS, BaselineOptions, run_method, search_half_widths
+from calib.baselines import BaselineOptions, run_method, search_half_widths
 from calib.calibrate import calibrate
+from calib.methods import BASELINES, METHODS
 from sim_fixtures.scenario import write_scenario
 from sim_fixtures.world import Noise
 from station.cli import main

@@ -212,3 +212,73 @@ def test_a_bad_parameter_is_named_by_its_flag(three_lines, tmp_path, capsys, wit
     code, _, err = _cli(capsys, "calibrate", sc.samples, "--robot", sc.robot, *setup, "--out", out, *flags)
     assert code == 2 and err.count("\n") == 1 and message in err
     assert not out.exists()
+
+
+def _edit_toml(path, out, edit):
+    data = tomllib.loads(path.read_text())
+    edit(data)
+    out.write_text(tomli_w.dumps(data))
+    return out
+
+
+def _edit_cell(path, out, row, column, value):
+    header, *rows = _lines(path)
+    cells = rows[row].split(",")
+    cells[header.split(",").index(column)] = value
+    rows[row] = ",".join(cells)
+    out.write_text("\n".join([header, *rows]) + "\n")
+    return out
+
+
+def _set(*keys, value):
+    def edit(data):
+        for key in keys[:-1]:
+            data = data[key]
+        data[keys[-1]] = value
+
+    return edit
+
+
+# Values that parse but that the maths cannot take (issue 15: the first four ended in tracebacks):
+# (input edited, how, the one line's key and reason).
+VALUE_CASES = {
+    "NaN in the setup": ("setup", _set("drawstring", "length_offset_mm", value=float("nan")),
+                         "drawstring.length_offset_mm: Input should be a finite number"),
+    "1e308 in a samples cell": ("samples", (3, "length_mm", "1e308"),
+                                "row 3 (line 5): length_mm: '1e308' is outside -100000 .. 100000 mm"),
+    "NaN in the robot": ("robot", _set("joints", 1, "a_mm", value=float("nan")),
+                         "joints.1.a_mm: Input should be a finite number"),
+    "inf in a hold-out cell": ("holdout", (2, "line", "inf"),
+                               "row 2 (line 4): line: 'inf' is not a line id (a whole number 0 .. 1e+09)"),
+    "a 1e308 mm length": ("robot", _set("joints", 2, "d_mm", value=1e308),
+                          "joints.2.d_mm: Input should be less than or equal to 100000"),
+    "a zero dial axis": ("setup", _set("lines", 1, "dial_axis", value=[0.0, 0.0, 0.0]),
+                         "lines.1.dial_axis: must be a direction, not the zero vector"),
+    "a zero sigma": ("setup", _set("drawstring", "sigma_mm", value=0.0),
+                     "drawstring.sigma_mm: Input should be greater than or equal to 0.000001"),
+    "joint limits the wrong way round": ("robot", _set("joints", 4, "q_min_deg", value=200.0),
+                                         "joints.4: q_min_deg 200 must be below q_max_deg 135"),
+    "a line placed twice": ("setup", _set("lines", 2, "id", value=0),
+                            "(top level): line id 0 appears twice in [[lines]]"),
+    "a joint reading of ten thousand degrees": ("samples", (0, "q6_deg", "1e4"),
+                                                "row 0 (line 2): q6_deg: '1e4' is outside -3600 .. 3600 deg"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", VALUE_CASES)
+def test_a_value_the_maths_cannot_take_is_refused_naming_file_and_key(case, three_lines, tmp_path, capsys):
+    which, edit, message = VALUE_CASES[case]
+    files = {"samples": three_lines.samples, "robot": three_lines.robot, "setup": three_lines.setup}
+    files["holdout"] = three_lines.holdout
+    source = files[which]
+    bad = tmp_path / f"bad{source.suffix}"
+    edited = _edit_cell(source, bad, *edit) if isinstance(edit, tuple) else _edit_toml(source, bad, edit)
+    files[which] = edited
+    out, report = tmp_path / "o.toml", tmp_path / "r.json"
+    code, _, err = _cli(
+        capsys, "calibrate", files["samples"], "--robot", files["robot"], "--setup", files["setup"],
+        "--holdout", files["holdout"], "--out", out, "--report", report,
+    )  # fmt: skip
+    assert code == 2
+    assert err == f"station: error: {bad}: {message}\n"
+    assert not out.exists() and not report.exists()

@@ -7,6 +7,8 @@ import json
 
 import numpy as np
 import pytest
+import tomli_w
+import tomllib
 
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
@@ -186,9 +188,14 @@ def test_bad_table_robot_or_output(cell, tmp_path, capsys):
     )
     broken = tmp_path / "broken.toml"
     broken.write_text(corrected.read_text().replace("covariance = [", "covariance = [ [ 1.0,], ", 1))
+    asymmetric = tmp_path / "asymmetric.toml"  # one off-diagonal entry of -1e308 (issue 15's fuzz)
+    data = tomllib.loads(corrected.read_text())
+    data["calibration"]["covariance"][11][0] = -1e308
+    asymmetric.write_text(tomli_w.dumps(data))
     out = tmp_path / "out.csv"
     cases = [
         (("--table", five, "--robot", sc.robot, "--out", out), f"{five}: joints: expected 6 joints, got 5"),
+        (("--table", asymmetric, "--robot", sc.robot, "--out", out), "covariance: not a covariance"),
         (("--table", corrected, "--robot", ur10, "--out", out), "not a calibration of that robot"),
         (("--table", broken, "--robot", sc.robot, "--out", out), "calibration.covariance"),
         (("--table", corrected, "--robot", sc.robot, "--out", tmp_path / "none" / "o.csv"), "does not exist"),

@@ -68,6 +68,16 @@ def test_ascii_drawstring_and_mitutoyo_dial(tmp_path):
         (('kind = "rtde"', 'kind = "ros"'), r"robot: Input tag 'ros' found using 'kind' does not"),
         (("device_id = 7", "device_id = 7\nbaud = 9600"), r"drawstring\.baud: Extra inputs"),
         (('[robot]\nkind = "rtde"', ""), r": robot: Field required"),
+        # values the session cannot work with (issue 15)
+        (("address = 40", "address = 40\nscale = 0.0"), r"registers\.scale: 0: the scale must lie within"),
+        (("device_id = 7", "device_id = 7\ntimeout_s = nan"), r"timeout_s: Input should be a finite"),
+        (("[robot]", "time_scale = 0.0\n[robot]"), r": time_scale: Input should be greater"),
+        (("/dev/ttyUSB1", "/dev/tty\\u0000"), r"drawstring\.port: String should match pattern"),
+        (("[drawstring]", "[reconnect]\nfactor = 1e308\n[drawstring]"), r"reconnect\.factor: Input"),
+        (
+            ("[drawstring]", "[session]\ndial_range_mm = [2.0, -2.0]\n[drawstring]"),
+            r"session: dial_range_mm: the low end 2 must be below the high end -2",
+        ),
     ],
 )
 def test_bad_key_names_file_and_key(tmp_path, edit, message):
@@ -79,7 +89,7 @@ def test_bad_key_names_file_and_key(tmp_path, edit, message):
 
 
 def test_unreadable_or_broken_file(tmp_path):
-    with pytest.raises(InputError, match="missing.toml: cannot read"):
+    with pytest.raises(InputError, match="missing.toml: no such file"):
         load_station_config(tmp_path / "missing.toml")
     (tmp_path / "bad.toml").write_text("[robot\n")
     with pytest.raises(InputError, match="bad.toml: not valid TOML"):

@@ -64,7 +64,14 @@ def test_import_ipa_round_trip(tmp_path):
         ("", "empty file"),
         (HEADER.replace("elbow_joint", "elbow") + "\n" + ROW, "missing column 'elbow_joint'"),
         (HEADER + "\n", "no data rows"),
-        (HEADER + "\n" + ROW.replace("2336,7643", "n/a"), "line 2, column 'measurement_x': not a number"),
+        (
+            HEADER + "\n" + ROW.replace("2336,7643", "n/a"),
+            "line 2, column 'measurement_x': 'n/a' is not a finite number",
+        ),
+        (
+            HEADER + "\n" + ROW.replace("2336,7643", "1e308"),
+            "line 2, column 'measurement_x': '1e308' is outside -100000 .. 100000 mm",
+        ),
         (HEADER + "\n" + ROW + ";1", "line 2: 11 fields, the header has 10"),
     ],
 )

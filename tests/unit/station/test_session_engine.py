@@ -14,7 +14,16 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from drivers.base import Backoff, DeviceReplyError, DeviceTimeout, Driver, Field, Reading
+from drivers.base import (
+    Backoff,
+    CrcError,
+    DeviceReplyError,
+    DeviceTimeout,
+    Driver,
+    Field,
+    GarbledReply,
+    Reading,
+)
 from errors import DeviceError
 from station.acquire.capture import RUNNING, Capture, Devices, Rules
 from station.acquire.session import SUSPENDED_POLL_S, Listener, Session, State
@@ -350,6 +359,70 @@ def test_a_stop_request_while_suspended_ends_the_session(tmp_path, clock):
     assert session.run() is State.STOPPED
     assert "resumed" not in cell.messages
     assert cell.folder.rows == []
+
+
+def test_a_fault_that_a_retry_clears_is_named_in_the_log(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    glitch = iter([CrcError("drawstring", "bad CRC in reply 01 03 04")])
+    cell.drawstring.script = lambda t: next(glitch, None) or cell.length_from_pose(t)
+    assert cell.run() is State.DONE
+    assert "drawstring: bad CRC in reply 01 03 04; retrying" in cell.messages
+    assert not cell.said("suspended")
+
+
+def test_a_silent_device_is_named_once_not_at_every_reconnect_while_suspended(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    cell.dial.script = lambda t: DeviceTimeout("dial", "no reply") if 5.0 <= t < 7.0 else {"dial_mm": 0.25}
+    assert cell.run() is State.DONE
+    retries = [m for m in cell.messages if m.startswith("dial: no reply; retrying")]
+    assert len(retries) == 1  # before the session suspended; its reconnects while waiting are not told
+    assert cell.dial.reads > 10  # though it was asked again every poll
+
+
+def test_a_cable_slackening_during_a_capture_rejects_it(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    reads = iter(range(1_000_000))
+
+    def slackens(t: float) -> dict:
+        # read 0 is the gate (taut); the cable comes off for the whole first capture (reads 1..3)
+        return {"length_mm": 12.0} if 1 <= next(reads) <= RULES.readings else cell.length_from_pose(t)
+
+    cell.drawstring.script = slackens
+    assert cell.run() is State.DONE
+    assert cell.said(
+        "capture at target 0 rejected: drawstring read 12.000 mm, outside 50..5000 mm: cable slack or jump"
+    )
+    lengths = [float(r["length_mm"]) for r in cell.folder.rows]
+    assert lengths == pytest.approx([ANCHOR_MM + q[0] for q in PLAN.q_deg])  # nothing slack stored
+
+
+def test_each_condition_that_holds_a_suspension_is_named(tmp_path, clock):
+    q = PLAN.q_deg
+    # at target 0 the controller stops (0.8 .. 2 s) and the dial falls silent (1.5 .. 3 s)
+    segments = [(0.5, moving(q[0])), (0.8, still(q[0])), (2.0, still(q[0], mode=5)), (6.0, still(q[0]))]
+    cell = Cell(tmp_path, clock, timeline(*segments, *walk(q[1:], start_s=6.0)))
+    cell.dial.script = lambda t: DeviceTimeout("dial", "no reply") if 1.5 <= t < 3.0 else {"dial_mm": 0.25}
+    assert cell.run() is State.DONE
+    suspended = [m for m in cell.messages if m.startswith("suspended")]
+    assert suspended[0].startswith("suspended: robot not running")
+    assert suspended[1].startswith("suspended: dial not answering")
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_a_new_kind_of_failure_of_a_silent_device_is_named(tmp_path, clock):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    silent, garbled = DeviceTimeout("dial", "no reply"), GarbledReply("dial", "unparseable reply b'#'")
+    # at target 1 the dial falls silent, then answers garbage, then recovers
+    cell.dial.script = lambda t: (
+        silent if 5.0 <= t < 6.0 else garbled if 6.0 <= t < 7.0 else {"dial_mm": 0.25}
+    )
+    assert cell.run() is State.DONE
+    suspended = [m for m in cell.messages if m.startswith("suspended")]
+    assert suspended == [
+        "suspended: dial not answering: unreachable after 2 attempts (no reply)",
+        "suspended: dial not answering: unreachable after 2 attempts (unparseable reply b'#')",
+    ]
+    assert cell.targets() == [0, 1, 2]
 
 
 def test_a_finish_request_ends_the_session_done_with_its_reason_and_targets_left(tmp_path, clock):
