@@ -51,7 +51,7 @@ def _free_port() -> int:
 
 def _config(folder: Path) -> Path:
     raw = {
-        "time_scale": 6.0,  # the session outlasts the viewer's start
+        "time_scale": 3.0,  # the session outlasts a slow browser start on a loaded machine (SIGINT ends it)
         "robot": {"kind": "rtde", "host": f"127.0.0.{random.randint(2, 250)}"},
         "drawstring": {"kind": "modbus_tcp", "port": _free_port()},
         "dial": {"port": str(folder / "dial")},
