@@ -134,7 +134,7 @@ def calibrate_samples(
         raise ParameterError(MESSAGES["terms"], value=terms, choices=", ".join(MODELS))
     payload = setup.payload if setup is not None else None
     choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
-    fit = SOLVERS[method](choice.model, method, select)
+    fit = SOLVERS[method](choice, method, select)
     elapsed = time.perf_counter() - t0
     report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms)
     return CalibrationOutcome(report, fit.calibration, choice.model)
@@ -230,22 +230,23 @@ def validate(model: MeasurementModel, where: str, method: str, select: int | Non
 
 
 # -- the solvers --------------------------------------------------------------------------------
-def _lmlc(model: MeasurementModel, method: str, select: int | None) -> MethodFit:
-    return MethodFit(calibrate(model, CalibrationOptions()))
+def _lmlc(choice: TermChoice, method: str, select: int | None) -> MethodFit:
+    return MethodFit(choice.calibration or calibrate(choice.model, CalibrationOptions()))
 
 
-def _mcs_lmlc(model: MeasurementModel, method: str, select: int | None) -> MethodFit:
-    mcs, cal = mcs_lmlc(model, CalibrationOptions(), select)
+def _mcs_lmlc(choice: TermChoice, method: str, select: int | None) -> MethodFit:
+    mcs, cal = mcs_lmlc(choice.model, CalibrationOptions(), select)
     return MethodFit(cal, selection=mcs)
 
 
-def _baseline(model: MeasurementModel, method: str, select: int | None) -> MethodFit:
-    cal, optimum = baseline(model, method)
+def _baseline(choice: TermChoice, method: str, select: int | None) -> MethodFit:
+    cal, optimum = baseline(choice.model, method)
     return MethodFit(cal, optimum=optimum)
 
 
 SOLVERS = {"lmlc": _lmlc, "mcs-lmlc": _mcs_lmlc, **dict.fromkeys(BASELINES, _baseline)}
-"""One solver per method: ``(model, method, select) -> MethodFit``; they trust ``validate``."""
+"""One solver per method: ``(choice, method, select) -> MethodFit`` on ``choice.model`` (the
+training rows with the terms ``--model`` chose); they trust ``validate``."""
 
 
 def mcs_lmlc(

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from calib.calibrate import CalibrationOptions
+from calib.calibrate import Calibration, CalibrationOptions
 from calib.joint_terms import (
     COMPLIANCE,
     JointTerms,
@@ -88,6 +88,11 @@ class TermChoice:
     selection: TermSelection | None
     held: dict[str, str]
     warning: str | None = None
+
+    @property
+    def calibration(self) -> Calibration | None:
+        """The pipeline's calibration of ``model`` (default options) where ``auto`` already ran it."""
+        return self.selection.calibration if self.selection is not None else None
 
 
 def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, unknowns: int) -> TermChoice:

@@ -14,7 +14,7 @@ from calib.joint_terms import JointTerms, LinkMasses, Term, compliance_group, ha
 from calib.kinematics import tcp_position
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.position import PositionModel, PositionSamples, rotation_from_vector
-from calib.selection import select_terms
+from calib.selection import cross_validated_errors, kfold, select_terms
 from sim_fixtures.world import JointError, Robot, World
 from station.formats.tables import load_robot
 
@@ -121,3 +121,36 @@ def test_cross_validation_keeps_a_compliance_the_data_carries():
     model = PositionModel(samples, nominal, np.array([0.0, 0.0, 100.0]), sigma_mm=TRACKER_SIGMA_MM)
     selection = select_terms(model, groups, pool, CalibrationOptions())
     assert [g.label for g in selection.groups] == ["J2 compliance"]
+
+
+def refit_selection(model, groups, pool, min_gain=0.05) -> list[str]:
+    """The greedy selection with every candidate refitted from the nominal robot (what the screen
+    stands in for)."""
+    folds = kfold(model.placement_ids())
+    kept, left = [], list(groups)
+
+    def score(gs):
+        terms = pool.subset([t for g in gs for t in g.terms])
+        err, _ = cross_validated_errors(model.with_terms(terms), folds, CalibrationOptions())
+        return np.sqrt(np.mean(err**2))
+
+    current = score(kept)
+    while left:
+        best_rmse, best = min(((score(kept + [g]), g) for g in left), key=lambda s: s[0])
+        if best_rmse > (1 - min_gain) * current:
+            break
+        kept.append(best)
+        left.remove(best)
+        current = best_rmse
+    return [g.label for g in kept]
+
+
+@pytest.mark.parametrize("compliance", [0.0, 15.0])
+def test_the_screen_chooses_what_refitting_every_candidate_chooses(compliance):
+    nominal = Robot.from_file(configs.path("robots/ur10.toml")).dh
+    terms = JointTerms([Term(1, "compliance_urad_per_Nm")], nominal, UR10_LINKS)
+    _, samples = position_set(150, JointError(terms, np.array([compliance])), seed=5)
+    groups, pool = candidates_ur10(nominal)
+    model = PositionModel(samples, nominal, np.array([0.0, 0.0, 100.0]), sigma_mm=TRACKER_SIGMA_MM)
+    selection = select_terms(model, groups, pool, CalibrationOptions())
+    assert [g.label for g in selection.groups] == refit_selection(model, groups, pool)
