@@ -32,7 +32,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from station.formats.base import atomic_write, check_writable
+    from station.formats.base import Output, check_writable, write_outputs
     from station.jobs import planning
 
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
@@ -50,15 +50,16 @@ def run(args) -> int:
             suggest=not args.no_suggest,
             progress=lambda message: print(f"... {message}", file=sys.stderr, flush=True),
         )
-    atomic_write(args.out, design.plan.csv_text())
+    outputs = [Output.text(args.out, "--out", design.plan.csv_text())]
     if args.report:
-        atomic_write(args.report, json.dumps(design.report, indent=2) + "\n")
+        outputs.append(Output.text(args.report, "--report", json.dumps(design.report, indent=2) + "\n"))
     if args.plot:
-        from station.view.plots import plan_figure, write_png
+        from station.view.plots import plan_figure
 
-        write_png(plan_figure, design.report, args.plot)
+        outputs.append(Output(args.plot, "--plot", lambda tmp: plan_figure(design.report, tmp)))
+    write_outputs(outputs)
     print(planning.summary(design))
-    print("wrote " + ", ".join(str(p) for p in (args.out, args.report, args.plot) if p))
+    print("wrote " + ", ".join(str(o.path) for o in outputs))
     return 0
 
 
