@@ -28,17 +28,8 @@ ROBOT, SETUP = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.t
 @pytest.fixture(scope="module")
 def planned(tmp_path_factory):
     out = tmp_path_factory.mktemp("plan")
-    argv = [
-        "plan",
-        "--robot",
-        str(ROBOT),
-        "--setup",
-        str(SETUP),
-        "--out",
-        str(out / "plan.csv"),
-        "--readings",
-        "1",
-    ]
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--readings", "1"]
+    argv += ["--out", str(out / "plan.csv")]
     assert cli.main(argv + ["--report", str(out / "plan.json"), "--plot", str(out / "plan.png")]) == 0
     return load_plan(out / "plan.csv"), json.loads((out / "plan.json").read_text()), out
 
