@@ -108,3 +108,24 @@ def excursions(x: np.ndarray, x_ref: np.ndarray, prior_sigma: np.ndarray, free: 
     z = np.zeros(len(x))
     z[known] = np.abs(x[known] - x_ref[known]) / prior_sigma[known]
     return z
+
+
+def wild_rows(errors: np.ndarray, factor: float) -> np.ndarray:
+    """Rows whose error is ``factor`` times the median row's or more: readings no robot error
+    explains (a 100 m cable among 1 m ones, a joint read ten turns off), which a fit that starts
+    with least squares cannot shrug off.
+
+    Parameters
+    ----------
+    errors : ndarray, shape (N,)
+        Each row's error [mm], e.g. under the nominal table with the setup fitted.
+    factor : float
+        How many median errors make a row wild.
+
+    Returns
+    -------
+    ndarray of int
+        The wild rows, in order.
+    """
+    size = np.abs(np.asarray(errors, float))
+    return np.flatnonzero(size >= factor * np.median(size))

@@ -28,7 +28,7 @@ from calib.calibrate import (
     fit_setup,
     row_noise,
 )
-from calib.consistency import NoiseTest, excursions, noise_test
+from calib.consistency import NoiseTest, excursions, noise_test, wild_rows
 from calib.kinematics import N_DH, dh_table
 from calib.methods import ALL_METHODS, BASELINES
 from calib.metrics import error_metrics
@@ -76,6 +76,9 @@ session fitted with the UR10's table leaves 700x, a real UR10 on its own table 5
 EXCURSION_DOUBT, EXCURSION_OVERWHELMING = 10.0, 100.0
 """Prior sigmas (a table parameter's tolerance, the setup's stated uncertainty) a parameter may move
 before a warning, and before the fit is refused."""
+WILD_FACTOR = 100.0
+"""A row whose error before calibration is this many times the median row's is a wild reading (on
+simulated and real cells the largest row is 2-8 times the median, whatever the table)."""
 MIXED_FRACTION = 0.2
 """Down-weighted rows beyond this fraction, with all rows' residual beyond ``OVERWHELMING_RATIO``:
 not a few gross readings but rows of another cell."""
@@ -111,6 +114,10 @@ WARNINGS = {
         "of the optimum"
     ),
     "excursion": "{moves}: far beyond what was known before measuring; check the {files}",
+    "wild": (
+        "{rows}: error before calibration up to {ratio:.0f} times the median row's ({worst:.4g} mm "
+        "against {median:.3g} mm): a wild reading; check {these}"
+    ),
     "refusal": "these samples do not fit this robot and setup: {evidence}; likely cause: {cause}",
 }
 
@@ -452,13 +459,15 @@ def fit_check(
     residual beyond the noise (chi-square), the iteration cap, a parameter far beyond its prior.
     Overwhelming evidence (a residual hundreds of times the noise, a fifth of the rows that far
     off, a parameter moved a hundred tolerances) makes the verdict ``inconsistent``, its
-    ``refusal`` naming the likely cause (the first of ``notes``, else what the evidence points at)."""
+    ``refusal`` naming the likely cause (the first of ``notes``, else a wild reading, else what the
+    evidence points at)."""
     rows = len(model.groups)
     test = noise_test(cal.after.residuals[:rows], cal.after.weights[:rows], int(cal.identified.sum()))
     z = excursions(cal.x, model.x0, model.prior_sigma(), cal.identified)
     order = [k for k in np.argsort(-z) if z[k] >= EXCURSION_DOUBT]
     cap = cal.after.status == 0
-    messages = []
+    wild = _wild(model, cal)
+    messages = [wild] if wild else []
     if test.ratio >= NOISE_DOUBT_RATIO and test.p_value < NOISE_DOUBT_P:
         p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
         messages.append(
@@ -474,7 +483,7 @@ def fit_check(
             if mask[order].any()
         )
         messages.append(WARNINGS["excursion"].format(moves=moves, files=files))
-    refusal = _refusal(model, cal, test, z, fit, robot, notes)
+    refusal = _refusal(model, cal, test, z, fit, robot, (*notes, *([wild] if wild else [])))
     verdict = "inconsistent" if refusal else "doubtful" if messages else "consistent"
     top = int(np.argmax(z))
     check = FitCheck(
@@ -521,6 +530,22 @@ def _refusal(
         return None
     cause = notes[0] if notes else causes[0] if causes else "a wrong robot model or setup, or sessions mixed"
     return WARNINGS["refusal"].format(evidence="; ".join(evidence), cause=cause)
+
+
+def _wild(model: MeasurementModel, cal: Calibration) -> str | None:
+    """The warning naming wild rows (``WILD_FACTOR``), judged before calibration; None if none."""
+    errors = np.abs(model.row_error_mm(cal.before.x))
+    rows = wild_rows(errors, WILD_FACTOR)
+    if rows.size == 0:
+        return None
+    median = float(np.median(errors))
+    return WARNINGS["wild"].format(
+        rows=("row " if rows.size == 1 else "rows ") + ", ".join(str(r) for r in rows[:10]),
+        ratio=errors[rows].max() / median,
+        worst=errors[rows].max(),
+        median=median,
+        these="that row" if rows.size == 1 else "these rows",
+    )
 
 
 def _excursion(model: MeasurementModel, cal: Calibration, z: np.ndarray, k: int) -> str:

@@ -4,7 +4,7 @@ noise, and how far each parameter moved in its prior sigmas."""
 import numpy as np
 from scipy.special import erfc
 
-from calib.consistency import chi_square_sf, excursions, noise_test
+from calib.consistency import chi_square_sf, excursions, noise_test, wild_rows
 
 
 def test_chi_square_tail_matches_its_closed_forms():
@@ -42,3 +42,9 @@ def test_excursions_count_prior_sigmas_of_the_fitted_unknowns_only():
     sigma = np.array([1.0, 0.1, np.inf, 1.0])
     free = np.array([True, True, True, False])
     assert np.allclose(excursions(x, x0, sigma, free), [3.0, 5.0, 0.0, 0.0])
+
+
+def test_a_row_a_hundred_median_errors_off_is_wild():
+    errors = np.array([0.3, -0.2, 0.5, 99000.0, 0.4, -2.0])
+    assert wild_rows(errors, 100.0).tolist() == [3]
+    assert wild_rows(errors, 4.0).tolist() == [3, 5]  # the median is 0.45 mm

@@ -100,3 +100,18 @@ def test_an_output_that_cannot_be_written_is_found_before_the_work(three_lines, 
     code, _, err = _cli(capsys, *argv, "--out", out, "--report", report, "--plot", plot)
     assert code == 2 and err.count("\n") == 1 and f"--plot {plot}: folder" in err
     assert not out.exists() and not report.exists()
+
+
+def test_a_wild_reading_is_named_as_the_likely_cause(three_lines, tmp_path, capsys):
+    # A 100 m cable reading among 1 m ones: the fit cannot shrug it off and is refused, naming it.
+    header, *rows = three_lines.samples.read_text().splitlines()
+    column = header.split(",").index("length_mm")
+    cells = rows[5].split(",")
+    cells[column] = "99999.0"
+    wild = tmp_path / "wild.csv"
+    wild.write_text("\n".join([header, *rows[:5], ",".join(cells), *rows[6:]]) + "\n")
+    argv = ["calibrate", wild, "--robot", three_lines.robot, "--setup", three_lines.setup]
+    code, _, err = _cli(capsys, *argv, "--model", "geometric", "--out", tmp_path / "o.toml")
+    assert code == 2 and err.count("\n") == 1
+    assert "likely cause: row 5: error before calibration up to" in err and "a wild reading" in err
+    assert not (tmp_path / "o.toml").exists()
