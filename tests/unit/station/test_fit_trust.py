@@ -1,6 +1,7 @@
 """`station calibrate` as a user meets its judgement of the data: samples that cannot be this
 robot's refused (exit 2, one line naming the likely cause, nothing written), a flag replacing a
-session's robot said, good data passed without a word; ``--plot``; outputs written all or none."""
+session's robot said, good data passed without a word; a wild reading or rows of another session named;
+``--plot``; an unwritable output found before the work."""
 
 import json
 import shutil
@@ -11,6 +12,7 @@ import pytest
 import tomli_w
 
 import configs
+from sim_fixtures.scenario import write_scenario
 from station.cli import main
 from station.formats.base import read_toml
 
@@ -114,4 +116,17 @@ def test_a_wild_reading_is_named_as_the_likely_cause(three_lines, tmp_path, caps
     code, _, err = _cli(capsys, *argv, "--model", "geometric", "--out", tmp_path / "o.toml")
     assert code == 2 and err.count("\n") == 1
     assert "likely cause: row 5: error before calibration up to" in err and "a wild reading" in err
+    assert not (tmp_path / "o.toml").exists()
+
+
+def test_rows_of_another_session_mixed_in_are_named_as_the_likely_cause(three_lines, tmp_path, capsys):
+    # 40 rows of another cell (its own robot and anchor) appended to this one's 150
+    other = write_scenario(tmp_path / "other", seed=5, n_lines=1, n_per_line=40)
+    header, *rows = three_lines.samples.read_text().splitlines()
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text("\n".join([header, *rows, *other.samples.read_text().splitlines()[1:]]) + "\n")
+    argv = ["calibrate", mixed, "--robot", three_lines.robot, "--setup", three_lines.setup]
+    code, _, err = _cli(capsys, *argv, "--model", "geometric", "--out", tmp_path / "o.toml")
+    assert code == 2 and err.count("\n") == 1 and "rows lie hundreds of noise sigmas off the rest" in err
+    assert "likely cause: samples of different sessions (or of a cell that changed) in one set" in err
     assert not (tmp_path / "o.toml").exists()
