@@ -464,25 +464,9 @@ def fit_check(
     rows = len(model.groups)
     test = noise_test(cal.after.residuals[:rows], cal.after.weights[:rows], int(cal.identified.sum()))
     z = excursions(cal.x, model.x0, model.prior_sigma(), cal.identified)
-    order = [k for k in np.argsort(-z) if z[k] >= EXCURSION_DOUBT]
-    cap = cal.after.status == 0
     wild = _wild(model, cal)
     messages = [wild] if wild else []
-    if test.ratio >= NOISE_DOUBT_RATIO and test.p_value < NOISE_DOUBT_P:
-        p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
-        messages.append(
-            WARNINGS["noise"].format(ratio=test.ratio, chi2=test.chi2, dof=test.dof, p=p, rmse=fit.rmse_mm)
-        )
-    if cap:
-        messages.append(WARNINGS["iteration_cap"].format(nit=cal.after.nit))
-    if order:
-        moves = "; ".join(_excursion(model, cal, z, k) for k in order[:3])
-        files = " and the ".join(
-            name
-            for name, mask in (("robot file", ~model.setup_mask), ("setup", model.setup_mask))
-            if mask[order].any()
-        )
-        messages.append(WARNINGS["excursion"].format(moves=moves, files=files))
+    messages += _doubts(model, cal, test, z, fit)
     refusal = _refusal(model, cal, test, z, fit, robot, (*notes, *([wild] if wild else [])))
     verdict = "inconsistent" if refusal else "doubtful" if messages else "consistent"
     top = int(np.argmax(z))
@@ -493,11 +477,37 @@ def fit_check(
         p_value=test.p_value,
         excursion=model.names[top] if z[top] > 0 else None,
         excursion_sigmas=float(z[top]),
-        iteration_cap=bool(cap),
+        iteration_cap=bool(cal.after.status == 0),
         verdict=verdict,
         refusal=refusal,
     )
     return check, messages
+
+
+def _doubts(
+    model: MeasurementModel, cal: Calibration, test: NoiseTest, z: np.ndarray, fit: ErrorMetrics
+) -> list[str]:
+    """The warnings of a fit that may still stand: a residual beyond the stated noise (the chi-square
+    rejects it and it is ``NOISE_DOUBT_RATIO`` times the noise or more), the iteration cap reached,
+    parameters ``EXCURSION_DOUBT`` prior sigmas or more from their start."""
+    messages = []
+    if test.ratio >= NOISE_DOUBT_RATIO and test.p_value < NOISE_DOUBT_P:
+        p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
+        messages.append(
+            WARNINGS["noise"].format(ratio=test.ratio, chi2=test.chi2, dof=test.dof, p=p, rmse=fit.rmse_mm)
+        )
+    if cal.after.status == 0:
+        messages.append(WARNINGS["iteration_cap"].format(nit=cal.after.nit))
+    order = [k for k in np.argsort(-z) if z[k] >= EXCURSION_DOUBT]
+    if order:
+        moves = "; ".join(_excursion(model, cal, z, k) for k in order[:3])
+        files = " and the ".join(
+            name
+            for name, mask in (("robot file", ~model.setup_mask), ("setup", model.setup_mask))
+            if mask[order].any()
+        )
+        messages.append(WARNINGS["excursion"].format(moves=moves, files=files))
+    return messages
 
 
 def _refusal(
@@ -523,7 +533,7 @@ def _refusal(
     if far.any():
         evidence.append(_excursion(model, cal, z, int(np.argmax(z))))
         if (far & ~model.setup_mask).any():
-            causes.insert(0, f"a wrong robot model (the robot file describes a {robot.name})")
+            causes.insert(0, f"a wrong robot model (the robot file describes the {robot.name})")
         if (far & model.setup_mask).any():
             causes.append("a wrong setup file")
     if not evidence:

@@ -44,7 +44,7 @@ def _outputs(folder):
     "with_session, cause",
     [
         (True, "likely cause: --robot {ur10} replaces the robot embedded in {session}/session.toml: name"),
-        (False, "likely cause: a wrong robot model (the robot file describes a UR10)"),
+        (False, "likely cause: a wrong robot model (the robot file describes the UR10)"),
     ],
 )
 def test_a_jr680_session_calibrated_with_the_ur10_table_is_refused(
