@@ -171,9 +171,8 @@ def robust_fit(
         return result, scale
     history = list(result.history)
     for _ in range(2):
-        loss_scale = options.loss_threshold * scale
         result = levenberg_marquardt(
-            fun, result.x, options=_with(lm, loss=options.loss, loss_scale=loss_scale), **kw
+            fun, result.x, options=_with(lm, loss=options.loss, loss_scale=loss_scale(scale, options)), **kw
         )
         history += result.history
         scale = _scale(result, model)
@@ -351,6 +350,15 @@ def calibrate(
     )
 
 
+def loss_scale(scale: np.ndarray, options: CalibrationOptions) -> np.ndarray:
+    """Where the robust loss starts to down-weight, per residual group (whitened units):
+    ``loss_threshold`` fitted noise scales, never fewer than ``loss_threshold`` stated noises. A row
+    within a few stated sigmas is no gross reading, however much better the instruments read than
+    stated (averaged or quantised readings put the MAD at a fraction of it, and a threshold there
+    flagged clean rows: ``benchmarks/false_alarms.py``)."""
+    return options.loss_threshold * np.maximum(scale, 1.0)
+
+
 def _scale(result: LMResult, model) -> np.ndarray:
     """Robust noise scale per residual group; prior rows are never down-weighted."""
     scale = robust_scale(result.residuals, model.groups)
@@ -446,7 +454,7 @@ def _downweighted_rows(model, result: LMResult, scale, options: CalibrationOptio
     Cauchy loss at 3 sigma: beyond 5.2 noise scales): the gross readings."""
     if options.loss == "linear":
         return np.array([], int)
-    _, w = loss_terms(result.residuals, options.loss_threshold * scale[model.groups], options.loss)
+    _, w = loss_terms(result.residuals, loss_scale(scale, options)[model.groups], options.loss)
     rows = model.rows[w**2 < 0.25]
     return np.unique(rows[rows >= 0])
 

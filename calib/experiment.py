@@ -18,7 +18,7 @@ from calib import ik
 from calib.accuracy import workspace_error_modes
 from calib.calibrate import CalibrationOptions, covariance, fit_setup
 from calib.kinematics import dh_table, tcp_position
-from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.models import GROUP_PRIOR, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 
 MIN_CONDITIONING = 0.04
 """Inverse condition number of the scaled geometric Jacobian below which a pose counts as near a
@@ -126,7 +126,7 @@ def design_model(
     return DrawstringLineModel(samples, setup, frame, dh, tool)
 
 
-def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.ndarray:
+def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray, readings: int = 1) -> np.ndarray:
     """What a calibration on a model's configurations promises over the workspace, from the stated
     noise and the parameters it would identify.
 
@@ -136,6 +136,9 @@ def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.nd
         The planned experiment (``design_model``).
     workspace_q : ndarray, shape (K, 6)
         Configurations the promise is averaged over [rad].
+    readings : int
+        Readings of every instrument averaged per capture: each row's noise is the stated noise
+        over ``sqrt(readings)`` (what was known before measuring, the priors, stays).
 
     Returns
     -------
@@ -143,7 +146,8 @@ def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray) -> np.nd
         Workspace error mode variances [mm^2] (``accuracy.workspace_error_modes``).
     """
     prep = fit_setup(model, CalibrationOptions(loss="linear"))
-    _, robot_cov = covariance(prep.prior, prep.before.x, prep.free)
+    noise = np.where(prep.prior.groups == GROUP_PRIOR, 1.0, 1.0 / np.sqrt(readings))
+    _, robot_cov = covariance(prep.prior, prep.before.x, prep.free, noise=noise)
     x = prep.before.x
     return workspace_error_modes(dh_table(x), model.tcp_in_flange(x), workspace_q, robot_cov, model.terms)
 

@@ -333,32 +333,37 @@ class World:
         found = q[reached]
         return found[np.argmin(np.linalg.norm(found - WORKING_POSE_DEG, axis=1))]
 
-    def measure(self, q_true_deg, line_ids, rng, outlier_fraction: float = 0.0) -> SampleSet:
-        """Instrument readings at true configurations, with noise, resolution and gross readings."""
+    def measure(
+        self, q_true_deg, line_ids, rng, outlier_fraction: float = 0.0, readings: int = 1
+    ) -> SampleSet:
+        """Instrument readings at true configurations, with noise, resolution and gross readings;
+        ``readings`` (K) drawstring and dial readings per capture, each quantised as the device shows
+        it, averaged as ``station sample`` does (the joints read once: the simulated controller's are
+        steady, exact where ``Noise.q_deg`` is 0). A gross reading shifts a whole capture."""
         nz = self.noise
         n = q_true_deg.shape[0]
-        length = self.true_length_mm(q_true_deg) + rng.normal(0, nz.length_mm, n)
-        dial = self.true_dial_mm(q_true_deg, line_ids) + rng.normal(0, nz.dial_mm, n)
+        length = self.true_length_mm(q_true_deg) + rng.normal(0, nz.length_mm, (readings, n))
+        dial = self.true_dial_mm(q_true_deg, line_ids) + rng.normal(0, nz.dial_mm, (readings, n))
         exact = q_true_deg if self.joint_error is None else self.joint_error.readings_deg(q_true_deg)
         q_read = exact + rng.normal(0, nz.q_deg, q_true_deg.shape)
         # Gross readings drawn last, so a set with them shares every other draw with one without.
         outliers = np.sort(rng.choice(n, size=int(round(outlier_fraction * n)), replace=False))
-        length[outliers] += rng.choice([-1.0, 1.0], outliers.size) * rng.uniform(2.0, 5.0, outliers.size)
+        length[:, outliers] += rng.choice([-1.0, 1.0], outliers.size) * rng.uniform(2.0, 5.0, outliers.size)
         return SampleSet(
             q_deg=q_read,
-            length_mm=_quantise(length, nz.length_resolution_mm),
-            dial_mm=_quantise(dial, nz.dial_resolution_mm),
+            length_mm=_quantise(length, nz.length_resolution_mm).mean(axis=0),
+            dial_mm=_quantise(dial, nz.dial_resolution_mm).mean(axis=0),
             line=np.asarray(line_ids),
             q_true_deg=q_true_deg,
             outliers=outliers,
         )
 
     def sample_set(
-        self, n_per_line: int, rng: np.random.Generator, outlier_fraction: float = 0.0
+        self, n_per_line: int, rng: np.random.Generator, outlier_fraction: float = 0.0, readings: int = 1
     ) -> SampleSet:
-        """A measured session: ``n_per_line`` samples on every line."""
+        """A measured session: ``n_per_line`` samples on every line, ``readings`` averaged per capture."""
         q, ids = self.line_configurations(n_per_line, rng)
-        return self.measure(q, ids, rng, outlier_fraction)
+        return self.measure(q, ids, rng, outlier_fraction, readings)
 
     def random_configurations(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """Configurations [deg] (n, 6) uniform within the joint limits (the workspace test set)."""

@@ -43,17 +43,20 @@ def register(sub) -> None:
         "the cross-validated error of the training rows by >= 5 %%; default)",
     )
     p.add_argument("--report", type=Path, help="report JSON to write")
+    p.add_argument(
+        "--plot", type=Path, help="PNG to write: error per sample and per line, predicted workspace error"
+    )
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from station.formats.base import atomic_write, check_writable, toml_text
+    from station.formats.base import Output, check_writable, toml_text, write_outputs
     from station.jobs import calibration
     from station.jobs.report import corrected_table
 
-    check_writable(args.out, "--out")
-    if args.report:
-        check_writable(args.report, "--report")
+    for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
+        if path:
+            check_writable(path, flag)
     inputs = load_inputs(args)
     with parameters_as_flags(FLAGS):
         outcome = calibration.calibrate_samples(
@@ -65,16 +68,26 @@ def run(args) -> int:
             method=args.method,
             select=args.select,
             terms=args.model,
+            notes=inputs.notes,
         )
+    if outcome.report.fit_check.refusal:
+        raise InputError(f"{args.samples}: {outcome.report.fit_check.refusal}; nothing written")
     payload = inputs.setup.payload if inputs.setup is not None else None
     table = corrected_table(
         inputs.robot, outcome.calibration, inputs.samples, args.method, model=args.model, payload=payload
     )
-    atomic_write(args.out, toml_text(table))
+    outputs = [Output.text(args.out, "--out", toml_text(table))]
     if args.report:
-        atomic_write(args.report, json.dumps(outcome.report.as_json(), indent=2) + "\n")
+        report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
+        outputs.append(Output.text(args.report, "--report", report))
+    if args.plot:
+        from station.view.plots import calibration_figure
+
+        data = calibration.residual_rows(outcome)
+        outputs.append(Output(args.plot, "--plot", lambda tmp: calibration_figure(data, tmp)))
+    write_outputs(outputs)
     print(summary(outcome.report))
-    print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+    print("wrote " + ", ".join(str(o.path) for o in outputs))
     return 0
 
 
@@ -87,13 +100,14 @@ class Inputs:
     setup: SetupFile | None
     setup_where: str
     holdout: Samples | None
+    notes: tuple[str, ...] = ()
 
 
 def load_inputs(args) -> Inputs:
     """Samples (CSV or session folder), robot, setup and hold-out from ``args``; the flags override
-    what a session folder embeds."""
+    what a session folder embeds, and ``notes`` say so where they differ from it."""
     from station.formats.samples import load_samples
-    from station.formats.session_folder import load_robot_and_setup
+    from station.formats.session_folder import load_robot_and_setup, replaced_by
 
     session = args.samples if args.samples.is_dir() else None
     if session is None and args.robot is None:
@@ -103,7 +117,11 @@ def load_inputs(args) -> Inputs:
     holdout = load_samples(args.holdout) if args.holdout else None
     if holdout is not None and holdout.kind != samples.kind:
         raise InputError(f"{args.holdout}: a {holdout.kind} set cannot hold out for a {samples.kind} set")
-    return Inputs(samples, robot, setup, setup_where, holdout)
+    notes = ()
+    if session is not None:
+        flags = {"--robot": (args.robot, robot), "--setup": (args.setup, setup)}
+        notes = replaced_by(session, {flag: given for flag, given in flags.items() if given[0]})
+    return Inputs(samples, robot, setup, setup_where, holdout, notes)
 
 
 def summary(report: CalibrationReport) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from calib.methods import ALL_METHODS
@@ -31,7 +32,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from calib.baselines import BaselineOptions
-    from station.formats.base import atomic_write, check_writable
+    from station.formats.base import Output, check_writable, write_outputs
     from station.jobs import comparison
 
     for path, flag in ((args.report, "--report"), (args.plot, "--plot")):
@@ -47,22 +48,22 @@ def run(args) -> int:
             holdout=inputs.holdout,
             methods=args.methods,
             options=BaselineOptions(seed=args.seed),
+            progress=lambda message: print(f"... {message}", file=sys.stderr, flush=True),
         )
-    print(comparison.table(result.report))
+    outputs = []
     if args.report:
-        atomic_write(args.report, json.dumps(result.report, indent=2) + "\n")
-        print(f"wrote {args.report}")
+        outputs.append(Output.text(args.report, "--report", json.dumps(result.report, indent=2) + "\n"))
     if args.plot:
-        _write_plot(result.report, args.plot)
-        print(f"wrote {args.plot}")
+        from station.view.plots import comparison_figure
+
+        outputs.append(
+            Output(args.plot, "--plot", lambda tmp: comparison_figure(result.report, tmp, comparison.LABELS))
+        )
+    write_outputs(outputs)
+    print(comparison.table(result.report))
+    if outputs:
+        print("wrote " + ", ".join(str(o.path) for o in outputs))
     return 0
-
-
-def _write_plot(report: dict, path: Path) -> None:
-    from station.jobs.comparison import LABELS
-    from station.view.plots import comparison_figure, write_png
-
-    write_png(lambda rep, file: comparison_figure(rep, file, LABELS), report, path)
 
 
 def _methods(text: str) -> tuple[str, ...]:

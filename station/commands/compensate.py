@@ -34,7 +34,7 @@ def run(args) -> int:
     import numpy as np
 
     from calib.compensation import CompensationOptions
-    from station.formats.base import atomic_write, check_writable
+    from station.formats.base import Output, check_writable, write_outputs
     from station.formats.program import load_program
     from station.formats.tables import check_same_robot, check_same_tool, load_robot
     from station.jobs import compensate as compensation
@@ -55,9 +55,10 @@ def run(args) -> int:
         nominal_where=str(args.robot),
         options=CompensationOptions(wrist_margin=np.radians(args.wrist_margin_deg)),
     )
-    atomic_write(args.out, outcome.text)
+    outputs = [Output.text(args.out, "--out", outcome.text)]
     if args.report:
-        atomic_write(args.report, json.dumps(outcome.report, indent=2) + "\n")
+        outputs.append(Output.text(args.report, "--report", json.dumps(outcome.report, indent=2) + "\n"))
+    write_outputs(outputs)
     print(compensation.summary(outcome.report))
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0

@@ -99,13 +99,17 @@ def _plan(out: Path, config_path: Path, plan_size: int | None) -> Plan:
     robot = load_robot(runner.resolve(cfg.session.robot_model, config_path))
     setup_path = runner.resolve(cfg.session.setup, config_path)
     setup = load_setup(setup_path)
-    design = planning.design(robot, setup, str(setup_path), n_select=plan_size, suggest=False)
+    readings = cfg.session.readings
+    design = planning.design(
+        robot, setup, str(setup_path), n_select=plan_size, suggest=False, readings=readings
+    )
     atomic_write(out / "plan.csv", design.plan.csv_text())
     promise = design.report["predicted"]["plan"]
     print(
         f"plan:      {len(design.plan)} poses on {len(set(design.plan.line.tolist()))} gauge lines, "
         f"promising {promise['predicted_rmse_mm']:.3f} mm workspace error "
-        f"(95 %: {promise['predicted_rmse_95_mm']:.3f} mm) from single readings -> {out / 'plan.csv'} "
+        f"(95 %: {promise['predicted_rmse_95_mm']:.3f} mm) at the stated noise, {readings} readings per "
+        f"capture -> {out / 'plan.csv'} "
         f"({time.perf_counter() - t0:.1f} s)",
         flush=True,
     )

@@ -31,7 +31,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from station.formats.base import atomic_write, check_writable
+    from station.formats.base import Output, check_writable, write_outputs
     from station.formats.tables import check_same_robot, load_robot
     from station.jobs import export as exporting
 
@@ -46,7 +46,7 @@ def run(args) -> int:
         nominal = load_robot(args.robot)
         check_same_robot(robot, str(args.table), nominal, str(args.robot))
     result = exporting.export(robot, args.fmt, source=str(args.table), nominal=nominal, hash_=args.hash_)
-    atomic_write(args.out, result.text)
+    write_outputs([Output.text(args.out, "--out", result.text)])
     for note in result.notes:
         print(f"note: {note}")
     print(f"wrote {args.out} ({args.fmt})")

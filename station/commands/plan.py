@@ -24,6 +24,13 @@ def register(sub) -> None:
     p.add_argument(
         "--select", type=_positive, metavar="N", help="configurations to keep (default: where O1 flattens)"
     )
+    p.add_argument(
+        "--readings",
+        type=_positive,
+        metavar="K",
+        help="readings averaged per capture, for the promise (default: the session's or the shipped "
+        "station config's [session] readings, 5)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -32,7 +39,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from station.formats.base import atomic_write, check_writable
+    from station.formats.base import Output, check_writable, write_outputs
     from station.jobs import planning
 
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
@@ -48,17 +55,19 @@ def run(args) -> int:
             n_select=args.select,
             seed=args.seed,
             suggest=not args.no_suggest,
+            readings=_readings(args),
             progress=lambda message: print(f"... {message}", file=sys.stderr, flush=True),
         )
-    atomic_write(args.out, design.plan.csv_text())
+    outputs = [Output.text(args.out, "--out", design.plan.csv_text())]
     if args.report:
-        atomic_write(args.report, json.dumps(design.report, indent=2) + "\n")
+        outputs.append(Output.text(args.report, "--report", json.dumps(design.report, indent=2) + "\n"))
     if args.plot:
-        from station.view.plots import plan_figure, write_png
+        from station.view.plots import plan_figure
 
-        write_png(plan_figure, design.report, args.plot)
+        outputs.append(Output(args.plot, "--plot", lambda tmp: plan_figure(design.report, tmp)))
+    write_outputs(outputs)
     print(planning.summary(design))
-    print("wrote " + ", ".join(str(p) for p in (args.out, args.report, args.plot) if p))
+    print("wrote " + ", ".join(str(o.path) for o in outputs))
     return 0
 
 
@@ -70,6 +79,23 @@ def _inputs(args):
     if robot is None or setup is None:
         raise InputError("station plan needs --robot and --setup (or a session folder)")
     return robot, setup, where
+
+
+def _readings(args) -> int:
+    """``--readings``, else ``[session] readings`` of the session's station config, else of the
+    shipped one: what a capture will average."""
+    import configs
+    from station.config import load_station_config, station_config
+    from station.formats.base import read_toml
+
+    if args.readings is not None:
+        return args.readings
+    if args.session is not None:
+        where = args.session / "session.toml"
+        station = read_toml(where).get("station")
+        if station is not None:
+            return station_config(station, f"{where} [station]").session.readings
+    return load_station_config(configs.path("station.toml")).session.readings
 
 
 def _positive(text: str) -> int:

@@ -15,6 +15,8 @@ import math
 import os
 import sys
 import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
@@ -126,21 +128,54 @@ def id_cell(cell: str, what: str) -> int:
 def atomic_write(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` via a temporary file in the same folder and a rename."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = _temporary(path)
     try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp makes it 0600; results are for others to read
+        _write_text(tmp, text)
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
+@dataclass(frozen=True)
+class Output:
+    """One result file of a command: its ``path``, the ``flag`` that named it, and ``write``, which
+    writes the content to the path it is given (a temporary file beside ``path``)."""
+
+    path: Path
+    flag: str
+    write: Callable[[Path], None]
+
+    @classmethod
+    def text(cls, path: Path, flag: str, text: str) -> Output:
+        return cls(Path(path), flag, lambda tmp: _write_text(tmp, text))
+
+
+def write_outputs(outputs: Sequence[Output]) -> None:
+    """Every output to a temporary file beside it, then all renamed into place: a command leaves
+    all its results or none (a file already there stays as it was). A failure (a folder that
+    cannot be written after all, a full disk) is bad input naming the output, with nothing written."""
+    temps: list[Path] = []
+    try:
+        for out in outputs:
+            temps.append(_temporary(out.path))
+            out.write(temps[-1])
+            os.chmod(temps[-1], 0o644)  # mkstemp makes it 0600; results are for others to read
+        for out, tmp in zip(outputs, temps, strict=True):
+            os.replace(tmp, out.path)
+    except OSError as exc:
+        names = ", ".join(str(o.path) for o in outputs)
+        raise InputError(
+            f"{out.flag} {out.path}: cannot write ({exc.strerror or exc}); nothing written ({names})"
+        ) from None
+    finally:
+        for tmp in temps:
+            tmp.unlink(missing_ok=True)
+
+
 def check_writable(path: Path, what: str) -> Path:
-    """Fail early (InputError) if ``path`` cannot be written: missing or read-only folder."""
+    """Fail early (InputError) if ``path`` cannot be written: missing or read-only folder, or one
+    where a file cannot be created (tried: permissions are not all, e.g. a read-only mount)."""
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
@@ -149,7 +184,26 @@ def check_writable(path: Path, what: str) -> Path:
         raise InputError(f"{what} {path}: folder {folder} is not writable")
     if path.is_dir():
         raise InputError(f"{what} {path}: is a directory")
+    try:
+        _temporary(path).unlink()
+    except OSError as exc:
+        raise InputError(f"{what} {path}: cannot write in folder {folder} ({exc.strerror or exc})") from None
     return path
+
+
+def _temporary(path: Path) -> Path:
+    """A new empty file beside ``path``, hidden, ending like it (matplotlib picks a format by it)."""
+    fd, tmp = tempfile.mkstemp(dir=Path(path).parent, prefix=f".{Path(path).name}.", suffix=Path(path).suffix)
+    os.close(fd)
+    return Path(tmp)
+
+
+def _write_text(path: Path, text: str) -> None:
+    with open(path, "w") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.chmod(path, 0o644)
 
 
 def toml_text(data: dict) -> str:

@@ -268,6 +268,35 @@ def load_robot_and_setup(session: Path | None, robot: Path | None, setup: Path |
     return robot_file, setup_file, where, samples
 
 
+def replaced_by(session: Path, given: dict[str, tuple[Path, RobotFile | SetupFile]]) -> tuple[str, ...]:
+    """What flags replace of the robot and setup a ``session`` folder embeds: ``given`` maps a flag
+    (``--robot``, ``--setup``) to its file and what it holds; one note per file that differs,
+    naming the first difference (``--robot R replaces the robot embedded in S/session.toml: name
+    'HSR-JR680' -> 'UR10'``)."""
+    robot, setup, _ = load_session(session)
+    embedded = {"--robot": ("robot", robot), "--setup": ("setup", setup)}
+    where, notes = Path(session) / "session.toml", []
+    for flag, (path, new) in given.items():
+        what, old = embedded[flag]
+        difference = first_difference(old.model_dump(), new.model_dump())
+        if difference:
+            notes.append(f"{flag} {path} replaces the {what} embedded in {where}: {difference}")
+    return tuple(notes)
+
+
+def first_difference(a, b, key: str = "") -> str | None:
+    """Where two plain values (dicts, lists, numbers, text) first differ, as ``key old -> new``
+    (``joints.1.a_mm 900.0 -> 612.0``); None where they are equal."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        keys = [*a, *(k for k in b if k not in a)]
+        pairs = [(a.get(k), b.get(k), f"{key}.{k}" if key else str(k)) for k in keys]
+    elif isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        pairs = [(x, y, f"{key}.{i}") for i, (x, y) in enumerate(zip(a, b, strict=True))]
+    else:
+        return None if a == b else f"{key} {a!r} -> {b!r}"
+    return next((d for x, y, k in pairs if (d := first_difference(x, y, k))), None)
+
+
 def load_session(folder: Path) -> tuple[RobotFile, SetupFile, Path]:
     """Robot table, setup and samples path embedded in a session folder's ``session.toml``."""
     folder = Path(folder)

@@ -24,10 +24,12 @@ from calib.calibrate import (
     WithPrior,
     calibrate,
     covariance,
+    display_unit,
     fit_setup,
     row_noise,
 )
-from calib.kinematics import dh_table
+from calib.consistency import NoiseTest, excursions, noise_test, wild_rows
+from calib.kinematics import N_DH, dh_table
 from calib.methods import ALL_METHODS, BASELINES
 from calib.metrics import error_metrics
 from calib.models import (
@@ -50,6 +52,7 @@ from station.jobs.report import (
     CrossValidationRow,
     ErrorMetrics,
     Estimate,
+    FitCheck,
     FitMetrics,
     HeldParameter,
     Selection,
@@ -63,6 +66,22 @@ WORKSPACE_WARNING_RATIO, WORKSPACE_WARNING_FLOOR_MM = 10.0, 0.5
 """Warn when the predicted workspace error exceeds both this many times the training fit and this."""
 SHORT_OF_OPTIMUM_RATIO = 1.5
 """Warn when a method's whitened residual RMS exceeds LMLC's by this factor."""
+NOISE_DOUBT_RATIO, NOISE_DOUBT_P = 2.0, 1e-3
+"""Warn when the kept rows' residual exceeds this many stated noises and the chi-square test rejects
+the stated noise at this level. Within 2x is the noise stated loosely (on a simulated cell the
+joint-reading noise seen through the arm lifts the drawstring's residual to about 1.15x)."""
+OVERWHELMING_RATIO = 100.0
+"""A residual this many times the stated noise: the rows are not this robot's and setup's (a JR680
+session fitted with the UR10's table leaves 700x, a real UR10 on its own table 5x)."""
+EXCURSION_DOUBT, EXCURSION_OVERWHELMING = 10.0, 100.0
+"""Prior sigmas (a table parameter's tolerance, the setup's stated uncertainty) a parameter may move
+before a warning, and before the fit is refused."""
+WILD_FACTOR = 100.0
+"""A row whose error before calibration is this many times the median row's is a wild reading (on
+simulated and real cells the largest row is 2-8 times the median, whatever the table)."""
+MIXED_FRACTION = 0.2
+"""Down-weighted rows beyond this fraction, with all rows' residual beyond ``OVERWHELMING_RATIO``:
+not a few gross readings but rows of another cell."""
 
 MESSAGES = {
     "method": "{method} {value!r}: must be one of {choices}",
@@ -84,6 +103,22 @@ WARNINGS = {
         "{best:.2f} for lmlc): its table is worse than the data allows and the predicted workspace "
         "error does not apply to it"
     ),
+    "noise": (
+        "the fit leaves residuals {ratio:.1f} times the stated noise (chi-square {chi2:.4g} on {dof} "
+        "degrees of freedom, p {p}): the instruments read worse than stated, or the model misses an "
+        "error the rows show; then the predicted workspace error, which counts the parameters' "
+        "uncertainty, leaves out the {rmse:.3f} mm the model does not explain"
+    ),
+    "iteration_cap": (
+        "the solver stopped at its cap of {nit} iterations before converging: the table may be short "
+        "of the optimum"
+    ),
+    "excursion": "{moves}: far beyond what was known before measuring; check the {files}",
+    "wild": (
+        "{rows}: error before calibration up to {ratio:.0f} times the median row's ({worst:.4g} mm "
+        "against {median:.3g} mm): a wild reading; check {these}"
+    ),
+    "refusal": "these samples do not fit this robot and setup: {evidence}; likely cause: {cause}",
 }
 
 
@@ -118,14 +153,17 @@ def calibrate_samples(
     method: str = "lmlc",
     select: int | None = None,
     terms: str = "geometric",
+    notes: tuple[str, ...] = (),
 ) -> CalibrationOutcome:
     """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows.
 
     ``method`` is one of ``METHODS``; ``mcs-lmlc`` first selects ``select`` configurations (default:
     where O1 flattens). ``terms`` is one of ``station.jobs.terms.MODELS``: the joint-space terms
     fitted beside the table (``auto`` chooses them by cross-validation on ``samples`` alone).
-    Raises ``InputError`` for too few samples and ``ParameterError`` for a bad ``method``,
-    ``select``, ``terms`` or a missing ``setup``.
+    ``notes`` (what the caller noticed of the inputs, e.g. a flag replacing a session's robot) lead
+    the report's warnings and, for a fit refused, name the likely cause. Raises ``InputError`` for
+    too few samples and ``ParameterError`` for a bad ``method``, ``select``, ``terms`` or a missing
+    ``setup``.
     """
     t0 = time.perf_counter()
     model = build_model(samples, robot, setup, setup_where)
@@ -136,7 +174,7 @@ def calibrate_samples(
     choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
     fit = SOLVERS[method](choice, method, select)
     elapsed = time.perf_counter() - t0
-    report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms)
+    report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms, notes)
     return CalibrationOutcome(report, fit.calibration, choice.model)
 
 
@@ -304,11 +342,14 @@ def _report(
     fit: MethodFit,
     elapsed: float,
     terms: str,
+    notes: tuple[str, ...],
 ) -> CalibrationReport:
     model, cal = choice.model, fit.calibration
     after = metrics(model, hold_model, cal.x)
     workspace = predicted_workspace(robot, cal, model)
-    messages = [choice.warning] if choice.warning else []
+    check, doubts = fit_check(model, cal, after.train, robot, notes)
+    messages = [*notes, *doubts]
+    messages += [choice.warning] if choice.warning else []
     messages += workspace_warnings(model, cal.x, after.train, workspace)
     messages += short_of_optimum(model, cal.x, fit.optimum, method)
     held = {**choice.held, **cal.held}
@@ -330,7 +371,27 @@ def _report(
         model=terms,
         terms=_parameters(cal, model.terms.names),
         cross_validation=None if choice.selection is None else _cross_validation(choice.selection),
+        fit_check=check,
     )
+
+
+def residual_rows(outcome: CalibrationOutcome) -> dict:
+    """What ``station calibrate --plot`` draws (JSON-ready): each training row's error [mm] before
+    and after with its placement (gauge line), the down-weighted rows, the metrics before and after
+    and the predicted workspace error."""
+    model, cal, report = outcome.model, outcome.calibration, outcome.report
+    return {
+        "kind": report.kind,
+        "rows": {
+            "before_mm": model.row_error_mm(cal.before.x).tolist(),
+            "after_mm": model.row_error_mm(cal.x).tolist(),
+            "placement": model.placement_ids().tolist(),
+        },
+        "downweighted": list(report.downweighted),
+        "before": report.before.as_json(),
+        "after": report.after.as_json(),
+        "workspace": dataclasses.asdict(report.workspace),
+    }
 
 
 def metrics(model: MeasurementModel, hold_model: MeasurementModel | None, x: np.ndarray) -> FitMetrics:
@@ -390,6 +451,128 @@ def short_of_optimum(
     if rms <= SHORT_OF_OPTIMUM_RATIO * best:
         return []
     return [WARNINGS["short_of_optimum"].format(method=method, rms=rms, best=best)]
+
+
+def fit_check(
+    model: MeasurementModel, cal: Calibration, fit: ErrorMetrics, robot: RobotFile, notes: tuple[str, ...]
+) -> tuple[FitCheck, list[str]]:
+    """How the fit agrees with the stated noise and tolerances, and the warnings it calls for: a
+    residual beyond the noise (chi-square), the iteration cap, a parameter far beyond its prior.
+    Overwhelming evidence (a residual hundreds of times the noise, a fifth of the rows that far
+    off, a parameter moved a hundred tolerances) makes the verdict ``inconsistent``, its
+    ``refusal`` naming the likely cause (the first of ``notes``, else a wild reading, else what the
+    evidence points at)."""
+    rows = len(model.groups)
+    test = noise_test(cal.after.residuals[:rows], cal.after.weights[:rows], int(cal.identified.sum()))
+    z = excursions(cal.x, model.x0, model.prior_sigma(), cal.identified)
+    wild = _wild(model, cal)
+    messages = [wild] if wild else []
+    messages += _doubts(model, cal, test, z, fit)
+    refusal = _refusal(model, cal, test, z, fit, robot, (*notes, *([wild] if wild else [])))
+    verdict = "inconsistent" if refusal else "doubtful" if messages else "consistent"
+    top = int(np.argmax(z))
+    check = FitCheck(
+        noise_ratio=test.ratio,
+        chi2=test.chi2,
+        dof=test.dof,
+        p_value=test.p_value,
+        excursion=model.names[top] if z[top] > 0 else None,
+        excursion_sigmas=float(z[top]),
+        iteration_cap=bool(cal.after.status == 0),
+        verdict=verdict,
+        refusal=refusal,
+    )
+    return check, messages
+
+
+def _doubts(
+    model: MeasurementModel, cal: Calibration, test: NoiseTest, z: np.ndarray, fit: ErrorMetrics
+) -> list[str]:
+    """The warnings of a fit that may still stand: a residual beyond the stated noise (the chi-square
+    rejects it and it is ``NOISE_DOUBT_RATIO`` times the noise or more), the iteration cap reached,
+    parameters ``EXCURSION_DOUBT`` prior sigmas or more from their start."""
+    messages = []
+    if test.ratio >= NOISE_DOUBT_RATIO and test.p_value < NOISE_DOUBT_P:
+        p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
+        messages.append(
+            WARNINGS["noise"].format(ratio=test.ratio, chi2=test.chi2, dof=test.dof, p=p, rmse=fit.rmse_mm)
+        )
+    if cal.after.status == 0:
+        messages.append(WARNINGS["iteration_cap"].format(nit=cal.after.nit))
+    order = [k for k in np.argsort(-z) if z[k] >= EXCURSION_DOUBT]
+    if order:
+        moves = "; ".join(_excursion(model, cal, z, k) for k in order[:3])
+        files = " and the ".join(
+            name
+            for name, mask in (("robot file", ~model.setup_mask), ("setup", model.setup_mask))
+            if mask[order].any()
+        )
+        messages.append(WARNINGS["excursion"].format(moves=moves, files=files))
+    return messages
+
+
+def _refusal(
+    model: MeasurementModel,
+    cal: Calibration,
+    test: NoiseTest,
+    z: np.ndarray,
+    fit: ErrorMetrics,
+    robot: RobotFile,
+    notes: tuple[str, ...],
+) -> str | None:
+    """The one line refusing a fit the evidence says is not of this robot and setup; None if not."""
+    n, k = len(model.samples), len(cal.downweighted)
+    far = z >= EXCURSION_OVERWHELMING
+    evidence, causes = [], []
+    if test.ratio >= OVERWHELMING_RATIO:
+        evidence.append(
+            f"the residual is {test.ratio:.0f} times the stated noise (train RMSE {fit.rmse_mm:.3f} mm)"
+        )
+    if k >= MIXED_FRACTION * n and test.ratio_all >= OVERWHELMING_RATIO:
+        evidence.append(f"{k} of {n} rows lie hundreds of noise sigmas off the rest")
+        causes.append("samples of different sessions (or of a cell that changed) in one set")
+    if far.any():
+        evidence.append(_excursion(model, cal, z, int(np.argmax(z))))
+        if (far & ~model.setup_mask).any():
+            causes.insert(0, f"a wrong robot model (the robot file describes the {robot.name})")
+        if (far & model.setup_mask).any():
+            causes.append("a wrong setup file")
+    if not evidence:
+        return None
+    cause = notes[0] if notes else causes[0] if causes else "a wrong robot model or setup, or sessions mixed"
+    return WARNINGS["refusal"].format(evidence="; ".join(evidence), cause=cause)
+
+
+def _wild(model: MeasurementModel, cal: Calibration) -> str | None:
+    """The warning naming wild rows (``WILD_FACTOR``), judged before calibration; None if none."""
+    errors = np.abs(model.row_error_mm(cal.before.x))
+    rows = wild_rows(errors, WILD_FACTOR)
+    if rows.size == 0:
+        return None
+    median = float(np.median(errors))
+    return WARNINGS["wild"].format(
+        rows=("row " if rows.size == 1 else "rows ") + ", ".join(str(r) for r in rows[:10]),
+        ratio=errors[rows].max() / median,
+        worst=errors[rows].max(),
+        median=median,
+        these="that row" if rows.size == 1 else "these rows",
+    )
+
+
+def _excursion(model: MeasurementModel, cal: Calibration, z: np.ndarray, k: int) -> str:
+    """``J5.d_mm moved 1262 mm from the robot file's value, 1262 times its tolerance (1 mm)``."""
+    name = model.names[k]
+    factor, unit = display_unit(name)
+    delta = (cal.x[k] - model.x0[k]) * factor
+    if model.setup_mask[k]:
+        source, what = "setup's", "stated uncertainty"
+    else:
+        source, what = "robot file's", "tolerance" if k < N_DH else "prior"
+    sigma = abs(delta) / z[k]
+    return (
+        f"{name} moved {delta:+.4g} {unit} from the {source} value, "
+        f"{z[k]:.0f} times its {what} ({sigma:.3g} {unit})"
+    )
 
 
 def _selection(mcs: MCSResult) -> Selection:

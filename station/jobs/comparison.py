@@ -54,19 +54,25 @@ def compare(
     holdout: Samples | None = None,
     methods: tuple[str, ...] = COMPARED,
     options: BaselineOptions | None = None,
+    progress=lambda message: None,
 ) -> Comparison:
-    """Run ``methods`` on ``samples`` from the common start; metrics on training and hold-out rows."""
+    """Run ``methods`` on ``samples`` from the common start; metrics on training and hold-out rows.
+    ``progress(message)`` hears of the common start and of each method as it finishes."""
     options = options or BaselineOptions()
     model = build_model(samples, robot, setup, setup_where)
     check_enough(model, samples.path)
+    t0 = time.perf_counter()
     start = calibrate(model, options.calibration)
+    progress(f"common start (setup fit, identification): {time.perf_counter() - t0:.1f} s")
     hold_model = holdout_model(model, holdout)
-    results = [
-        _mcs_lmlc(model, options)
-        if m == "mcs-lmlc"
-        else run_method(m, model, start.before.x, start.identified, options)
-        for m in methods
-    ]
+    results = []
+    for k, m in enumerate(methods, 1):
+        if m == "mcs-lmlc":
+            results.append(_mcs_lmlc(model, options))
+        else:
+            results.append(run_method(m, model, start.before.x, start.identified, options))
+        fit = metrics(model, None, results[-1].x).train.rmse_mm
+        progress(f"{LABELS[m]} ({k}/{len(methods)}): {results[-1].time_s:.2f} s, training RMSE {fit:.4f} mm")
     free = np.asarray(model.names)[start.identified]
     report = {
         "kind": model.kind,

@@ -2,7 +2,9 @@
 setup, MCS to choose the plan, and what each choice promises over the workspace.
 
 All promises are expectations from the nominal robot and the instruments' stated noise
-(``calib.experiment``): before anything is measured, nothing else is known.
+(``calib.experiment``), averaged over the readings a capture takes (``[session] readings``): before
+anything is measured, nothing else is known. A session then predicts from the noise its fit finds:
+lower where the instruments read better than stated.
 """
 
 from __future__ import annotations
@@ -90,10 +92,12 @@ def design(
     n_select: int | None = None,
     seed: int = 0,
     suggest: bool = True,
+    readings: int = 1,
     progress=lambda message: None,
 ) -> Design:
     """Candidates on every line, the MCS plan, its promise next to all candidates', every subset
-    of the lines, and (``suggest``) the best next line placements."""
+    of the lines, and (``suggest``) the best next line placements; every promise with ``readings``
+    readings averaged per capture."""
     lines = placements(setup, where)
     ds_setup = drawstring_setup(setup, where)
     dh, tool = robot_arrays(robot)
@@ -120,9 +124,10 @@ def design(
     mcs = select_measurements(model, n_select)
     rows = np.sort(mcs.selection.rows)
     workspace_q = rng.uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
-    plan_modes = expected_modes(model.with_samples(model.samples.subset(rows)), workspace_q)
-    all_modes = expected_modes(model, workspace_q)
+    plan_modes = expected_modes(model.with_samples(model.samples.subset(rows)), workspace_q, readings)
+    all_modes = expected_modes(model, workspace_q, readings)
     report = {
+        "readings": readings,
         "candidates": {str(lid): len(q) for lid, q in q_line.items()},
         "selection": {
             "n": int(len(rows)),
@@ -134,7 +139,7 @@ def design(
         "placements": [
             {
                 "lines": [int(i) for i in subset],
-                **_promise(expected_modes(_on(model, line_all, subset), workspace_q)),
+                **_promise(expected_modes(_on(model, line_all, subset), workspace_q, readings)),
             }
             for subset in _subsets(list(q_line))
         ],
@@ -143,7 +148,7 @@ def design(
     if suggest:
         progress("trying further gauge-line placements")
         report["next"] = _next_placements(
-            dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng
+            dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, readings=readings
         )
     plan = Plan(np.arange(len(rows)), line_all[rows], np.degrees(q_all[rows]))
     return Design(plan, report)
@@ -188,7 +193,9 @@ def summary(design_: Design) -> str:
     out = [
         f"reachable candidates: {cand}",
         f"O1 flattens at N = {r['selection']['n']}; chose {r['selection']['n']} by simulated annealing",
-        "predicted workspace error (RMS over random poses, after a base re-fit):",
+        f"predicted workspace error (RMS over random poses, after a base re-fit), from the setup's "
+        f"stated noise with {_readings(r['readings'])} (a session predicts from the noise its fit "
+        "finds: lower where the instruments read better than stated):",
         f"  plan ({r['selection']['n']} poses)  {_fmt(plan)}",
         f"  all {sum(r['candidates'].values())} candidates  {_fmt(everything)}",
         "gauge-line placements (all candidates on the lines named):",
@@ -202,6 +209,11 @@ def summary(design_: Design) -> str:
             f"tool approach {vector_text(nxt['approach'], 2)} -> {_fmt(nxt)} with the present lines"
         )
     return "\n".join(out)
+
+
+def _readings(k: int) -> str:
+    """How the promise takes the captures: ``5 readings averaged per capture``."""
+    return "single readings" if k == 1 else f"{k} readings averaged per capture"
 
 
 def _promise(modes: np.ndarray) -> dict:
@@ -220,7 +232,9 @@ def _subsets(ids: list[int], most: int = 7) -> list[tuple[int, ...]]:
     return [s for k in range(1, len(ids) + 1) for s in itertools.combinations(ids, k)][:most]
 
 
-def _next_placements(dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, keep: int = 3):
+def _next_placements(
+    dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, keep: int = 3, readings: int = 1
+):
     """Candidate further lines ranked by the predicted workspace error of all lines together:
     through the TCP of random well-conditioned poses in the present lines' working area (their
     height range, +-300 mm; their distance from the base axis, +-300 mm), along each base axis
@@ -267,7 +281,7 @@ def _next_placements(dh, tool, limits, lines, q_all, line_all, ds_setup, workspa
                     "direction": direction.tolist(),
                     "approach": approach.tolist(),
                     "length_mm": 400.0,
-                    **_promise(expected_modes(model, workspace_q)),
+                    **_promise(expected_modes(model, workspace_q, readings)),
                 }
             )
     return sorted(found, key=lambda f: f["predicted_rmse_mm"])[:keep]

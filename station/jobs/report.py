@@ -67,6 +67,26 @@ class WorkspacePrediction:
 
 
 @dataclass(frozen=True)
+class FitCheck:
+    """Does the fit agree with what was stated before measuring (``calib.consistency``)?
+    ``noise_ratio``: the residual of the rows the robust loss kept, in stated noises, with its
+    chi-square (``chi2`` on ``dof`` degrees of freedom, ``p_value``); ``excursion``: the parameter
+    that moved most from its start, by ``excursion_sigmas`` of its prior (tolerance); whether the
+    solver stopped at its ``iteration_cap``; the ``verdict``: ``consistent``, ``doubtful`` (the
+    report warns) or ``inconsistent`` (``station calibrate`` refuses the result with ``refusal``)."""
+
+    noise_ratio: float
+    chi2: float
+    dof: int
+    p_value: float
+    excursion: str | None
+    excursion_sigmas: float
+    iteration_cap: bool
+    verdict: str
+    refusal: str | None = None
+
+
+@dataclass(frozen=True)
 class Selection:
     """The configurations MCS chose: training ``rows`` (0-based), their number ``n`` and the
     observability ``index`` with its ``value``."""
@@ -106,7 +126,8 @@ class CalibrationReport:
     estimate (``calib.models.DrawstringSetupEstimate`` or ``calib.position.TrackerSetupEstimate``),
     whose fields the JSON spreads at the top level. Beyond the contract's keys: ``model`` (the
     ``--model``), ``terms`` (the identified joint-space terms, as ``parameters``) and, for
-    ``--model auto``, ``cross_validation``."""
+    ``--model auto``, ``cross_validation``; ``fit_check``, how the fit agrees with the stated
+    noise and tolerances."""
 
     kind: str
     method: str
@@ -125,6 +146,7 @@ class CalibrationReport:
     model: str = "geometric"
     terms: dict[str, Estimate] = dataclasses.field(default_factory=dict)
     cross_validation: CrossValidation | None = None
+    fit_check: FitCheck | None = None
 
     def as_json(self) -> dict:
         """The contract's REPORT.json object (keys in the contract's order, plain JSON values)."""
@@ -149,6 +171,8 @@ class CalibrationReport:
         out["terms"] = {name: dataclasses.asdict(e) for name, e in self.terms.items()}
         if self.cross_validation is not None:
             out["cross_validation"] = _plain(dataclasses.asdict(self.cross_validation))
+        if self.fit_check is not None:
+            out["fit_check"] = dataclasses.asdict(self.fit_check)
         return out
 
 

@@ -1,12 +1,14 @@
 """Figures as PNG files (matplotlib, no display needed): the method comparison of the paper's
-Fig. 2 (accuracy bars) and Fig. 3 (training curves, time), and a measurement plan (Fig. 5a)."""
+Fig. 2 (accuracy bars) and Fig. 3 (training curves, time), a measurement plan (Fig. 5a) and a
+calibration's residuals with its predicted workspace error. Each draws into the file it is given
+(``station.formats.base.write_outputs`` gives a temporary one and renames it with the others)."""
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the file-only backend)
@@ -66,28 +68,71 @@ def plan_figure(report: dict, path: Path) -> None:
     ax_index.legend()
     rows = [("+".join(map(str, p["lines"])), p) for p in report["placements"]]
     rows += [(f"+next {k + 1}", p) for k, p in enumerate(report["next"])]
-    xs = range(len(rows))
-    ax_lines.bar(xs, [p["predicted_rmse_mm"] for _, p in rows], label="expected")
-    ax_lines.scatter(
-        xs, [p["predicted_rmse_95_mm"] for _, p in rows], color="k", marker="_", s=400, label="95 %"
-    )
-    ax_lines.set_xticks(list(xs), [name for name, _ in rows], rotation=45)
-    ax_lines.set_yscale("log")
-    ax_lines.set_ylabel("predicted workspace error [mm RMS]")
+    _bars_with_bound(ax_lines, rows, "predicted workspace error [mm RMS]")
     ax_lines.set_title("(b) gauge-line placements")
-    ax_lines.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def write_png(draw, report: dict, path: Path) -> None:
-    """``draw(report, file)`` into a temporary file beside ``path``, then rename: a failed plot
-    leaves no half file."""
-    with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".png", delete=False) as tmp:
-        tmp_path = Path(tmp.name)
-    try:
-        draw(report, tmp_path)
-        tmp_path.replace(path)
-    finally:
-        tmp_path.unlink(missing_ok=True)
+def calibration_figure(data: dict, path: Path) -> None:
+    """Three panels from a calibration (``station.jobs.calibration.residual_rows``): (a) each
+    sample row's error [mm] before and after, down-weighted rows marked; (b) the RMS error per
+    placement (gauge line) before and after; (c) the RMS error of the training and hold-out rows
+    before and after next to the predicted workspace error and its 95 % bound."""
+    fig, (ax_rows, ax_lines, ax_ws) = plt.subplots(1, 3, figsize=(16, 4.8), width_ratios=(2, 1, 1))
+    rows = data["rows"]
+    before, after, placement = (np.abs(rows[k]) for k in ("before_mm", "after_mm", "placement"))
+    index = np.arange(len(before))
+    ax_rows.semilogy(index, before, ".", color="0.6", label="before (nominal table)")
+    ax_rows.semilogy(index, after, ".", color="C0", label="after")
+    down = np.asarray(data["downweighted"], int)
+    if down.size:
+        ax_rows.semilogy(down, after[down], "x", color="C3", markersize=9, label="down-weighted")
+    ax_rows.set_xlabel("sample row")
+    ax_rows.set_ylabel(f"|{data['kind']} error| [mm]")
+    ax_rows.set_title("(a) error per sample")
+    ax_rows.legend(fontsize=8)
+    ids = np.unique(np.asarray(rows["placement"]))
+    width, lowest = 0.4, np.inf
+    for k, (errors, label, colour) in enumerate(((before, "before", "0.6"), (after, "after", "C0"))):
+        rms = [np.sqrt(np.mean(errors[placement == i] ** 2)) for i in ids]
+        ax_lines.bar(np.arange(len(ids)) + (k - 0.5) * width, rms, width, color=colour, label=label)
+        lowest = min(lowest, *rms)
+    names = [f"line {i}" if i >= 0 else "no line" for i in ids] if data["kind"] == "drawstring" else ["all"]
+    ax_lines.set_xticks(range(len(ids)), names)
+    ax_lines.set_yscale("log")
+    ax_lines.set_ylim(bottom=lowest / 3)  # a log bar's foot is arbitrary: half a decade below the least
+    ax_lines.set_ylabel("RMS error [mm]")
+    ax_lines.set_title("(b) error per placement")
+    ax_lines.legend(fontsize=8)
+    bars = [
+        (f"{part} {when}", {"predicted_rmse_mm": data[when][part]["rmse_mm"]})
+        for part in ("train", "holdout")
+        for when in ("before", "after")
+        if part in data[when]
+    ]
+    bars.append(("workspace predicted", data["workspace"]))
+    colours = [{"before": "0.6", "after": "C0"}.get(name.split()[-1], "C1") for name, _ in bars]
+    _bars_with_bound(ax_ws, bars, "RMS error [mm]", colours)
+    ax_ws.set_title("(c) rows fitted, workspace predicted")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _bars_with_bound(ax, rows: list[tuple[str, dict]], ylabel: str, colours: list | None = None) -> None:
+    """One bar per ``(label, promise)`` of its ``predicted_rmse_mm`` [mm] (in ``colours`` where
+    given, else labelled "expected"), a black mark at its ``predicted_rmse_95_mm`` where it has
+    one; log scale."""
+    xs = range(len(rows))
+    heights = [p["predicted_rmse_mm"] for _, p in rows]
+    ax.bar(xs, heights, color=colours, label=None if colours else "expected")
+    bounds = [(x, p["predicted_rmse_95_mm"]) for x, (_, p) in enumerate(rows) if "predicted_rmse_95_mm" in p]
+    if bounds:
+        ax.scatter(*zip(*bounds, strict=True), color="k", marker="_", s=400, label="95 %")
+    ax.set_xticks(list(xs), [name for name, _ in rows], rotation=45)
+    ax.set_yscale("log")
+    ax.set_ylim(bottom=min(heights) / 3)
+    ax.set_ylabel(ylabel)
+    ax.legend()

@@ -155,3 +155,26 @@ def test_prediction_holds_where_the_instruments_read_better_than_stated():
     true = float(np.sqrt(np.mean(aligned_errors(p, world.true_tcp_mm(q)) ** 2)))
     assert out.calibration.scale[1] < 0.3  # the line contacts read far better than stated
     assert true / 2 < out.report.workspace.predicted_rmse_mm < 2 * true
+
+
+def test_clean_averaged_captures_downweight_nothing_while_a_gross_reading_still_is():
+    """Captures as the simulated station takes them (5 drawstring and dial readings averaged, each
+    in 1 um steps, the joints exact) read far better than the setup states. The robust loss's scale,
+    the MAD of those residuals, once fell to a fraction of the stated noise and called clean rows
+    gross (2 of these 60). Floored at the stated noise, a row is down-weighted only beyond 5.2
+    stated sigmas (Cauchy at 3 sigma, weight below a quarter): a clean row, at most a few sigmas
+    off, never; a reading 10 stated sigmas off (0.2 mm) still."""
+    world = dataclasses.replace(World.create(0, n_lines=1), noise=Noise(q_deg=0.0))
+    rng = np.random.default_rng(1000)
+    s = world.sample_set(60, rng, readings=5)
+    setup = SetupFile.model_validate(setup_dict(world, rng))
+    robot = load_robot(configs.path("robots/hsr_jr680.toml"))
+
+    def downweighted(length_mm):
+        samples = Samples("averaged", "drawstring", s.q_deg, length_mm, s.dial_mm, s.line)
+        return calibration.calibrate_samples(samples, robot, setup).report.downweighted
+
+    assert downweighted(s.length_mm) == ()
+    gross = s.length_mm.copy()
+    gross[17] += 10 * setup.drawstring.sigma_mm
+    assert downweighted(gross) == (17,)

@@ -28,7 +28,8 @@ ROBOT, SETUP = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.t
 @pytest.fixture(scope="module")
 def planned(tmp_path_factory):
     out = tmp_path_factory.mktemp("plan")
-    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--out", str(out / "plan.csv")]
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--readings", "1"]
+    argv += ["--out", str(out / "plan.csv")]
     assert cli.main(argv + ["--report", str(out / "plan.json"), "--plot", str(out / "plan.png")]) == 0
     return load_plan(out / "plan.csv"), json.loads((out / "plan.json").read_text()), out
 
@@ -66,8 +67,9 @@ def test_more_lines_promise_more_and_the_suggestion_adds_to_all(planned):
 
 def test_the_plan_delivers_its_promise_on_the_simulated_world(planned):
     # Measure the plan in three true cells (the tool moved onto each true line from the planned
-    # pose), calibrate, compare with the truth: below the 95 % bound each time, and the RMS over
-    # the cells within 2x of the expected value.
+    # pose, one reading per capture as the plan was asked to assume), calibrate, compare with the
+    # truth: below the 95 % bound each time, and the RMS over the cells within 2x of the expected
+    # value.
     plan, report, _ = planned
     robot, promise = load_robot(ROBOT), report["predicted"]["plan"]
     true = []
@@ -85,6 +87,21 @@ def test_the_plan_delivers_its_promise_on_the_simulated_world(planned):
     assert max(true) < promise["predicted_rmse_95_mm"]
     pooled = np.sqrt(np.mean(np.square(true)))
     assert promise["predicted_rmse_mm"] / 2 < pooled < 2 * promise["predicted_rmse_mm"]
+
+
+def test_the_promise_counts_the_readings_a_capture_averages(tmp_path):
+    # Each capture averages the config's [session] readings (K = 5 shipped): every row's noise is
+    # the stated noise over sqrt(K), so the promise falls by nearly sqrt(K) (the priors do not).
+    promises = {}
+    for readings in ("1", None):
+        report = tmp_path / f"{readings}.json"
+        argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--out", str(tmp_path / "p.csv")]
+        argv += ["--no-suggest", "--per-line", "30", "--report", str(report)]
+        assert cli.main(argv + (["--readings", readings] if readings else [])) == 0
+        data = json.loads(report.read_text())
+        promises[data["readings"]] = data["predicted"]["plan"]["predicted_rmse_mm"]
+    assert set(promises) == {1, 5}
+    assert promises[1] / np.sqrt(5) < promises[5] < 1.1 * promises[1] / np.sqrt(5)
 
 
 def _setup_without(tmp_path, key):

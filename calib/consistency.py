@@ -1,0 +1,131 @@
+"""Does a fit agree with what was stated before measuring? Statistics a calibration can take of
+itself: its whitened residual against the instruments' stated noise (a chi-square), and how far
+each parameter moved against what was known of it (its prior sigma: a table parameter's
+manufacturing tolerance, the setup's rough values).
+
+Residuals are whitened by the stated noise, so under the model with the noise as stated the sum of
+squares of ``m`` rows fitted by ``k`` free unknowns is chi-square with ``m - k`` degrees of freedom,
+and ``sqrt(chi2 / (m - k))`` is the residual in units of the stated noise (1 as stated, hundreds
+when the rows come from another robot or cell).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import gammaincc
+
+
+@dataclass(frozen=True)
+class NoiseTest:
+    """The residual against the stated noise.
+
+    Attributes
+    ----------
+    ratio : float
+        RMS whitened residual of the rows the robust loss kept, per degree of freedom:
+        ``sqrt(chi2 / dof)``, in stated noises.
+    ratio_all : float
+        The same over every row, the down-weighted ones included.
+    chi2 : float
+        Sum of the kept rows' squared whitened residuals.
+    dof : int
+        Kept rows minus free unknowns (at least 1).
+    p_value : float
+        Probability of a chi-square of ``dof`` degrees of freedom at or above ``chi2``.
+    kept, rows : int
+        Residual rows kept by the robust loss, and all of them.
+    """
+
+    ratio: float
+    ratio_all: float
+    chi2: float
+    dof: int
+    p_value: float
+    kept: int
+    rows: int
+
+
+def chi_square_sf(chi2: float, dof: int) -> float:
+    """``P(X >= chi2)`` for ``X`` chi-square with ``dof`` degrees of freedom: ``Q(dof/2, chi2/2)``,
+    the regularised upper incomplete gamma function."""
+    return float(gammaincc(dof / 2.0, chi2 / 2.0))
+
+
+def noise_test(residuals: np.ndarray, weights: np.ndarray, n_free: int) -> NoiseTest:
+    """The chi-square of a fit's whitened residual against the stated noise.
+
+    Parameters
+    ----------
+    residuals : ndarray, shape (m,)
+        The data rows' residuals at the solution, whitened by their stated noise (no prior rows).
+    weights : ndarray, shape (m,)
+        The robust loss's weights there (``sqrt(rho')``); a row below half (its square below a
+        quarter) counts as down-weighted and stays out of the test.
+    n_free : int
+        Unknowns the fit estimated.
+
+    Returns
+    -------
+    NoiseTest
+    """
+    r = np.asarray(residuals, float)
+    kept = np.asarray(weights, float) ** 2 >= 0.25
+    chi2 = float(np.sum(r[kept] ** 2))
+    dof = max(int(kept.sum()) - n_free, 1)
+    dof_all = max(r.size - n_free, 1)
+    return NoiseTest(
+        ratio=float(np.sqrt(chi2 / dof)),
+        ratio_all=float(np.sqrt(np.sum(r**2) / dof_all)),
+        chi2=chi2,
+        dof=dof,
+        p_value=chi_square_sf(chi2, dof),
+        kept=int(kept.sum()),
+        rows=int(r.size),
+    )
+
+
+def excursions(x: np.ndarray, x_ref: np.ndarray, prior_sigma: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """How far each fitted unknown moved from where the fit started, in its prior sigmas.
+
+    Parameters
+    ----------
+    x, x_ref : ndarray, shape (n,)
+        The solution and the start (the robot file's table, the setup's rough values), internal
+        units.
+    prior_sigma : ndarray, shape (n,)
+        What was known of each before measuring (1 sigma, internal units; inf: nothing).
+    free : ndarray of bool, shape (n,)
+        The fitted unknowns.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``|x - x_ref| / prior_sigma``; 0 where held or without a prior.
+    """
+    known = free & np.isfinite(prior_sigma)
+    z = np.zeros(len(x))
+    z[known] = np.abs(x[known] - x_ref[known]) / prior_sigma[known]
+    return z
+
+
+def wild_rows(errors: np.ndarray, factor: float) -> np.ndarray:
+    """Rows whose error is ``factor`` times the median row's or more: readings no robot error
+    explains (a 100 m cable among 1 m ones, a joint read ten turns off), which a fit that starts
+    with least squares cannot shrug off.
+
+    Parameters
+    ----------
+    errors : ndarray, shape (N,)
+        Each row's error [mm], e.g. under the nominal table with the setup fitted.
+    factor : float
+        How many median errors make a row wild.
+
+    Returns
+    -------
+    ndarray of int
+        The wild rows, in order.
+    """
+    size = np.abs(np.asarray(errors, float))
+    return np.flatnonzero(size >= factor * np.median(size))

@@ -1,0 +1,132 @@
+"""`station calibrate` as a user meets its judgement of the data: samples that cannot be this
+robot's refused (exit 2, one line naming the likely cause, nothing written), a flag replacing a
+session's robot said, good data passed without a word; a wild reading or rows of another session named;
+``--plot``; an unwritable output found before the work."""
+
+import json
+import shutil
+
+import matplotlib.image
+import numpy as np
+import pytest
+import tomli_w
+
+import configs
+from sim_fixtures.scenario import write_scenario
+from station.cli import main
+from station.formats.base import read_toml
+
+UR10 = configs.path("robots/ur10.toml")
+
+
+def _cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def session(three_lines, tmp_path_factory):
+    """A simulated JR680 session folder: the three-line cell's samples, its robot and setup embedded."""
+    folder = tmp_path_factory.mktemp("session") / "run1"
+    folder.mkdir()
+    header = {"robot": read_toml(three_lines.robot), "setup": read_toml(three_lines.setup)}
+    (folder / "session.toml").write_text(tomli_w.dumps(header))
+    shutil.copy(three_lines.samples, folder / "samples.csv")
+    return folder
+
+
+def _outputs(folder):
+    return folder / "o.toml", folder / "r.json", folder / "p.png"
+
+
+@pytest.mark.parametrize(
+    "with_session, cause",
+    [
+        (True, "likely cause: --robot {ur10} replaces the robot embedded in {session}/session.toml: name"),
+        (False, "likely cause: a wrong robot model (the robot file describes the UR10)"),
+    ],
+)
+def test_a_jr680_session_calibrated_with_the_ur10_table_is_refused(
+    with_session, cause, session, three_lines, tmp_path, capsys
+):
+    samples = session if with_session else three_lines.samples
+    setup = [] if with_session else ["--setup", three_lines.setup]
+    out, report, plot = _outputs(tmp_path)
+    argv = ["calibrate", samples, "--robot", UR10, *setup, "--out", out, "--report", report, "--plot", plot]
+    # --model geometric: under auto every cross-validation fold hits the iteration cap too (30 s)
+    code, stdout, err = _cli(capsys, *argv, "--model", "geometric")
+    assert code == 2 and stdout == ""
+    assert err.count("\n") == 1 and err.startswith(f"station: error: {samples}: these samples do not fit")
+    assert "times the stated noise" in err and cause.format(ur10=UR10, session=session) in err
+    assert err.endswith("; nothing written\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_good_session_passes_without_a_word_and_plots(session, tmp_path, capsys):
+    out, report, plot = _outputs(tmp_path)
+    code, stdout, _ = _cli(capsys, "calibrate", session, "--out", out, "--report", report, "--plot", plot)
+    assert code == 0 and "warning" not in stdout
+    assert f"wrote {out}, {report}, {plot}" in stdout
+    data = json.loads(report.read_text())
+    assert data["warnings"] == [] and data["fit_check"]["verdict"] == "consistent"
+    # clean data at the stated noise: the residual within 2x of it (the joint noise adds a little)
+    assert 0.5 < data["fit_check"]["noise_ratio"] < 2.0
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    image = matplotlib.image.imread(plot)
+    height, width = image.shape[:2]
+    assert width >= 1200 and 400 <= height <= width / 2  # three panels side by side
+    assert np.std(image[..., :3]) > 0.05  # drawn on, not a blank page
+
+
+def test_a_robot_given_for_a_session_is_said_unless_it_is_the_same(session, tmp_path, capsys):
+    corrected = tmp_path / "corrected.toml"
+    assert _cli(capsys, "calibrate", session, "--out", corrected, "--model", "geometric")[0] == 0
+    embedded = tmp_path / "jr680.toml"
+    embedded.write_text(tomli_w.dumps(read_toml(session / "session.toml")["robot"]))
+    report = tmp_path / "r.json"
+    for robot, note in ((embedded, False), (corrected, True)):
+        argv = ["calibrate", session, "--robot", robot, "--out", tmp_path / "o.toml", "--report", report]
+        code, stdout, _ = _cli(capsys, *argv, "--model", "geometric")
+        said = f"--robot {robot} replaces the robot embedded in {session / 'session.toml'}: joints."
+        assert code == 0 and (f"warning: {said}" in stdout) == note
+        assert any(w.startswith(said) for w in json.loads(report.read_text())["warnings"]) == note
+
+
+def test_an_output_that_cannot_be_written_is_found_before_the_work(three_lines, tmp_path, capsys):
+    # A folder that is a file: refused before the solve, nothing of the others written.
+    (tmp_path / "file").write_text("")
+    out, report, _ = _outputs(tmp_path)
+    plot = tmp_path / "file" / "p.png"
+    argv = ["calibrate", three_lines.samples, "--robot", three_lines.robot, "--setup", three_lines.setup]
+    code, _, err = _cli(capsys, *argv, "--out", out, "--report", report, "--plot", plot)
+    assert code == 2 and err.count("\n") == 1 and f"--plot {plot}: folder" in err
+    assert not out.exists() and not report.exists()
+
+
+def test_a_wild_reading_is_named_as_the_likely_cause(three_lines, tmp_path, capsys):
+    # A 100 m cable reading among 1 m ones: the fit cannot shrug it off and is refused, naming it.
+    header, *rows = three_lines.samples.read_text().splitlines()
+    column = header.split(",").index("length_mm")
+    cells = rows[5].split(",")
+    cells[column] = "99999.0"
+    wild = tmp_path / "wild.csv"
+    wild.write_text("\n".join([header, *rows[:5], ",".join(cells), *rows[6:]]) + "\n")
+    argv = ["calibrate", wild, "--robot", three_lines.robot, "--setup", three_lines.setup]
+    code, _, err = _cli(capsys, *argv, "--model", "geometric", "--out", tmp_path / "o.toml")
+    assert code == 2 and err.count("\n") == 1
+    assert "likely cause: row 5: error before calibration up to" in err and "a wild reading" in err
+    assert not (tmp_path / "o.toml").exists()
+
+
+def test_rows_of_another_session_mixed_in_are_named_as_the_likely_cause(three_lines, tmp_path, capsys):
+    # 40 rows of another cell (its own robot and anchor) appended to this one's 150
+    other = write_scenario(tmp_path / "other", seed=5, n_lines=1, n_per_line=40)
+    header, *rows = three_lines.samples.read_text().splitlines()
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text("\n".join([header, *rows, *other.samples.read_text().splitlines()[1:]]) + "\n")
+    argv = ["calibrate", mixed, "--robot", three_lines.robot, "--setup", three_lines.setup]
+    code, _, err = _cli(capsys, *argv, "--model", "geometric", "--out", tmp_path / "o.toml")
+    assert code == 2 and err.count("\n") == 1 and "rows lie hundreds of noise sigmas off the rest" in err
+    assert "likely cause: samples of different sessions (or of a cell that changed) in one set" in err
+    assert not (tmp_path / "o.toml").exists()
