@@ -153,7 +153,7 @@ def open_devices(cfg: StationConfig) -> Devices:
 class SessionRun:
     """How a session run ended: its ``state``, the ``view`` (open: the caller closes it), the
     running calibration's ``refit`` on every sample (None if it never answered) and the largest
-    live error [mm] of the run (None before any prediction)."""
+    live error [mm] of the run (None if the running calibration was never judged)."""
 
     state: State
     view: LiveView
@@ -267,7 +267,7 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     view.cell(
         inputs.setup.drawstring.anchor_mm, line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line)
     )
-    for note in (*inputs.notes, *view.notes):
+    for note in (*view.notes, *inputs.notes):
         progress.message(note)
     worker.wait_ready(WORKER_START_S)
     for row in inputs.folder.rows:
