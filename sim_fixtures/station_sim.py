@@ -180,6 +180,7 @@ class SimStation:
                 "host": dev.host,
                 "port": dev.port,
                 "frequency_hz": self.cfg.robot.frequency_hz,
+                "time_scale": self.cfg.time_scale,
             }
         if isinstance(dev, ModbusDevice):
             return {"device": name, **dev.address}

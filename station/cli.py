@@ -8,31 +8,62 @@ import sys
 
 from errors import DeviceError, InputError, OutputError
 
+DISTRIBUTION = "calibration-station"  # pyproject.toml's [project] name
+
 # One module per command; each exposes ``register(subparsers)``, which adds its parser with
 # ``func`` set to the module's one entry ``run(args)`` (returns the exit code). A command module
 # imports at its top only what its parser needs (the standard library, ``errors``, names): numpy,
 # scipy, pydantic, the drivers, Rerun and matplotlib are imported in ``run``, where they are used,
 # so that ``station --help`` answers at once and each command loads only its own libraries.
-COMMANDS = (
+DESCRIPTION = """\
+Robot calibration station: measure a robot along gauge-block lines with a drawstring sensor, a dial
+indicator and its joint angles, and calibrate its Denavit-Hartenberg table.
+
+A session: `station plan` (which poses) -> `station sample` (measure them, with a running
+calibration) -> `station calibrate` (the corrected table and its report) -> `station export` or
+`station compensate` (use it). `station demo` runs all of it on simulated devices; `station sim
+serve` starts those devices for the other commands; `station read` checks the wiring."""
+
+COMMANDS = (  # in the order of the workflow, as the help lists them
     "demo",
-    "calibrate",
     "sim",
     "read",
-    "import-ipa",
-    "sample",
-    "compare",
     "plan",
+    "sample",
+    "calibrate",
+    "compare",
     "export",
     "compensate",
+    "import-ipa",
 )
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="station", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="station", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"station.commands.{name.replace('-', '_')}").register(sub)
     return parser
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed package's version, looked up only when asked (importlib.metadata)."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, help="print the station's version and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            found = version(DISTRIBUTION)
+        except PackageNotFoundError:
+            found = "unknown (not installed: pip install -e .)"
+        print(f"station {found}")
+        parser.exit()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -90,6 +90,7 @@ def make_kit(folder: Path) -> Kit:
     config.write_text(tomli_w.dumps(absent_devices()))
     session = folder / "session"
     inputs = runner.new_session(session, config, plan)
+    inputs.folder.make()  # a session run makes it once the devices answer
     for k in range(40):
         inputs.folder.append(*_session_row(sc.train, k))
     ipa = folder / "series.csv"

@@ -46,13 +46,14 @@ class Rules:
     match_deg: float
     target_timeout_s: float
     unreachable_s: float
+    time_scale: float = 1.0  # simulated s per real s: the config's times were divided by it
 
     @classmethod
     def from_config(cls, section: SessionConfig, time_scale: float) -> Rules:
         values = section.model_dump(exclude={"robot_model", "setup", "plan"})
         for key in ("settle_s", "window_s", "target_timeout_s"):
             values[key] /= time_scale
-        return cls(**values)
+        return cls(**values, time_scale=time_scale)
 
     @property
     def poll_s(self) -> float:

@@ -8,9 +8,12 @@ a thread because the solver's Python loop holds the GIL: a refit thread would de
 path's reads by the interpreter's switch interval each time (``benchmarks/live_fit.py``).
 
 The live error of a sample is its reading minus the length the latest refit predicts, taken
-before the sample joins a fit. Once the samples determine the unknowns (``Refit.judged``) the
-prediction carries an uncertainty, and a reading more than ``SUSPECT_SIGMAS`` of it (and of the
-noise) off is called suspect. Guidance, once per gauge line: the line stops paying when its last
+before the sample joins a fit, once the samples determine the unknowns (``Refit.judged``; 26
+samples on the simulated cell's first line): then the prediction carries an uncertainty, and a
+reading more than ``SUSPECT_SIGMAS`` of it (and of the noise) off is called suspect. Before that
+there is no live error: a fit of fewer samples than unknowns extrapolates to the next pose by up
+to millimetres (in simulated cells, 0.3-2 mm typical over the first seven samples, 15 mm once),
+which says nothing about the reading. Guidance, once per gauge line: the line stops paying when its last
 ``SATURATION_SAMPLES`` samples improved the predicted workspace error by less than
 ``SATURATION_GAIN``; the message names the next placement (the plan's next line, else the
 planner's best new one, else the model's advice).
@@ -136,18 +139,21 @@ def _one_blas_thread():
 
 @dataclass(frozen=True)
 class LiveError:
-    """A sample against the running calibration: the length it predicted ``model_mm`` and the
-    ``error_mm`` (reading - model), None before the first refit; ``limit_mm``, the largest error
-    the prediction's uncertainty and the noise explain (``SUSPECT_SIGMAS`` of them), None while
-    the refit is not judged; ``suspect`` beyond it."""
+    """A sample against the running calibration: the length it predicted ``model_mm``, the
+    ``error_mm`` (reading - model) and ``limit_mm``, the largest error the prediction's
+    uncertainty and the noise explain (``SUSPECT_SIGMAS`` of them), all None until a refit is
+    judged; ``suspect`` beyond the limit. Before that, the latest refit's ``fitted`` samples of the
+    ``needed`` (None before the first refit)."""
 
     model_mm: float | None = None
     error_mm: float | None = None
     limit_mm: float | None = None
+    fitted: int | None = None
+    needed: int | None = None
 
     @property
     def suspect(self) -> bool:
-        return self.limit_mm is not None and abs(self.error_mm) > self.limit_mm
+        return self.error_mm is not None and abs(self.error_mm) > self.limit_mm
 
 
 @dataclass
@@ -192,14 +198,15 @@ class RunningCalibration:
         return tcp_position(self.dh, np.radians(np.atleast_2d(q_deg)), self.tool)
 
     def live_error(self, q_deg, length_mm: float) -> LiveError:
-        """The sample against the latest refit (before it joins one)."""
+        """The sample against the latest refit (before it joins one), once a refit is judged."""
         fit = self.latest
         if fit is None:
             return LiveError()
+        if not fit.judged:
+            return LiveError(fitted=fit.n, needed=fit.needed)
         model_mm, sigma_mm = fit.predict(q_deg, self.setup.drawstring.sigma_mm)
-        error = float(length_mm) - model_mm
-        limit = SUSPECT_SIGMAS * float(np.hypot(sigma_mm, fit.noise_mm)) if fit.judged else None
-        return LiveError(model_mm, error, limit)
+        limit = SUSPECT_SIGMAS * float(np.hypot(sigma_mm, fit.noise_mm))
+        return LiveError(model_mm, float(length_mm) - model_mm, limit)
 
     def add(self, q_deg, length_mm: float, dial_mm: float, line: int) -> None:
         """A stored sample: joins the next refit (started now if the worker is idle)."""

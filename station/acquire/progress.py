@@ -38,8 +38,8 @@ class Progress:
         return (self.done - self.start_done) / elapsed if elapsed > 0 else 0.0
 
     def sample(self, row: dict, live) -> None:
-        """A stored sample ``row`` and its ``live`` error (``error_mm``, ``limit_mm``: None where not
-        known yet)."""
+        """A stored sample ``row`` and its ``live`` error (``error_mm``, ``limit_mm``: None until the
+        running calibration is judged; then ``fitted`` of ``needed`` samples)."""
         self.done += 1
         error = _error_text(live)
         if self.tty:
@@ -88,7 +88,8 @@ class Progress:
 
 
 def _error_text(live) -> str:
-    if live.error_mm is None:
+    if live.error_mm is not None:
+        return f"error {live.error_mm:+.3f} mm (limit {live.limit_mm:.3f})"
+    if live.needed is None:
         return "error: no model yet"
-    limit = "" if live.limit_mm is None else f" (limit {live.limit_mm:.3f})"
-    return f"error {live.error_mm:+.3f} mm{limit}"
+    return f"error: none until the model is determined ({live.fitted} of {live.needed} samples)"

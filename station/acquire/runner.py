@@ -18,7 +18,8 @@ from station.acquire.capture import Devices, Rules
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
-from station.config import StationConfig, load_station_config, station_config
+from station.config import UNREACHABLE_HINT, StationConfig, load_station_config, station_config
+from station.formats.announcement import announcement_path, running_simulator
 from station.formats.base import read_toml, validate
 from station.formats.plan import Plan, load_plan
 from station.formats.session_folder import SessionFolder, SessionHeader
@@ -34,13 +35,15 @@ FINAL_FIT_S = 30.0  # the session's end waits this long at most for the refit on
 @dataclass
 class SessionInputs:
     """Everything a session run needs, validated: its folder (new or reopened), the station
-    config, the plan, the robot table and the setup."""
+    config (at the session's time scale), the plan, the robot table and the setup; ``notes`` for
+    the session's log as it starts."""
 
     folder: SessionFolder
     cfg: StationConfig
     plan: Plan
     robot: RobotFile
     setup: SetupFile
+    notes: tuple[str, ...] = ()
 
 
 def resolve(name: str, config_path: Path) -> Path:
@@ -65,9 +68,31 @@ def default_plan(cfg: StationConfig, config_path: Path) -> Path:
     return path
 
 
-def new_session(out: Path, config_path: Path, plan_path: Path | None) -> SessionInputs:
-    """Validate the inputs, then create ``out`` with ``session.toml`` (fails before any sample)."""
-    cfg = load_station_config(config_path)
+def agree_time_scale(cfg: StationConfig, time_scale: float | None) -> tuple[StationConfig, tuple[str, ...]]:
+    """``cfg`` at the session's time scale, and a note when it is the simulator's. Where ``station
+    sim serve`` announces that it simulates this config's robot, its time scale holds (a different
+    ``time_scale`` (``--time-scale``) is an InputError); else ``time_scale`` if given, else the
+    config's."""
+    sim = running_simulator(cfg.sim.plan_csv)
+    if sim is None or sim.robot != cfg.robot_endpoint():
+        return cfg.with_time_scale(time_scale), ()
+    if time_scale is not None and time_scale != sim.time_scale:
+        raise InputError(
+            f"--time-scale {time_scale:g}: the simulated robot at {sim.robot} runs at time scale "
+            f"{sim.time_scale:g} (`station sim serve`, process {sim.pid}, announced in "
+            f"{announcement_path(cfg.sim.plan_csv)}); leave --time-scale out or give {sim.time_scale:g}"
+        )
+    note = f"time scale {sim.time_scale:g}: the simulated robot's (`station sim serve`, process {sim.pid})"
+    return cfg.with_time_scale(sim.time_scale), (note,)
+
+
+def new_session(
+    out: Path, config_path: Path, plan_path: Path | None, time_scale: float | None = None
+) -> SessionInputs:
+    """Validate the inputs (``time_scale``: :func:`agree_time_scale`) and check that ``out`` can be a
+    new session folder; :func:`run` makes it once every device answered, so a session that never
+    starts leaves nothing behind."""
+    cfg, notes = agree_time_scale(load_station_config(config_path), time_scale)
     robot = load_robot(resolve(cfg.session.robot_model, config_path))
     setup = load_setup(resolve(cfg.session.setup, config_path))
     if setup.drawstring is None:
@@ -84,20 +109,24 @@ def new_session(out: Path, config_path: Path, plan_path: Path | None) -> Session
         "station": _plain(cfg),
         "plan": plan.rows(),
     }
-    return SessionInputs(SessionFolder.create(out, header), cfg, plan, robot, setup)
+    return SessionInputs(SessionFolder.new(out, header), cfg, plan, robot, setup, notes)
 
 
-def resume_session(folder_path: Path, config_path: Path | None) -> SessionInputs:
-    """Reopen a session folder; its embedded config serves unless ``config_path`` is given. All of
-    ``session.toml`` is validated before the folder is opened (and repaired)."""
+def resume_session(
+    folder_path: Path, config_path: Path | None, time_scale: float | None = None
+) -> SessionInputs:
+    """Reopen a session folder; its embedded config serves unless ``config_path`` is given, at the
+    time scale :func:`agree_time_scale` finds. All of ``session.toml`` is validated before the
+    folder is opened (and repaired)."""
     where = Path(folder_path) / "session.toml"
     header = validate(SessionHeader, read_toml(where), str(where))
     if config_path:
         cfg = load_station_config(config_path)
     else:
         cfg = station_config(header.station, f"{where} [station]")
+    cfg, notes = agree_time_scale(cfg, time_scale)
     plan = Plan.from_rows(header.plan, str(where))
-    return SessionInputs(SessionFolder.open(folder_path), cfg, plan, header.robot, header.setup)
+    return SessionInputs(SessionFolder.open(folder_path), cfg, plan, header.robot, header.setup, notes)
 
 
 def open_devices(cfg: StationConfig) -> Devices:
@@ -116,7 +145,7 @@ def open_devices(cfg: StationConfig) -> Devices:
                 pass  # it answers (e.g. a dial off the edge, out of range): reachable
     except DriverError as exc:
         devices.close()
-        raise DeviceError(f"{exc} (is `station sim serve` or the station's wiring up?)") from exc
+        raise DeviceError(f"{exc} ({UNREACHABLE_HINT})") from exc
     return devices
 
 
@@ -124,7 +153,7 @@ def open_devices(cfg: StationConfig) -> Devices:
 class SessionRun:
     """How a session run ended: its ``state``, the ``view`` (open: the caller closes it), the
     running calibration's ``refit`` on every sample (None if it never answered) and the largest
-    live error [mm] of the run (None before any prediction)."""
+    live error [mm] of the run (None if the running calibration was never judged)."""
 
     state: State
     view: LiveView
@@ -145,12 +174,14 @@ def run(
     is the address to serve the web viewer on; ``until_mm`` ends the session once the running
     calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
     progress to the messages. Devices are opened first: an unreachable one fails before anything
-    else."""
+    else, and a new session's folder is made only once they all answered."""
     worker = FitWorker(inputs.robot, inputs.setup)  # starts while the devices open
     view = None
     try:
         devices = open_devices(inputs.cfg)
         try:
+            if not inputs.folder.made:
+                inputs.folder.make()
             view = LiveView(inputs.folder.rrd, viewer=viewer, web=web, resume=bool(inputs.folder.rows))
             progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream, every_sample=every_sample)
             live = Live(inputs.robot, inputs.setup, inputs.plan.line, worker, view, progress, until_mm)
@@ -236,7 +267,7 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     view.cell(
         inputs.setup.drawstring.anchor_mm, line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line)
     )
-    for note in view.notes:
+    for note in (*view.notes, *inputs.notes):
         progress.message(note)
     worker.wait_ready(WORKER_START_S)
     for row in inputs.folder.rows:

@@ -231,7 +231,7 @@ class Session:
             check_gates(self.devices, self.rules)
 
     def _timeout_message(self) -> str:
-        scale = self.folder.header["station"].get("time_scale", 1.0)
+        scale = self.rules.time_scale
         waited = self.rules.target_timeout_s * scale
         if not self.settle.ever:
             why = (

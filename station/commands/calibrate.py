@@ -27,7 +27,13 @@ def register(sub) -> None:
     p.add_argument("--setup", type=Path, help="setup TOML (required for a drawstring CSV)")
     p.add_argument("--out", type=Path, required=True, help="corrected table TOML to write")
     p.add_argument("--holdout", type=Path, help="samples CSV evaluated with the training setup fit")
-    p.add_argument("--method", default="lmlc", choices=ALL_METHODS)
+    p.add_argument(
+        "--method",
+        default="lmlc",
+        choices=ALL_METHODS,
+        help="lmlc (default: robust Levenberg-Marquardt with the line constraint), mcs-lmlc (LMLC on the "
+        "configurations MCS selects), or one of the paper's others: pso ekf ukf gn sa pf de",
+    )
     p.add_argument(
         "--select",
         type=int,

@@ -44,8 +44,15 @@ def register(sub) -> None:
         default=False,
         help="open the Rerun viewer (needs a display; the .rrd is saved either way)",
     )
-    p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
-    p.add_argument("--plan-size", type=int, help=argparse.SUPPRESS)  # MCS's N (tests: a short demo)
+    p.add_argument(
+        "--seed", type=int, default=0, help="the simulated cell: true robot, gauge lines, noise (default 0)"
+    )
+    p.add_argument(
+        "--plan-size",
+        type=int,
+        metavar="N",
+        help="poses the plan selects (default: where MCS's O1 flattens; fewer: a shorter demo)",
+    )
     p.set_defaults(func=run)
 
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 import json
 
 import configs
-from drivers.base import Backoff, Driver, Reading, call_with_reconnect
+from drivers.base import Backoff, DeviceUnreachable, Driver, Reading, call_with_reconnect
+from errors import DeviceError
 
 
 def register(subparsers) -> None:
@@ -49,10 +50,13 @@ def as_json(readings: dict[str, Reading]) -> dict:
 
 
 def run(args) -> int:
-    from station.config import load_station_config
+    from station.config import UNREACHABLE_HINT, load_station_config
 
     cfg = load_station_config(args.config)
     backoff = cfg.reconnect.backoff()
-    readings = {name: read_once(section.build(), backoff) for name, section in cfg.devices().items()}
+    try:
+        readings = {name: read_once(section.build(), backoff) for name, section in cfg.devices().items()}
+    except DeviceUnreachable as exc:
+        raise DeviceError(f"{exc} ({UNREACHABLE_HINT})") from exc
     print(json.dumps(as_json(readings)))
     return 0

@@ -1,5 +1,8 @@
-"""``station sample [--config F] [--plan P.csv] (--out DIR | --resume DIR) [--until-mm X] [--viewer]
-[--web [--web-bind ADDR]]``.
+"""``station sample [--config F] [--plan P.csv] (--out DIR | --resume DIR) [--time-scale S] [--until-mm X]
+[--viewer] [--web [--web-bind ADDR]]``.
+
+The session runs at the time scale of ``station sim serve`` where it announces that it simulates
+the configured robot (``--time-scale`` must then agree), else at ``--time-scale`` or the config's.
 
 Exit 0 when every target is measured or the running calibration's 95 % workspace bound reached
 ``--until-mm`` (kept in the session: a resume goes on towards it), 130 after Ctrl-C (the sample in
@@ -32,6 +35,13 @@ def register(subparsers) -> None:
     where.add_argument("--out", type=Path, help="new session folder")
     where.add_argument("--resume", type=Path, metavar="DIR", help="continue the session in DIR")
     p.add_argument(
+        "--time-scale",
+        type=float,
+        metavar="S",
+        help="simulated seconds per real second of the robot measured (default: what `station sim "
+        "serve` announces for the configured robot, else the config's time_scale; 1 = real time)",
+    )
+    p.add_argument(
         "--until-mm",
         type=_positive_mm,
         metavar="X",
@@ -58,10 +68,11 @@ def run(args) -> int:
     if args.resume:
         if args.plan:
             raise InputError("--plan: a resumed session keeps the plan embedded in its session.toml")
-        inputs = runner.resume_session(args.resume, args.config)
+        inputs = runner.resume_session(args.resume, args.config, args.time_scale)
         print(f"resuming {args.resume}: {len(inputs.folder.rows)} of {len(inputs.plan)} targets measured")
     else:
-        inputs = runner.new_session(args.out, args.config or configs.path("station.toml"), args.plan)
+        config = args.config or configs.path("station.toml")
+        inputs = runner.new_session(args.out, config, args.plan, args.time_scale)
     until_mm = args.until_mm or inputs.folder.header.get("until_mm")
     if args.until_mm:
         inputs.folder.update_header(until_mm=args.until_mm)

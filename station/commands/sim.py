@@ -1,8 +1,11 @@
-"""``station sim serve [--config F] [--hold] [--plan P.csv]``: run the simulated devices until SIGINT/SIGTERM.
+"""``station sim serve [--config F] [--hold] [--plan P.csv] [--time-scale S]``: run the simulated
+devices until SIGINT/SIGTERM.
 
 Publishes the plan its robot walks at ``[sim] plan_csv`` (where ``station sample`` looks by
-default), prints one JSON line per device with its address, then serves; on a signal it stops
-every device and removes the pty links.
+default) and announces its robot and time scale beside it (``station.formats.announcement``: a
+``station sample`` on that robot adopts the time scale), prints one JSON line per device with its
+address (the robot's with the time scale), then serves; on a signal it stops every device, removes
+the pty links and its announcement.
 """
 
 from __future__ import annotations
@@ -35,15 +38,23 @@ def register(subparsers) -> None:
     serve.add_argument(
         "--plan", type=Path, help="plan CSV (station plan) for the simulated robot to walk instead of its own"
     )
+    serve.add_argument(
+        "--time-scale",
+        type=float,
+        metavar="S",
+        help="simulated seconds per real second (default: the config's time_scale, 1 = real time; "
+        "20: a 210-target session in about a minute); `station sample` adopts it",
+    )
     serve.set_defaults(func=run)
 
 
 def run(args) -> int:
     from sim_fixtures.station_sim import SimStation
     from station.config import load_station_config
+    from station.formats.announcement import withdraw
     from station.formats.plan import Plan, load_plan
 
-    cfg = load_station_config(args.config)
+    cfg = load_station_config(args.config).with_time_scale(args.time_scale)
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
     station = SimStation(cfg, hold=args.hold, plan=None if plan is None else (plan.q_deg, plan.line))
@@ -58,13 +69,27 @@ def run(args) -> int:
             raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: stop.set())
+        _announce(cfg)
         for address in addresses:
             print(json.dumps(address), flush=True)
         while not stop.wait(0.5):
             pass
     finally:
+        withdraw(cfg.sim.plan_csv)
         station.stop()
     return 0
+
+
+def _announce(cfg) -> None:
+    """Say beside the published plan which robot this simulator serves, at which time scale."""
+    from station.formats.announcement import announce
+
+    try:
+        announce(cfg.sim.plan_csv, cfg.robot_endpoint(), cfg.time_scale)
+    except OSError as exc:
+        raise DeviceError(
+            f"cannot announce the simulator beside {cfg.sim.plan_csv}: {exc.strerror or exc}"
+        ) from exc
 
 
 def publish_plan(path: Path, plan: Plan) -> None:

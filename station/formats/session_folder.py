@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated
@@ -157,11 +158,13 @@ RAW_CHECKS = {"sample": lambda c: id_cell(c, "a sample id")}
 
 @dataclass
 class SessionFolder:
-    """An open session folder: its header (``session.toml`` content), the samples taken so far."""
+    """An open session folder: its header (``session.toml`` content), the samples taken so far; a
+    new one exists on disk only once :meth:`make` wrote it."""
 
     path: Path
     header: dict
     rows: list[dict] = field(default_factory=list)
+    made: bool = True  # False from :meth:`new` until :meth:`make` wrote it
 
     @property
     def samples_csv(self) -> Path:
@@ -184,20 +187,43 @@ class SessionFolder:
         return max((int(r["sample"]) for r in self.rows), default=-1) + 1
 
     @classmethod
-    def create(cls, path, header: dict) -> SessionFolder:
-        """A new session at ``path`` (created; must not hold a session yet). Everything is written
-        once here, so an unwritable or full disk fails before the first sample (InputError)."""
+    def new(cls, path, header: dict) -> SessionFolder:
+        """A session to be made at ``path`` by :meth:`make`: checked now and nothing written (no
+        session there yet, a folder the station can create and write), so that bad input fails
+        before any device is opened and a session that never starts leaves nothing behind."""
         path = Path(path)
         if (path / "session.toml").exists():
             raise InputError(f"{path}: already holds a session; continue it with --resume {path}")
-        try:
-            path.mkdir(parents=True, exist_ok=True)
-            atomic_write(path / "session.toml", toml_text(header))
-            for name, columns in (("samples.csv", SAMPLE_COLUMNS), ("raw.csv", RAW_COLUMNS)):
-                atomic_write(path / name, ",".join(columns) + "\n")
+        existing = next(p for p in (path.absolute(), *path.absolute().parents) if p.exists())
+        if not existing.is_dir():
+            raise InputError(f"{path}: cannot write the session folder: {existing} is not a folder")
+        try:  # what make() does first, undone: permissions alone miss a read-only file system
+            os.rmdir(tempfile.mkdtemp(dir=existing, prefix=".station-probe-"))
         except OSError as exc:
-            raise InputError(f"{path}: cannot write the session folder: {exc.strerror or exc}") from None
-        return cls(path, header)
+            raise InputError(
+                f"{path}: cannot write the session folder in {existing}: {exc.strerror}"
+            ) from None
+        return cls(path, header, made=False)
+
+    def make(self) -> None:
+        """Create the folder (and missing parents) with ``session.toml`` and the CSV headers.
+        Everything is written once here, so an unwritable or full disk fails before the first
+        sample (InputError)."""
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+            atomic_write(self.path / "session.toml", toml_text(self.header))
+            for name, columns in (("samples.csv", SAMPLE_COLUMNS), ("raw.csv", RAW_COLUMNS)):
+                atomic_write(self.path / name, ",".join(columns) + "\n")
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot write the session folder: {exc.strerror or exc}") from None
+        self.made = True
+
+    @classmethod
+    def create(cls, path, header: dict) -> SessionFolder:
+        """A new session at ``path``, checked and made at once (:meth:`new`, :meth:`make`)."""
+        folder = cls.new(path, header)
+        folder.make()
+        return folder
 
     @classmethod
     def open(cls, path) -> SessionFolder:
@@ -240,8 +266,12 @@ class SessionFolder:
         self.rows.append({k: _cell(v) for k, v in row.items()})
 
     def update_header(self, **changes) -> None:
-        """Rewrite ``session.toml`` with ``changes`` (atomically: on failure the old file stays)."""
+        """Rewrite ``session.toml`` with ``changes`` (atomically: on failure the old file stays); a
+        folder not made yet takes them into what :meth:`make` writes."""
         header = {**self.header, **changes}
+        if not self.made:
+            self.header = header
+            return
         try:
             atomic_write(self.path / "session.toml", toml_text(header))
         except OSError as exc:

@@ -10,7 +10,7 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
 - ``cell/anchor``, ``cell/lines/<id>`` (static): the drawstring's cable exit and the gauge lines
   (fitted to the plan's nominal TCPs);
 - ``cell/path`` (nominal TCPs of the samples so far), ``cell/sample`` (the current one: grey
-  before the running calibration judges, green within its limit, red when suspect) and
+  before the running calibration is judged, green within its limit, red when suspect) and
   ``cell/cable`` (anchor -> TCP);
 - ``live/error`` (reading - the running calibration's prediction, made before the sample joins a
   fit), ``live/error/limit/upper|lower`` (what the prediction's uncertainty and the noise explain)
@@ -155,12 +155,12 @@ class LiveView:
 
     def sample(self, index: int, t_s: float, tcp_mm, length_mm: float, dial_mm: float, live) -> None:
         """One stored sample: where the nominal model puts the TCP, and ``live`` (``model_mm``,
-        ``error_mm``, ``limit_mm``, ``suspect``; None where not known yet) against the running
-        calibration."""
+        ``error_mm``, ``limit_mm``, ``suspect``; None until the running calibration is judged)
+        against the running calibration."""
         self.rec.set_time("sample", sequence=index)
         self.rec.set_time("session_time", duration=t_s)
         tcp = np.asarray(tcp_mm, float)
-        color = GREY if live.limit_mm is None else RED if live.suspect else GREEN
+        color = GREY if live.error_mm is None else RED if live.suspect else GREEN
         label = f"#{index}" if live.error_mm is None else f"#{index}: {live.error_mm:+.3f} mm"
         self._path.append(tcp)
         self.rec.log("cell/path", rr.LineStrips3D([np.array(self._path)], radii=0.8, colors=[GREY]))
@@ -175,9 +175,8 @@ class LiveView:
             return
         self.rec.log("live/length/model", rr.Scalars(live.model_mm))
         self.rec.log("live/error", rr.Scalars(live.error_mm))
-        if live.limit_mm is not None:
-            self.rec.log("live/error/limit/upper", rr.Scalars(live.limit_mm))
-            self.rec.log("live/error/limit/lower", rr.Scalars(-live.limit_mm))
+        self.rec.log("live/error/limit/upper", rr.Scalars(live.limit_mm))
+        self.rec.log("live/error/limit/lower", rr.Scalars(-live.limit_mm))
         if live.suspect:
             self.rec.log("live/error/suspect", rr.Scalars(live.error_mm))
 

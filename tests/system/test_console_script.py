@@ -2,8 +2,11 @@
 command line answers without importing what only some commands need."""
 
 import json
+import re
 import subprocess
 import sys
+
+import pytest
 
 HEAVY = ("numpy", "scipy.stats", "rerun", "matplotlib", "pymodbus", "sim_fixtures")
 """Imported only where used: together they take over a second to import (issue 15)."""
@@ -31,14 +34,34 @@ def test_console_script_runs_without_traceback(three_lines, tmp_path):
     assert "nope.csv" in proc.stderr and "no such file" in proc.stderr
 
 
-def test_parsing_any_command_line_imports_nothing_heavy():
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["calibrate", "x.csv", "--robot", "r.toml", "--out", "o.toml"],
+        ["--help"],
+        ["--version"],
+        ["sample", "--help"],
+    ],
+)
+def test_parsing_any_command_line_imports_nothing_heavy(argv):
     # a fresh interpreter: the station's modules, the parser of every command, a parsed command line
+    # (--help and --version answer while parsing: their output goes to stderr here, and they exit)
     code = (
-        "import json, sys; import station.cli as c; "
-        "c.build_parser().parse_args(['calibrate', 'x.csv', '--robot', 'r.toml', '--out', 'o.toml']); "
+        "import contextlib, json, sys; import station.cli as c\n"
+        "with contextlib.redirect_stdout(sys.stderr), contextlib.suppress(SystemExit):\n"
+        f"    c.build_parser().parse_args({argv!r})\n"
         f"print(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))"
     )
     proc = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
     )
     assert json.loads(proc.stdout) == []
+    assert ("usage: station" in proc.stderr) is ("--help" in argv)
+
+
+def test_version_through_the_console_script():
+    proc = subprocess.run(
+        [sys.executable, "-m", "station.cli", "--version"], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0 and proc.stderr == ""
+    assert re.fullmatch(r"station \d+\.\d+\.\d+\S*\n", proc.stdout)

@@ -201,7 +201,7 @@ def test_rrd_holds_the_live_view_entities(finished):
     ):
         assert path in entities
     rows = sum(c.num_rows for c in chunks if c.entity_path == "/live/error" and not c.is_static)
-    assert 1 <= rows < N_TARGETS  # the first sample has no model to be judged against
+    assert rows == 0  # 9 samples cannot determine the running calibration's 26 unknowns: no live error
 
 
 def test_sigkill_mid_session_then_resume_without_torn_or_duplicate_rows(tmp_path):
@@ -353,13 +353,15 @@ def test_progress_is_a_bar_on_a_terminal_with_the_live_error_and_the_predicted_w
     tty.isatty = lambda: True
     bar = Progress(total=4, stream=tty, width=8)
     bar.sample({"sample": 0, "target": 0, "line": 0, "length_mm": 1.0}, LiveError())
-    bar.sample({"sample": 1, "target": 1, "line": 0, "length_mm": 1.0}, LiveError(1.0, 0.25, 0.1))
+    bar.sample({"sample": 1, "target": 1, "line": 0, "length_mm": 1.0}, LiveError(fitted=1, needed=26))
+    bar.sample({"sample": 2, "target": 2, "line": 0, "length_mm": 1.0}, LiveError(1.0, 0.25, 0.1))
     bar.refit(0.0412, 0.0688)
     bar.message("suspended: dial not answering")
     assert written[0].startswith("\r\033[K[##......] 1/4") and "error: no model yet" in written[0]
-    assert "error +0.250 mm (limit 0.100)" in written[1]
-    assert written[2].endswith("error +0.250 mm (limit 0.100)  workspace 0.0412 mm (95 %: 0.0688 mm)")
-    assert written[3].startswith("\r\033[Ksuspended: dial not answering\n[####....] 2/4")
+    assert written[1].endswith("error: none until the model is determined (1 of 26 samples)")
+    assert "error +0.250 mm (limit 0.100)" in written[2]
+    assert written[3].endswith("error +0.250 mm (limit 0.100)  workspace 0.0412 mm (95 %: 0.0688 mm)")
+    assert written[4].startswith("\r\033[Ksuspended: dial not answering\n[######..] 3/4")
 
 
 def test_until_mm_ends_the_session_done_once_the_bound_is_met_and_a_resume_goes_on(tmp_path):

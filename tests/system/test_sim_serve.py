@@ -14,12 +14,13 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sim_fixtures.station_sim import make_cell
-from station.formats.plan import load_plan
+from station.formats.plan import Plan, load_plan
 
 # The real entry point, limited to the commands present on this branch (siblings such as
 # ``demo`` arrive with other branches).
@@ -51,6 +52,15 @@ dialect = "mitutoyo"
 attempts = 2
 initial_s = 0.05
 """
+
+
+def write_config(tmp_path, text: str = CONFIG, extra: str = "") -> Path:
+    """``tmp_path/station.toml``: ``text`` on a random loopback RTDE address and a free Modbus
+    port, then ``extra``."""
+    host = f"127.0.0.{random.randint(2, 250)}"
+    config = tmp_path / "station.toml"
+    config.write_text(text.format(host=host, port=free_port(), dial=tmp_path / "dial") + extra)
+    return config
 
 
 def free_port() -> int:
@@ -95,13 +105,11 @@ def served(tmp_path):
 
 
 @contextlib.contextmanager
-def serving(tmp_path, *flags, extra_config=""):
+def serving(tmp_path, *flags, extra_config="", config_text=CONFIG):
     """``sim serve`` with ``flags`` on a random loopback RTDE address and a free Modbus port, its
-    config ``CONFIG`` followed by ``extra_config``: (process, config path, printed addresses)."""
+    config ``config_text`` followed by ``extra_config``: (process, config path, printed addresses)."""
     for _ in range(3):
-        host = f"127.0.0.{random.randint(2, 250)}"
-        config = tmp_path / "station.toml"
-        config.write_text(CONFIG.format(host=host, port=free_port(), dial=tmp_path / "dial") + extra_config)
+        config = write_config(tmp_path, config_text, extra_config)
         with open(tmp_path / "serve.err", "w") as err:
             proc = subprocess.Popen(
                 [*CLI, "sim", "serve", "--config", str(config), *flags],
@@ -178,6 +186,81 @@ def test_sample_without_plan_measures_the_plan_sim_serve_published(tmp_path):
     # the simulated robot dwells exactly at each target; both files keep 6 decimals
     assert np.abs(q - plan.q_deg[targets]).max() < 1e-5
     assert f'plan_source = "{plan_path}"' in (tmp_path / "sess" / "session.toml").read_text()
+
+
+REAL_TIME = CONFIG.replace("time_scale = 20.0", "time_scale = 1.0")  # the shipped config's time scale
+
+
+def test_sample_runs_at_the_time_scale_sim_serve_announces_and_refuses_another(tmp_path):
+    # the config says real time; sim serve --time-scale 20 runs the robot 20x faster: a sample at
+    # real time would wait 0.5 s to settle at targets the robot leaves after 0.15 s, and time out
+    plan_path = tmp_path / "published" / "plan.csv"
+    fast = FAST_SESSION.format(plan=plan_path)
+    with serving(tmp_path, "--time-scale", "20", extra_config=fast, config_text=REAL_TIME) as started:
+        _, config, addresses = started
+        announced = plan_path.parent / "simulator.toml"
+        assert addresses[0]["time_scale"] == 20.0 and announced.exists()
+        refused = run_cli(
+            "sample", "--config", str(config), "--out", str(tmp_path / "a" / "s"), "--time-scale", "1"
+        )
+        t0 = time.monotonic()
+        result = run_cli("sample", "--config", str(config), "--out", str(tmp_path / "sess"))
+        took_s = time.monotonic() - t0
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert refused.stderr.startswith("station: error: --time-scale 1: the simulated robot at rtde ")
+    assert "runs at time scale 20 (`station sim serve`" in refused.stderr and refused.stderr.count("\n") == 1
+    assert not (tmp_path / "a").exists()
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "time scale 20: the simulated robot's (`station sim serve`" in result.stdout
+    assert result.stdout.splitlines()[-1].startswith(f"done: 9/9 samples in {tmp_path / 'sess'}")
+    assert "time_scale = 20.0" in (tmp_path / "sess" / "session.toml").read_text()
+    assert took_s < 60  # 9 targets at 20x; at real time alone the robot's walk takes over 40 s
+    assert not announced.exists()  # withdrawn when sim serve stopped
+
+
+def test_a_stale_announcement_is_ignored_and_time_scale_sets_the_pace(tmp_path):
+    plan_path = tmp_path / "published" / "plan.csv"
+    fast = FAST_SESSION.format(plan=plan_path)
+    with serving(tmp_path, "--time-scale", "20", extra_config=fast, config_text=REAL_TIME) as (
+        proc,
+        config,
+        _,
+    ):
+        announced = plan_path.parent / "simulator.toml"
+        # a simulator killed without its clean-up leaves its announcement: a process that is gone
+        announced.write_text(announced.read_text().replace(f"pid = {proc.pid}", "pid = 999999999"))
+        result = run_cli(
+            "sample", "--config", str(config), "--out", str(tmp_path / "sess"), "--time-scale", "20"
+        )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "time scale 20: the simulated robot's" not in result.stdout
+    assert "time_scale = 20.0" in (tmp_path / "sess" / "session.toml").read_text()
+
+
+def test_an_unreachable_device_leaves_no_session_folder_and_the_retry_works(tmp_path):
+    plan_path = tmp_path / "published" / "plan.csv"
+    fast = FAST_SESSION.format(plan=plan_path)
+    plan_path.parent.mkdir()
+    plan_path.write_text(Plan.of(make_cell(0, 3).plan_deg, make_cell(0, 3).plan_lines).csv_text())
+    config = write_config(tmp_path, extra=fast)  # nothing serves these addresses
+    out = tmp_path / "runs" / "today" / "run1"
+    failed = run_cli("sample", "--config", str(config), "--out", str(out))
+    assert failed.returncode == 1, failed.stdout + failed.stderr
+    assert failed.stderr.startswith("station: device error: robot: unreachable after 2 attempts")
+    assert failed.stderr.endswith("(is `station sim serve` running, or the station's wiring up?)\n")
+    assert not (tmp_path / "runs").exists()  # no session folder, no parents
+    with serving(tmp_path, extra_config=fast):
+        retry = run_cli("sample", "--config", str(config), "--out", str(out))
+    assert retry.returncode == 0, retry.stdout + retry.stderr
+    assert retry.stdout.splitlines()[-1].startswith(f"done: 9/9 samples in {out}")
+
+
+def test_read_with_no_simulator_exits_1_with_the_hint(tmp_path):
+    result = run_cli("read", "--config", str(write_config(tmp_path)))
+    assert result.returncode == 1 and result.stdout == ""
+    assert result.stderr.startswith("station: device error: robot: unreachable after 2 attempts")
+    assert result.stderr.endswith("(is `station sim serve` running, or the station's wiring up?)\n")
+    assert result.stderr.count("\n") == 1
 
 
 def test_sim_serve_stops_on_sigterm_and_removes_links(served):

@@ -90,17 +90,25 @@ def _errors(session) -> np.ndarray:
     return np.array([np.nan if e.error_mm is None else e.error_mm for e in session["live"]])
 
 
+def test_live_error_starts_with_the_first_judged_refit_and_says_how_far_off_that_is(session):
+    errors, live = _errors(session), session["live"]
+    first = next(f for f in session["refits"] if f.judged)  # answered LAG samples after it started
+    known = np.isfinite(errors)
+    assert not known[: first.n + LAG].any() and known[first.n + LAG :].all()
+    assert (live[0].fitted, live[0].needed) == (None, None)  # no refit yet
+    assert (live[LAG + 1].fitted, live[LAG + 1].needed) == (1, session["refits"][0].needed)
+    assert all(e.limit_mm is not None for e in live[first.n + LAG :])
+
+
 def test_live_error_has_no_jump_at_a_new_line_and_is_at_the_noise_within_a_line(session):
     errors, line = _errors(session), session["line"]
-    known = np.isfinite(errors)
-    assert not known[0] and known[4:].all()  # the first refit answers 3 samples later
     assert np.nanmax(np.abs(errors)) < 10.0
     firsts = [int(np.flatnonzero(line == k)[0]) for k in (1, 2)]
     assert all(abs(errors[i]) < 10.0 for i in firsts)
     # once the refits hold ten samples of a line (3 more were taken while they ran), the prediction
     # is good to the noise (0.02 mm): a 0.1 mm error stands out
     settled = [i for i in range(len(line)) if i != BAD and np.sum(line[:i] == line[i]) >= 10 + LAG]
-    assert np.max(np.abs(errors[settled])) < 5 * NOISE_MM
+    assert np.nanmax(np.abs(errors[settled])) < 5 * NOISE_MM
 
 
 def test_a_bad_reading_is_suspect_and_no_good_one_is(session):

@@ -24,6 +24,7 @@ def session(tmp_path):
     config.write_text(tomli_w.dumps(absent_devices()))
     (tmp_path / "plan.csv").write_text(PLAN.csv_text())
     inputs = runner.new_session(tmp_path / "sess", config, tmp_path / "plan.csv")
+    inputs.folder.make()  # a session run makes it once the devices answer
     for k in range(2):
         q = {f"q{i + 1}_deg": float(v) for i, v in enumerate(PLAN.q_deg[k])}
         row = {"sample": k, "target": k, "line": 0, **q, "length_mm": 900.0 + k, "dial_mm": 0.1, "t_s": k}
@@ -133,3 +134,20 @@ def test_a_copied_session_resumes_where_its_rows_end(session, tmp_path):
     copy = tmp_path / "copy"
     shutil.copytree(session, copy)
     assert runner.resume_session(copy, None).folder.next_sample == 2
+
+
+def test_a_new_session_folder_is_written_only_when_made(tmp_path):
+    from station.formats.session_folder import SessionFolder
+
+    folder = SessionFolder.new(tmp_path / "runs" / "today" / "run1", {"start_wall_s": 1.7e9})
+    folder.update_header(until_mm=0.5)
+    assert not (tmp_path / "runs").exists()
+    folder.make()
+    written = tomllib.loads((folder.path / "session.toml").read_text())
+    assert written == {"start_wall_s": 1.7e9, "until_mm": 0.5}
+    assert (folder.samples_csv.read_text().count("\n"), folder.raw_csv.read_text().count("\n")) == (1, 1)
+    with pytest.raises(InputError, match="already holds a session; continue it with --resume"):
+        SessionFolder.new(folder.path, {})
+    (tmp_path / "file").write_text("")
+    with pytest.raises(InputError, match=r"cannot write the session folder: .*file is not a folder"):
+        SessionFolder.new(tmp_path / "file" / "run1", {})

@@ -1,0 +1,69 @@
+"""What ``station sim serve`` announces beside the plan it publishes: ``simulator.toml`` in the
+folder of ``[sim] plan_csv`` (``/tmp/station-sim/simulator.toml`` by default) names the robot it
+simulates, its time scale and its process id, so that ``station sample`` on that robot runs at the
+simulator's time scale or refuses a ``--time-scale`` that disagrees.
+
+An announcement whose process is gone (a simulator killed without its clean-up) is stale and read
+as none; ``sim serve`` removes its own when it stops.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field
+
+from errors import InputError
+from station.formats.base import Strict, atomic_write, read_toml, toml_text, validate
+
+FILE_NAME = "simulator.toml"
+
+
+class Announcement(Strict):
+    """A running simulator: the robot it serves (``StationConfig.robot_endpoint``), simulated
+    seconds per real second, its process id."""
+
+    robot: Annotated[str, Field(min_length=1)]
+    time_scale: Annotated[float, Field(gt=0)]
+    pid: Annotated[int, Field(gt=0)]
+
+
+def announcement_path(plan_csv: str | Path) -> Path:
+    """Where a simulator publishing its plan at ``plan_csv`` announces itself."""
+    return Path(plan_csv).parent / FILE_NAME
+
+
+def announce(plan_csv: str | Path, robot: str, time_scale: float) -> Path:
+    """Announce this process as the simulator of ``robot`` at ``time_scale``; returns the file."""
+    path = announcement_path(plan_csv)
+    found = Announcement(robot=robot, time_scale=time_scale, pid=os.getpid())
+    atomic_write(path, toml_text(found.model_dump()))
+    return path
+
+
+def withdraw(plan_csv: str | Path) -> None:
+    """Remove this process's announcement (one by another simulator stays)."""
+    path = announcement_path(plan_csv)
+    try:
+        if read_toml(path).get("pid") == os.getpid():
+            path.unlink()
+    except (InputError, OSError):
+        pass
+
+
+def running_simulator(plan_csv: str | Path) -> Announcement | None:
+    """The simulator announced beside ``plan_csv`` if its process still runs, else None. A file
+    that is there but unreadable is an InputError naming it."""
+    path = announcement_path(plan_csv)
+    if not path.exists():
+        return None
+    found = validate(Announcement, read_toml(path), str(path))
+    try:
+        os.kill(found.pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:  # another user's process: it runs
+        pass
+    return found
