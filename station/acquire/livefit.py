@@ -55,17 +55,17 @@ def _serve(conn, robot: RobotFile, setup: SetupFile) -> None:
     """The worker process: answer each ``(kind, samples)`` with ``(kind, result)`` until the pipe
     closes; a failed job answers with :class:`FitFailed`. Says ``("ready", None)`` first."""
     _yield_cpu()
-    conn.send(("ready", None))
-    while True:
-        try:
+    try:
+        conn.send(("ready", None))
+        while True:
             kind, samples = conn.recv()
-        except (EOFError, OSError):
-            return
-        try:
-            result = _job(kind, robot, setup, samples)
-        except Exception as exc:  # noqa: BLE001 - reported to the session, which goes on
-            result = FitFailed(f"{type(exc).__name__}: {exc}")
-        conn.send((kind, result))
+            try:
+                result = _job(kind, robot, setup, samples)
+            except Exception as exc:  # noqa: BLE001 - reported to the session, which goes on
+                result = FitFailed(f"{type(exc).__name__}: {exc}")
+            conn.send((kind, result))
+    except (EOFError, OSError):  # the station closed the pipe, or is gone
+        return
 
 
 def _yield_cpu() -> None:

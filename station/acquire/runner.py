@@ -280,13 +280,15 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     if live.running.goal_met:
         session.finish("accuracy reached")
     in_main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, lambda *_: session.request_stop()) if in_main else None
+    # Ctrl-C, and the SIGTERM of a service manager or `kill`, stop the session as the operator would
+    stops = (signal.SIGINT, signal.SIGTERM) if in_main else ()
+    previous = {s: signal.signal(s, lambda *_: session.request_stop()) for s in stops}
     try:
         state = session.run()
         if state is not State.STOPPED:
             live.drain(FINAL_FIT_S)
         return state
     finally:
-        if in_main:
-            signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         progress.close()

@@ -27,6 +27,7 @@ the live error largest, the predicted workspace error under it, then the log.
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -240,7 +241,11 @@ class WebViewer:
             cmd += ["--cors-allow-origin", f"http://{_url_host(host)}:{self.web_port}"]
         # its own session: a Ctrl-C for the station must not end the view before the last row
         self.proc = subprocess.Popen(
-            cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+            cmd,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+            preexec_fn=_end_with_parent if sys.platform == "linux" else None,
         )
         self._wait_listening(_connectable(bind))
 
@@ -259,6 +264,15 @@ class WebViewer:
         if self.proc.poll() is None:
             self.proc.terminate()
             self.proc.wait(timeout=5)
+
+
+def _end_with_parent() -> None:
+    """In the viewer's child process (Linux): SIGTERM it when the station dies, even by SIGKILL, so
+    that no orphaned viewer keeps holding the ports."""
+    import ctypes
+
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 def _rerun_binary() -> str:

@@ -142,3 +142,38 @@ def test_a_web_bind_beyond_this_machine_says_so_and_serves_there(tmp_path):
     finally:
         view.close()
     assert view.web.proc.poll() is not None  # the viewer ends with the session
+
+
+def _listening(port: int) -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGKILL])
+def test_a_session_ended_by_a_signal_leaves_no_viewer_behind(tmp_path, signum):
+    """SIGTERM (a service manager, ``kill``) stops the session as Ctrl-C does; even SIGKILL, which
+    the station cannot see, ends the viewer's child process: none keeps holding the ports."""
+    config = _config(tmp_path)
+    sim = _station("sim", "serve", "--config", str(config))
+    sample = None
+    try:
+        for _ in range(3):
+            assert sim.stdout.readline(), "sim serve ended early"
+        sample = _station("sample", "--config", str(config), "--out", str(tmp_path / "sess"), "--web")
+        port = int(re.match(r"live view: http://127\.0\.0\.1:(\d+)/", sample.stdout.readline()).group(1))
+        assert _listening(port)
+        sample.send_signal(signum)
+        code = sample.wait(30)
+        assert code == (130 if signum == signal.SIGTERM else -signal.SIGKILL)
+        deadline = time.monotonic() + 10
+        while _listening(port) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _listening(port), "the viewer outlived the station"
+    finally:
+        for proc in (sample, sim):
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                proc.wait(10)
