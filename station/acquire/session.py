@@ -3,7 +3,8 @@
 States: WAITING (for the robot to settle at an unfinished target) -> CAPTURING -> WAITING ...;
 SUSPENDED while a suspender holds (robot not running, a sensor out of its gate, a device not
 answering), back to WAITING by itself when it clears; and the ends DONE (every target measured),
-STOPPED (stop requested: Ctrl-C), TIMED_OUT (no capture for ``target_timeout_s``); DONE also
+STOPPED (stop requested: Ctrl-C), TIMED_OUT (for ``target_timeout_s`` no capture, and no plan
+target the robot settled at that it had not just visited); DONE also
 when asked to finish early (:meth:`Session.finish`: the running calibration reached its goal).
 
 The log names every fault: each suspension and each change of the condition holding it, and each
@@ -91,6 +92,7 @@ class Session:
         self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
         self.settle = Settle(rules)
         self.rejected = 0
+        self._visited: int | None = None  # the plan target the robot last settled at
         self._suspended_by: Suspend | None = None
         self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
         devices.on_retry = self._retrying
@@ -131,7 +133,9 @@ class Session:
         return self._end(State.DONE, f"all {len(self.plan)} targets measured")
 
     def _step(self) -> bool:
-        """One poll: True when a sample was stored. Raises :class:`Suspend`."""
+        """One poll: True on progress, a sample stored or the robot settled at a finished target
+        other than the last it settled at (a resumed program walking what was measured before).
+        Raises :class:`Suspend`."""
         robot = self.devices.read("robot")
         check_running(robot)
         if not self.settle.update(robot):
@@ -139,6 +143,9 @@ class Session:
         index = self._match(np.asarray(robot.values["q_deg"]))
         if index is None:
             return False
+        moved_on, self._visited = index != self._visited, index
+        if index not in self.pending:
+            return moved_on
         check_gates(self.devices, self.rules)
         self.state = State.CAPTURING
         try:
@@ -154,12 +161,10 @@ class Session:
         return True
 
     def _match(self, q_deg: np.ndarray) -> int | None:
-        """Index of the plan target nearest to ``q_deg`` if it is unfinished and within ``match_deg``."""
+        """Index of the plan target nearest to ``q_deg`` if within ``match_deg`` (finished or not)."""
         dist = np.max(np.abs(self.plan.q_deg - q_deg), axis=1)
         nearest = int(np.argmin(dist))
-        if dist[nearest] > self.rules.match_deg or nearest not in self.pending:
-            return None
-        return nearest
+        return nearest if dist[nearest] <= self.rules.match_deg else None
 
     def _store(self, index: int, cap: Capture) -> None:
         row = {

@@ -445,3 +445,33 @@ def test_the_listener_ticks_at_every_checkpoint_also_while_suspended(tmp_path, c
     suspended = [t for t in ticks if 0.5 < t < 3.0]
     assert len(suspended) >= (2.5 - RULES.settle_s) / SUSPENDED_POLL_S - 2  # each suspended poll
     assert np.max(np.diff(ticks)) < SUSPENDED_POLL_S + RULES.readings * 4 * READ_S + 0.01
+
+
+def test_a_resumed_program_walking_many_finished_targets_does_not_time_out(tmp_path, clock):
+    """The robot program restarts at its first target: it walks the measured ones (longer in all
+    than the target timeout) before the unfinished one, which is then captured."""
+    n = 12
+    q = np.array([[10.0 + 5 * k, -20, 30, 0, 45, 0] for k in range(n)])
+    plan = Plan.of(q, np.zeros(n, int))
+    assert n * 2.5 > 2 * RULES.target_timeout_s
+    first = Cell(tmp_path, clock, timeline(*walk(q[:-1])), plan=plan)
+    session = first.session()
+    first.on_sample = lambda row, cap: session.request_stop() if int(row["target"]) == n - 2 else None
+    assert session.run() is State.STOPPED
+
+    clock.now = 0.0
+    resumed = Cell(tmp_path, clock, timeline(*walk(q)), SessionFolder.open(tmp_path / "sess"), plan)
+    assert resumed.run() is State.DONE
+    assert resumed.targets() == list(range(n))
+
+
+def test_a_robot_parked_at_a_finished_target_still_times_out(tmp_path, clock):
+    first = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    assert stop_after_the_first_sample(first) is State.STOPPED
+
+    clock.now = 0.0
+    q0 = PLAN.q_deg[0]
+    robot = timeline((0.5, moving(q0)), (1e9, still(q0)))
+    parked = Cell(tmp_path, clock, robot, SessionFolder.open(tmp_path / "sess"))
+    assert parked.run() is State.TIMED_OUT
+    assert "settled only at finished targets or away from the plan" in parked.messages[-1]
