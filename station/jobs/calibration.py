@@ -64,6 +64,8 @@ METHODS = ALL_METHODS
 WORKSPACE_POSES = 1000
 WORKSPACE_WARNING_RATIO, WORKSPACE_WARNING_FLOOR_MM = 10.0, 0.5
 """Warn when the predicted workspace error exceeds both this many times the training fit and this."""
+LIMIT_MARGIN_DEG = 1.0
+"""How far beyond a stated joint limit a reading may lie (overtravel, encoder) before it is refused."""
 SHORT_OF_OPTIMUM_RATIO = 1.5
 """Warn when a method's whitened residual RMS exceeds LMLC's by this factor."""
 NOISE_DOUBT_RATIO, NOISE_DOUBT_P = 2.0, 1e-3
@@ -166,6 +168,9 @@ def calibrate_samples(
     ``setup``.
     """
     t0 = time.perf_counter()
+    for rows in (samples, holdout):
+        if rows is not None:
+            check_joint_limits(rows, robot)
     model = build_model(samples, robot, setup, setup_where)
     validate(model, samples.path, method, select)
     if terms not in MODELS:
@@ -240,6 +245,26 @@ def holdout_model(model: MeasurementModel, holdout: Samples | None) -> Measureme
 def unknowns(model: MeasurementModel) -> int:
     """How many unknowns (table and setup) the data must determine: all but the model's gauges."""
     return len(model.names) - len(model.gauges())
+
+
+def check_joint_limits(samples: Samples, robot: RobotFile) -> None:
+    """Bad input if a joint reads beyond the limits the robot file states (by more than
+    ``LIMIT_MARGIN_DEG``): no reading the robot can give, so a garbled reading or another robot's
+    rows, which the fit would otherwise absorb into a wrong table. Joints without stated limits pass."""
+    for j, joint in enumerate(robot.joints):
+        if not {"q_min_deg", "q_max_deg"} & joint.model_fields_set:
+            continue
+        q = samples.q_deg[:, j]
+        lo, hi = joint.q_min_deg - LIMIT_MARGIN_DEG, joint.q_max_deg + LIMIT_MARGIN_DEG
+        out = np.flatnonzero((q < lo) | (q > hi))
+        if out.size:
+            i = int(out[0])
+            raise InputError(
+                f"{samples.path}: row {i} (line {i + 2}): q{j + 1}_deg {q[i]:g} is outside joint {j + 1}'s "
+                f"limits {joint.q_min_deg:g} .. {joint.q_max_deg:g} deg in the robot file ({robot.name}): "
+                f"not a reading this robot can give ({out.size} such rows; a garbled reading, or another "
+                "robot's samples)"
+            )
 
 
 def check_enough(model: MeasurementModel, where: str) -> None:

@@ -36,6 +36,14 @@ def session(three_lines, tmp_path_factory):
     return folder
 
 
+def _with_row(samples, row, column, value, out):
+    header, *rows = samples.read_text().splitlines()
+    cells = rows[row].split(",")
+    cells[header.split(",").index(column)] = value
+    out.write_text("\n".join([header, *rows[:row], ",".join(cells), *rows[row + 1 :]]) + "\n")
+    return out
+
+
 def _outputs(folder):
     return folder / "o.toml", folder / "r.json", folder / "p.png"
 
@@ -106,17 +114,37 @@ def test_an_output_that_cannot_be_written_is_found_before_the_work(three_lines, 
 
 def test_a_wild_reading_is_named_as_the_likely_cause(three_lines, tmp_path, capsys):
     # A 100 m cable reading among 1 m ones: the fit cannot shrug it off and is refused, naming it.
-    header, *rows = three_lines.samples.read_text().splitlines()
-    column = header.split(",").index("length_mm")
-    cells = rows[5].split(",")
-    cells[column] = "99999.0"
-    wild = tmp_path / "wild.csv"
-    wild.write_text("\n".join([header, *rows[:5], ",".join(cells), *rows[6:]]) + "\n")
+    wild = _with_row(three_lines.samples, 5, "length_mm", "99999.0", tmp_path / "wild.csv")
     argv = ["calibrate", wild, "--robot", three_lines.robot, "--setup", three_lines.setup]
     code, _, err = _cli(capsys, *argv, "--model", "geometric", "--out", tmp_path / "o.toml")
     assert code == 2 and err.count("\n") == 1
     assert "likely cause: row 5: error before calibration up to" in err and "a wild reading" in err
     assert not (tmp_path / "o.toml").exists()
+
+
+@pytest.mark.parametrize("reading", ["3590.0", "-171.5"])
+def test_a_joint_beyond_the_robot_files_limits_is_refused_naming_it(three_lines, tmp_path, capsys, reading):
+    # within the loader's ten turns, but no angle the JR680's joint 1 (-170 .. 170 deg) can take
+    bad = _with_row(three_lines.samples, 7, "q1_deg", reading, tmp_path / "bad.csv")
+    argv = ["calibrate", bad, "--robot", three_lines.robot, "--setup", three_lines.setup]
+    code, _, err = _cli(capsys, *argv, "--out", tmp_path / "o.toml")
+    assert code == 2 and err.count("\n") == 1
+    where = f"bad.csv: row 7 (line 9): q1_deg {float(reading):g}"
+    assert f"{where} is outside joint 1's limits -170 .. 170 deg" in err
+    assert not (tmp_path / "o.toml").exists()
+
+
+@pytest.mark.parametrize("past_deg, code", [(0.5, 0), (1.5, 2)])
+def test_a_joint_within_a_degree_past_its_limit_is_overtravel(three_lines, tmp_path, capsys, past_deg, code):
+    """The clean samples against a robot file whose joint 1 ends ``past_deg`` below the highest q1."""
+    robot = read_toml(three_lines.robot)
+    header, *rows = three_lines.samples.read_text().splitlines()
+    q1 = max(float(r.split(",")[header.split(",").index("q1_deg")]) for r in rows)
+    robot["joints"][0]["q_max_deg"] = q1 - past_deg
+    (tmp_path / "robot.toml").write_text(tomli_w.dumps(robot))
+    robot_flags = ["--robot", tmp_path / "robot.toml", "--setup", three_lines.setup]
+    argv = ["calibrate", three_lines.samples, *robot_flags]
+    assert _cli(capsys, *argv, "--model", "geometric", "--out", tmp_path / "o.toml")[0] == code
 
 
 def test_rows_of_another_session_mixed_in_are_named_as_the_likely_cause(three_lines, tmp_path, capsys):
