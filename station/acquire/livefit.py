@@ -192,6 +192,7 @@ class RunningCalibration:
         self.saturated: set[int] = set()
         self.goal_met = False
         self._want_next = False  # a planner suggestion is wanted and not yet started
+        self._said_undetermined = False
 
     def nominal_tcp_mm(self, q_deg) -> np.ndarray:
         """Nominal TCPs (N, 3) [mm] of configurations (N, 6) [deg]."""
@@ -253,7 +254,15 @@ class RunningCalibration:
         self.latest = fit
         self.listener.refit(fit)
         if not fit.judged:
+            if not self._said_undetermined:
+                self._said_undetermined = True
+                self.listener.message(
+                    f"running calibration: live errors and the predicted workspace error start once "
+                    f"the samples determine the model ({fit.n} of {fit.needed} so far)"
+                )
             return
+        if not self.history:
+            self.listener.message(f"running calibration: the model is determined by {fit.n} samples")
         counts = _counts(self.samples.line[: fit.n])
         self.history.append((fit, counts))
         self._saturation(fit, counts)

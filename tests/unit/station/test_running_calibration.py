@@ -198,3 +198,11 @@ def test_a_slow_refit_never_delays_a_capture(tmp_path, clock):  # noqa: F811
     starts = np.array([t for t, _ in worker.jobs]) - (T0_WALL - cell.folder.header["start_wall_s"])
     assert [n for _, n in worker.jobs] == [int(np.searchsorted(t_s, t, side="right")) for t in starts]
     assert np.all(np.diff(starts) >= worker.fit_s) and 1 < len(worker.jobs) < len(plan)
+
+
+def test_the_log_says_once_why_the_live_error_waits_and_once_when_it_starts(session):
+    waiting = [m for m in session["messages"] if "start once the samples determine the model" in m]
+    started = [m for m in session["messages"] if "the model is determined by" in m]
+    first = next(f for f in session["refits"] if f.judged)
+    assert len(waiting) == 1 and waiting[0].endswith(f"(1 of {session['refits'][0].needed} so far)")
+    assert started == [f"running calibration: the model is determined by {first.n} samples"]
