@@ -47,6 +47,7 @@ GREEN, RED, GREY = (40, 200, 80), (230, 60, 50), (150, 150, 150)
 FLUSH_TIMEOUT_S = 10.0
 BLUE, ORANGE, PURPLE = (60, 120, 230), (240, 150, 30), (170, 80, 200)
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
+WARN_WORDS = ("suspended", "rejected", "retrying", "failed", "timed out", "check the cable")
 
 
 def blueprint() -> rrb.Blueprint:
@@ -97,10 +98,15 @@ class LiveView:
         if resume and rrd.exists():
             os.replace(rrd, self._previous)  # the new sink truncates rrd: keep what it held
         sinks = [rr.FileSink(str(rrd)), *self._live_sinks(viewer, web)]
-        self.rec.set_sinks(*sinks)
-        self.rec.send_blueprint(blueprint())
-        if self._previous.exists():
-            self.rec.log_file_from_path(self._previous)
+        try:
+            self.rec.set_sinks(*sinks)
+            self.rec.send_blueprint(blueprint())
+            if self._previous.exists():
+                self.rec.log_file_from_path(self._previous)
+        except BaseException:  # no view for the caller to close: stop the viewer here
+            if self.web is not None:
+                self.web.close()
+            raise
         self._path: list[np.ndarray] = []
         self._anchor = np.zeros(3)
 
@@ -190,8 +196,7 @@ class LiveView:
         self.rec.log("live/predicted_workspace_95_mm", rr.Scalars(bound_95_mm))
 
     def message(self, text: str) -> None:
-        warn = text.startswith(("suspended", "capture", "timed", "sample", "running calibration"))
-        self.rec.log("log", rr.TextLog(text, level=rr.TextLogLevel.WARN if warn else rr.TextLogLevel.INFO))
+        self.rec.log("log", rr.TextLog(text, level=log_level(text)))
 
     def calibration(self, method: str, before_mm, after_mm, cost_per_iteration) -> None:
         """Per-sample drawstring residuals (mm) before and after, and the solver's cost history."""
@@ -245,7 +250,7 @@ class WebViewer:
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
             start_new_session=True,
-            preexec_fn=_end_with_parent if sys.platform == "linux" else None,
+            preexec_fn=_death_signal() if sys.platform == "linux" else None,
         )
         self._wait_listening(_connectable(bind))
 
@@ -263,16 +268,28 @@ class WebViewer:
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.terminate()
-            self.proc.wait(timeout=5)
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
 
 
-def _end_with_parent() -> None:
-    """In the viewer's child process (Linux): SIGTERM it when the station dies, even by SIGKILL, so
-    that no orphaned viewer keeps holding the ports."""
+def log_level(text: str) -> rr.TextLogLevel:
+    """A session-log line's level: ``WARN`` where it reports a fault, a lost capture or a suspect
+    reading (``WARN_WORDS``), else ``INFO``."""
+    return rr.TextLogLevel.WARN if any(word in text for word in WARN_WORDS) else rr.TextLogLevel.INFO
+
+
+def _death_signal():
+    """What the viewer's child process runs before ``exec`` (Linux): SIGTERM it when the station
+    dies, even by SIGKILL, so that no orphaned viewer keeps holding the ports. ``prctl`` is looked
+    up here, in the parent: the child of a process with threads (the device readers) must only
+    call it."""
     import ctypes
 
-    PR_SET_PDEATHSIG = 1
-    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    prctl, pr_set_pdeathsig = ctypes.CDLL(None, use_errno=True).prctl, 1
+    return lambda: prctl(pr_set_pdeathsig, signal.SIGTERM)
 
 
 def _rerun_binary() -> str:

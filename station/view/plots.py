@@ -75,6 +75,12 @@ def plan_figure(report: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def rms_per_placement(errors: np.ndarray, placement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The placements (ascending ids; -1: rows on no line) and the RMS of ``errors`` [mm] on each."""
+    ids = np.unique(placement)
+    return ids, np.array([np.sqrt(np.mean(errors[placement == i] ** 2)) for i in ids])
+
+
 def calibration_figure(data: dict, path: Path) -> None:
     """Three panels from a calibration (``station.jobs.calibration.residual_rows``): (a) each
     sample row's error [mm] before and after, down-weighted rows marked; (b) the RMS error per
@@ -82,7 +88,8 @@ def calibration_figure(data: dict, path: Path) -> None:
     before and after next to the predicted workspace error and its 95 % bound."""
     fig, (ax_rows, ax_lines, ax_ws) = plt.subplots(1, 3, figsize=(16, 4.8), width_ratios=(2, 1, 1))
     rows = data["rows"]
-    before, after, placement = (np.abs(rows[k]) for k in ("before_mm", "after_mm", "placement"))
+    before, after = np.abs(rows["before_mm"]), np.abs(rows["after_mm"])
+    placement = np.asarray(rows["placement"])  # -1: rows on no line
     index = np.arange(len(before))
     ax_rows.semilogy(index, before, ".", color="0.6", label="before (nominal table)")
     ax_rows.semilogy(index, after, ".", color="C0", label="after")
@@ -93,10 +100,9 @@ def calibration_figure(data: dict, path: Path) -> None:
     ax_rows.set_ylabel(f"|{data['kind']} error| [mm]")
     ax_rows.set_title("(a) error per sample")
     ax_rows.legend(fontsize=8)
-    ids = np.unique(np.asarray(rows["placement"]))
     width, lowest = 0.4, np.inf
     for k, (errors, label, colour) in enumerate(((before, "before", "0.6"), (after, "after", "C0"))):
-        rms = [np.sqrt(np.mean(errors[placement == i] ** 2)) for i in ids]
+        ids, rms = rms_per_placement(errors, placement)
         ax_lines.bar(np.arange(len(ids)) + (k - 0.5) * width, rms, width, color=colour, label=label)
         lowest = min(lowest, *rms)
     names = [f"line {i}" if i >= 0 else "no line" for i in ids] if data["kind"] == "drawstring" else ["all"]
