@@ -17,7 +17,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from drivers.base import Backoff, Driver
 from drivers.dial import DIAL_DIALECTS, DialIndicator
 from drivers.drawstring import ENCODINGS, AsciiDrawstring, ModbusDrawstring, RegisterMap
-from drivers.robot import JOINT_ENCODINGS, JointRegisterMap, ModbusJointSource, RtdeJointSource
+from drivers.robot import JOINT_ENCODINGS, RTDE_PORT, JointRegisterMap, ModbusJointSource, RtdeJointSource
 
 
 class Section(BaseModel):
@@ -130,6 +130,10 @@ class RobotRtde(Section):
     def build(self) -> Driver:
         return RtdeJointSource(self.host, self.frequency_hz)
 
+    def endpoint(self) -> str:
+        """Where the joints are read, as a simulator announces the robot it serves."""
+        return f"rtde {self.host}:{RTDE_PORT}"
+
 
 class RobotModbusTcp(Section):
     """A controller publishing its six joints in Modbus registers (e.g. the HSR JR680): from
@@ -150,6 +154,10 @@ class RobotModbusTcp(Section):
         client = ModbusTcpClient(self.host, port=self.port, timeout=self.timeout_s, retries=0)
         layout = self.model_dump(include={"device_id", "address", "encoding", "word_order", "scale", "table"})
         return ModbusJointSource(client, JointRegisterMap(**layout))
+
+    def endpoint(self) -> str:
+        """Where the joints are read, as a simulator announces the robot it serves."""
+        return f"modbus-tcp {self.host}:{self.port}"
 
 
 RobotConfig = Annotated[RobotRtde | RobotModbusTcp, Field(discriminator="kind")]

@@ -18,19 +18,16 @@ from drivers.config import (
     Name,
     Reconnect,
     RobotConfig,
-    RobotRtde,
     Section,
     error_key,
 )
 from errors import InputError
-from station.formats.base import MAX_DIAL_MM, MAX_LENGTH_MM, DialReading, Length, read_toml
+from station.formats.base import MAX_DIAL_MM, MAX_LENGTH_MM, DialReading, Length, TimeScale, read_toml
 
 UNREACHABLE_HINT = "is `station sim serve` running, or the station's wiring up?"
 """What a device that stays unreachable at the start of ``station read`` or ``station sample`` asks."""
 
 Seconds = Annotated[float, Field(gt=0, le=86400)]  # a time of the capture rule, s: up to a day
-TimeScale = Annotated[float, Field(ge=1e-3, le=1e3, allow_inf_nan=False)]
-"""Simulated seconds per real second (1: real time)."""
 
 
 class SimConfig(Section):
@@ -85,21 +82,15 @@ class StationConfig(Section):
     reconnect: Reconnect = Reconnect()
     sim: SimConfig = SimConfig()
 
-    def robot_endpoint(self) -> str:
-        """Where the robot is read, as ``station sim serve`` announces the robot it simulates."""
-        if isinstance(self.robot, RobotRtde):
-            return f"rtde {self.robot.host}:30004"
-        return f"modbus-tcp {self.robot.host}:{self.robot.port}"
-
-    def with_time_scale(self, time_scale: float | None, flag: str = "--time-scale") -> StationConfig:
-        """This config at ``time_scale`` (None: as it is); a value out of range is an InputError
-        naming ``flag``."""
+    def with_time_scale(self, time_scale: float | None) -> StationConfig:
+        """This config at ``time_scale`` (None: as it is; from ``--time-scale`` or a simulator's
+        announcement); a value out of range is an InputError naming ``--time-scale``."""
         if time_scale is None:
             return self
         try:
             valid = TypeAdapter(TimeScale).validate_python(time_scale)
         except ValidationError as exc:
-            raise InputError(f"{flag} {time_scale:g}: {exc.errors()[0]['msg']}") from None
+            raise InputError(f"--time-scale {time_scale:g}: {exc.errors()[0]['msg']}") from None
         return self.model_copy(update={"time_scale": valid})
 
     def devices(self) -> dict[str, Section]:

@@ -74,7 +74,7 @@ def agree_time_scale(cfg: StationConfig, time_scale: float | None) -> tuple[Stat
     ``time_scale`` (``--time-scale``) is an InputError); else ``time_scale`` if given, else the
     config's."""
     sim = running_simulator(cfg.sim.plan_csv)
-    if sim is None or sim.robot != cfg.robot_endpoint():
+    if sim is None or sim.robot != cfg.robot.endpoint():
         return cfg.with_time_scale(time_scale), ()
     if time_scale is not None and time_scale != sim.time_scale:
         raise InputError(

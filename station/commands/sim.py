@@ -85,7 +85,7 @@ def _announce(cfg) -> None:
     from station.formats.announcement import announce
 
     try:
-        announce(cfg.sim.plan_csv, cfg.robot_endpoint(), cfg.time_scale)
+        announce(cfg.sim.plan_csv, cfg.robot.endpoint(), cfg.time_scale)
     except OSError as exc:
         raise DeviceError(
             f"cannot announce the simulator beside {cfg.sim.plan_csv}: {exc.strerror or exc}"

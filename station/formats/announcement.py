@@ -16,17 +16,17 @@ from typing import Annotated
 from pydantic import Field
 
 from errors import InputError
-from station.formats.base import Strict, atomic_write, read_toml, toml_text, validate
+from station.formats.base import Strict, TimeScale, atomic_write, read_toml, toml_text, validate
 
 FILE_NAME = "simulator.toml"
 
 
 class Announcement(Strict):
-    """A running simulator: the robot it serves (``StationConfig.robot_endpoint``), simulated
+    """A running simulator: the robot it serves (its ``[robot]`` section's ``endpoint()``), simulated
     seconds per real second, its process id."""
 
     robot: Annotated[str, Field(min_length=1)]
-    time_scale: Annotated[float, Field(gt=0)]
+    time_scale: TimeScale
     pid: Annotated[int, Field(gt=0)]
 
 

@@ -46,6 +46,7 @@ JointAngle = Annotated[float, Field(ge=-MAX_JOINT_DEG, le=MAX_JOINT_DEG)]
 Sigma = Annotated[float, Field(ge=MIN_SIGMA_MM, le=MAX_SIGMA_MM)]
 Id = Annotated[int, Field(ge=0, le=MAX_ID)]
 Vec3 = Annotated[list[Length], Field(min_length=3, max_length=3)]
+TimeScale = Annotated[float, Field(ge=1e-3, le=1e3, allow_inf_nan=False)]  # simulated s per real s
 
 
 def _non_zero(v: list[float]) -> list[float]:

@@ -20,7 +20,7 @@ def cfg(tmp_path):
 
 
 def test_a_session_adopts_the_announced_time_scale_of_its_robot(cfg):
-    announce(cfg.sim.plan_csv, cfg.robot_endpoint(), 20.0)
+    announce(cfg.sim.plan_csv, cfg.robot.endpoint(), 20.0)
     agreed, notes = agree_time_scale(cfg, None)
     assert agreed.time_scale == 20.0 and cfg.time_scale == 1.0
     assert notes == (f"time scale 20: the simulated robot's (`station sim serve`, process {os.getpid()})",)
@@ -28,12 +28,12 @@ def test_a_session_adopts_the_announced_time_scale_of_its_robot(cfg):
 
 
 def test_a_time_scale_that_disagrees_with_the_simulator_is_refused_naming_both(cfg):
-    announce(cfg.sim.plan_csv, cfg.robot_endpoint(), 20.0)
+    announce(cfg.sim.plan_csv, cfg.robot.endpoint(), 20.0)
     with pytest.raises(InputError) as refused:
         agree_time_scale(cfg, 1.0)
     text = str(refused.value)
     assert text.startswith(
-        f"--time-scale 1: the simulated robot at {cfg.robot_endpoint()} runs at time scale 20"
+        f"--time-scale 1: the simulated robot at {cfg.robot.endpoint()} runs at time scale 20"
     )
     assert str(announcement_path(cfg.sim.plan_csv)) in text and "give 20" in text
 
@@ -49,7 +49,7 @@ def test_another_robots_simulator_or_none_leaves_the_flag_or_the_config(cfg):
 
 def test_an_announcement_whose_process_is_gone_is_stale(cfg):
     path = announcement_path(cfg.sim.plan_csv)
-    path.write_text(tomli_w.dumps({"robot": cfg.robot_endpoint(), "time_scale": 20.0, "pid": 999_999_999}))
+    path.write_text(tomli_w.dumps({"robot": cfg.robot.endpoint(), "time_scale": 20.0, "pid": 999_999_999}))
     assert running_simulator(cfg.sim.plan_csv) is None
     assert agree_time_scale(cfg, None)[0].time_scale == 1.0
     withdraw(cfg.sim.plan_csv)  # not this process's: kept
