@@ -46,7 +46,7 @@ from calib.position import PositionModel, PositionSamples
 from calib.selection import TermSelection
 from errors import InputError, ParameterError
 from station.formats.samples import Samples
-from station.formats.tables import RobotFile, SetupFile
+from station.formats.tables import Payload, RobotFile, SetupFile
 from station.jobs.report import (
     CalibrationReport,
     CrossValidation,
@@ -127,12 +127,14 @@ WARNINGS = {
 
 @dataclass(frozen=True)
 class CalibrationOutcome:
-    """A finished calibration: the typed ``report``, ``calib``'s ``calibration`` (fits, covariance)
-    and the training ``model`` it ran on (with the terms it fitted)."""
+    """A finished calibration: the typed ``report``, ``calib``'s ``calibration`` (fits, covariance),
+    the training ``model`` it ran on (with the terms it fitted) and the ``payload`` its gravity
+    torques counted (``payload_of``), which a corrected table records."""
 
     report: CalibrationReport
     calibration: Calibration
     model: MeasurementModel
+    payload: Payload | None = None
 
 
 @dataclass(frozen=True)
@@ -178,12 +180,17 @@ def calibrate_samples(
     validate(model, samples.path, method, select)
     if terms not in MODELS:
         raise ParameterError(MESSAGES["terms"], value=terms, choices=", ".join(MODELS))
-    payload = setup.payload if setup is not None else None
+    payload = payload_of(robot, setup)
     choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
     fit = SOLVERS[method](choice, method, select)
     elapsed = time.perf_counter() - t0
     report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms, notes)
-    return CalibrationOutcome(report, fit.calibration, choice.model)
+    return CalibrationOutcome(report, fit.calibration, choice.model, payload)
+
+
+def payload_of(robot: RobotFile, setup: SetupFile | None) -> Payload | None:
+    """What the flange carried while measuring: the setup's payload, else the robot file's own."""
+    return (setup.payload if setup is not None else None) or robot.payload
 
 
 # -- the model and its validation ---------------------------------------------------------------

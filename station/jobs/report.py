@@ -199,7 +199,7 @@ def corrected_table(
 ) -> dict:
     """The robot file with the calibrated table, the identified joint-space terms (each under its
     joint, as ``calib.joint_terms`` names it), per-joint sigmas and provenance (TOML-ready); the
-    ``payload`` the compliances were identified with, where one was given."""
+    ``payload`` the compliances were identified with (``CalibrationOutcome.payload``)."""
     factor = display_factor(cal.names)
     table = dh_to_degrees(dh_table(cal.x))
     cols = DH_KEYS
