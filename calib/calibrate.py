@@ -449,12 +449,20 @@ def workspace_mask(model: MeasurementModel) -> np.ndarray:
     return ~model.setup_mask | model.tool_mask
 
 
+def robust_weights(
+    residuals: np.ndarray, groups: np.ndarray, scale: np.ndarray, options: CalibrationOptions
+) -> np.ndarray:
+    """The robust loss's weights ``sqrt(rho')`` (m,) of whitened ``residuals`` (m,) in residual
+    ``groups`` (m,), at a calibration's noise ``scale`` (per group); 1 for the linear loss."""
+    return loss_terms(residuals, loss_scale(scale, options)[groups], options.loss)[1]
+
+
 def _downweighted_rows(model, result: LMResult, scale, options: CalibrationOptions) -> np.ndarray:
     """Sample rows with a residual the robust loss cut to below a quarter of its weight (for the
     Cauchy loss at 3 sigma: beyond 5.2 noise scales): the gross readings."""
     if options.loss == "linear":
         return np.array([], int)
-    _, w = loss_terms(result.residuals, loss_scale(scale, options)[model.groups], options.loss)
+    w = robust_weights(result.residuals, model.groups, scale, options)
     rows = model.rows[w**2 < 0.25]
     return np.unique(rows[rows >= 0])
 

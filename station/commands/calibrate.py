@@ -78,9 +78,13 @@ def run(args) -> int:
         )
     if outcome.report.fit_check.refusal:
         raise InputError(f"{args.samples}: {outcome.report.fit_check.refusal}; nothing written")
-    payload = inputs.setup.payload if inputs.setup is not None else None
     table = corrected_table(
-        inputs.robot, outcome.calibration, inputs.samples, args.method, model=args.model, payload=payload
+        inputs.robot,
+        outcome.calibration,
+        inputs.samples,
+        args.method,
+        model=args.model,
+        payload=outcome.payload,
     )
     outputs = [Output.text(args.out, "--out", toml_text(table))]
     if args.report:

@@ -231,7 +231,9 @@ def _calibrate(out: Path, inputs, view, seed: int) -> int:
         )
         print(f"calibrate: {_one_line(outcome.report)}; {truth_line(world, outcome)}", flush=True)
     main_outcome = outcomes["lmlc"]
-    table = corrected_table(inputs.robot, main_outcome.calibration, samples, "lmlc")
+    table = corrected_table(
+        inputs.robot, main_outcome.calibration, samples, "lmlc", payload=main_outcome.payload
+    )
     atomic_write(out / "corrected.toml", toml_text(table))
     atomic_write(out / "report.json", json.dumps(main_outcome.report.as_json(), indent=2) + "\n")
     for method, outcome in outcomes.items():

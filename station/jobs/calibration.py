@@ -26,6 +26,7 @@ from calib.calibrate import (
     covariance,
     display_unit,
     fit_setup,
+    robust_weights,
     row_noise,
 )
 from calib.consistency import NoiseTest, excursions, noise_test, wild_rows
@@ -45,7 +46,7 @@ from calib.position import PositionModel, PositionSamples
 from calib.selection import TermSelection
 from errors import InputError, ParameterError
 from station.formats.samples import Samples
-from station.formats.tables import RobotFile, SetupFile
+from station.formats.tables import Payload, RobotFile, SetupFile
 from station.jobs.report import (
     CalibrationReport,
     CrossValidation,
@@ -126,23 +127,27 @@ WARNINGS = {
 
 @dataclass(frozen=True)
 class CalibrationOutcome:
-    """A finished calibration: the typed ``report``, ``calib``'s ``calibration`` (fits, covariance)
-    and the training ``model`` it ran on (with the terms it fitted)."""
+    """A finished calibration: the typed ``report``, ``calib``'s ``calibration`` (fits, covariance),
+    the training ``model`` it ran on (with the terms it fitted) and the ``payload`` its gravity
+    torques counted (``payload_of``), which a corrected table records."""
 
     report: CalibrationReport
     calibration: Calibration
     model: MeasurementModel
+    payload: Payload | None = None
 
 
 @dataclass(frozen=True)
 class MethodFit:
     """What a solver returns: the ``calibration`` (its ``downweighted`` rows numbered in the training
-    set), the MCS ``selection`` (mcs-lmlc) and the least-squares ``optimum`` a baseline is judged
-    against."""
+    set), the MCS ``selection`` (mcs-lmlc), the least-squares ``optimum`` a baseline is judged
+    against, and whether LMLC's solver found it (``lm``: its robust loss weighs the rows and its
+    iteration cap applies; a baseline has neither)."""
 
     calibration: Calibration
     selection: MCSResult | None = None
     optimum: np.ndarray | None = None
+    lm: bool = True
 
 
 def calibrate_samples(
@@ -175,12 +180,17 @@ def calibrate_samples(
     validate(model, samples.path, method, select)
     if terms not in MODELS:
         raise ParameterError(MESSAGES["terms"], value=terms, choices=", ".join(MODELS))
-    payload = setup.payload if setup is not None else None
+    payload = payload_of(robot, setup)
     choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
     fit = SOLVERS[method](choice, method, select)
     elapsed = time.perf_counter() - t0
     report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms, notes)
-    return CalibrationOutcome(report, fit.calibration, choice.model)
+    return CalibrationOutcome(report, fit.calibration, choice.model, payload)
+
+
+def payload_of(robot: RobotFile, setup: SetupFile | None) -> Payload | None:
+    """What the flange carried while measuring: the setup's payload, else the robot file's own."""
+    return (setup.payload if setup is not None else None) or robot.payload
 
 
 # -- the model and its validation ---------------------------------------------------------------
@@ -304,7 +314,7 @@ def _mcs_lmlc(choice: TermChoice, method: str, select: int | None) -> MethodFit:
 
 def _baseline(choice: TermChoice, method: str, select: int | None) -> MethodFit:
     cal, optimum = baseline(choice.model, method)
-    return MethodFit(cal, optimum=optimum)
+    return MethodFit(cal, optimum=optimum, lm=False)
 
 
 SOLVERS = {"lmlc": _lmlc, "mcs-lmlc": _mcs_lmlc, **dict.fromkeys(BASELINES, _baseline)}
@@ -372,7 +382,7 @@ def _report(
     model, cal = choice.model, fit.calibration
     after = metrics(model, hold_model, cal.x)
     workspace = predicted_workspace(robot, cal, model)
-    check, doubts = fit_check(model, cal, after.train, robot, notes)
+    check, doubts = fit_check(model, cal, after.train, robot, notes, lm=fit.lm)
     messages = [*notes, *doubts]
     messages += [choice.warning] if choice.warning else []
     messages += workspace_warnings(model, cal.x, after.train, workspace)
@@ -479,20 +489,31 @@ def short_of_optimum(
 
 
 def fit_check(
-    model: MeasurementModel, cal: Calibration, fit: ErrorMetrics, robot: RobotFile, notes: tuple[str, ...]
+    model: MeasurementModel,
+    cal: Calibration,
+    fit: ErrorMetrics,
+    robot: RobotFile,
+    notes: tuple[str, ...],
+    *,
+    lm: bool = True,
 ) -> tuple[FitCheck, list[str]]:
     """How the fit agrees with the stated noise and tolerances, and the warnings it calls for: a
     residual beyond the noise (chi-square), the iteration cap, a parameter far beyond its prior.
     Overwhelming evidence (a residual hundreds of times the noise, a fifth of the rows that far
     off, a parameter moved a hundred tolerances) makes the verdict ``inconsistent``, its
     ``refusal`` naming the likely cause (the first of ``notes``, else a wild reading, else what the
-    evidence points at)."""
-    rows = len(model.groups)
-    test = noise_test(cal.after.residuals[:rows], cal.after.weights[:rows], int(cal.identified.sum()))
+    evidence points at). Judged at ``cal.x`` on every row of ``model`` (the training set, whatever
+    subset the solver saw), weighted by LMLC's robust loss where ``lm`` (else every row counts, and
+    there is no iteration cap)."""
+    r = model.residuals(cal.x)
+    options = CalibrationOptions() if lm else CalibrationOptions(loss="linear")
+    weights = robust_weights(r, model.groups, cal.scale, options)
+    test = noise_test(r, weights, int(cal.identified.sum()))
+    capped = bool(lm and cal.after.status == 0)
     z = excursions(cal.x, model.x0, model.prior_sigma(), cal.identified)
     wild = _wild(model, cal)
     messages = [wild] if wild else []
-    messages += _doubts(model, cal, test, z, fit)
+    messages += _doubts(model, cal, test, z, fit, capped)
     refusal = _refusal(model, cal, test, z, fit, robot, (*notes, *([wild] if wild else [])))
     verdict = "inconsistent" if refusal else "doubtful" if messages else "consistent"
     top = int(np.argmax(z))
@@ -503,7 +524,7 @@ def fit_check(
         p_value=test.p_value,
         excursion=model.names[top] if z[top] > 0 else None,
         excursion_sigmas=float(z[top]),
-        iteration_cap=bool(cal.after.status == 0),
+        iteration_cap=capped,
         verdict=verdict,
         refusal=refusal,
     )
@@ -511,18 +532,24 @@ def fit_check(
 
 
 def _doubts(
-    model: MeasurementModel, cal: Calibration, test: NoiseTest, z: np.ndarray, fit: ErrorMetrics
+    model: MeasurementModel,
+    cal: Calibration,
+    test: NoiseTest,
+    z: np.ndarray,
+    fit: ErrorMetrics,
+    capped: bool,
 ) -> list[str]:
     """The warnings of a fit that may still stand: a residual beyond the stated noise (the chi-square
     rejects it and it is ``NOISE_DOUBT_RATIO`` times the noise or more), the iteration cap reached,
-    parameters ``EXCURSION_DOUBT`` prior sigmas or more from their start."""
+    parameters ``EXCURSION_DOUBT`` prior sigmas or more from their start. ``capped``: the solver
+    stopped at its iteration cap."""
     messages = []
     if test.ratio >= NOISE_DOUBT_RATIO and test.p_value < NOISE_DOUBT_P:
         p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
         messages.append(
             WARNINGS["noise"].format(ratio=test.ratio, chi2=test.chi2, dof=test.dof, p=p, rmse=fit.rmse_mm)
         )
-    if cal.after.status == 0:
+    if capped:
         messages.append(WARNINGS["iteration_cap"].format(nit=cal.after.nit))
     order = [k for k in np.argsort(-z) if z[k] >= EXCURSION_DOUBT]
     if order:

@@ -69,11 +69,12 @@ class WorkspacePrediction:
 @dataclass(frozen=True)
 class FitCheck:
     """Does the fit agree with what was stated before measuring (``calib.consistency``)?
-    ``noise_ratio``: the residual of the rows the robust loss kept, in stated noises, with its
-    chi-square (``chi2`` on ``dof`` degrees of freedom, ``p_value``); ``excursion``: the parameter
-    that moved most from its start, by ``excursion_sigmas`` of its prior (tolerance); whether the
-    solver stopped at its ``iteration_cap``; the ``verdict``: ``consistent``, ``doubtful`` (the
-    report warns) or ``inconsistent`` (``station calibrate`` refuses the result with ``refusal``)."""
+    ``noise_ratio``: the residual of the training rows the robust loss kept (a baseline: all), in
+    stated noises, with its chi-square (``chi2`` on ``dof`` degrees of freedom, ``p_value``);
+    ``excursion``: the parameter that moved most from its start, by ``excursion_sigmas`` of its prior
+    (tolerance); whether LMLC's solver stopped at its ``iteration_cap`` (never for a baseline); the
+    ``verdict``: ``consistent``, ``doubtful`` (the report warns) or ``inconsistent`` (``station
+    calibrate`` refuses the result with ``refusal``)."""
 
     noise_ratio: float
     chi2: float
@@ -198,7 +199,7 @@ def corrected_table(
 ) -> dict:
     """The robot file with the calibrated table, the identified joint-space terms (each under its
     joint, as ``calib.joint_terms`` names it), per-joint sigmas and provenance (TOML-ready); the
-    ``payload`` the compliances were identified with, where one was given."""
+    ``payload`` the compliances were identified with (``CalibrationOutcome.payload``)."""
     factor = display_factor(cal.names)
     table = dh_to_degrees(dh_table(cal.x))
     cols = DH_KEYS

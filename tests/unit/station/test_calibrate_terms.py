@@ -176,3 +176,17 @@ def test_the_setups_payload_loads_the_joints_and_travels_with_the_table(complian
     assert loaded.payload.mass_kg == 10.0 and loaded.payload.com_mm == [0.0, 0.0, 150.0]
     assert plain.payload is None
     assert loaded.joints[1].compliance_urad_per_Nm < 0.8 * plain.joints[1].compliance_urad_per_Nm
+
+
+def test_the_robot_files_payload_travels_with_the_table_it_was_fitted_under(compliant, corrected):
+    """A robot file carrying a payload, a calibration without a setup: the compliances are fitted
+    under that payload (smaller than without it), so the corrected table carries it."""
+    robot = compliant / "loaded_robot.toml"
+    robot.write_text(ROBOT.read_text() + "\n[payload]\nmass_kg = 10.0\ncom_mm = [0.0, 0.0, 150.0]\n")
+    out = compliant / "r.toml"
+    argv = ["calibrate", str(compliant / "train.csv"), "--robot", str(robot), "--model", "compliance"]
+    assert main(argv + ["--out", str(out)]) == 0
+    loaded, plain = load_robot(out), load_robot(corrected[0])
+    assert loaded.payload is not None
+    assert loaded.payload.mass_kg == 10.0 and loaded.payload.com_mm == [0.0, 0.0, 150.0]
+    assert loaded.joints[1].compliance_urad_per_Nm < 0.8 * plain.joints[1].compliance_urad_per_Nm
