@@ -24,6 +24,11 @@ from calib.identifiability import redundancy_partners, select_columns, weakly_de
 from calib.kinematics import N_DH
 from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
 from calib.models import GROUP_PRIOR, MeasurementModel
+from calib.params import display_unit
+
+DOWNWEIGHTED_BELOW = 0.25
+"""A residual row whose squared robust weight falls below this counts as down-weighted (a gross
+reading): for the Cauchy loss at 3 noise scales, beyond 5.2 of them."""
 
 
 class WithPrior:
@@ -72,7 +77,8 @@ class CalibrationOptions:
     loss : {"linear", "huber", "cauchy"}
         Loss of the robust rounds.
     loss_threshold : float
-        Where the robust loss starts to down-weight, in robust standard deviations of each group.
+        Where the robust loss starts to down-weight, in noise scales of each group: the robust
+        (MAD) scale, never below the stated noise.
     rank_rtol : float
         Relative size below which a scaled Jacobian column counts as produced by the others.
     hold_weak : bool
@@ -257,15 +263,6 @@ def weak_reason(name: str, sigma: float, prior: float, what: str) -> str:
         f"the data determines it only to +-{sigma * factor:.3g} {unit}, no better than its "
         f"{what} (+-{prior * factor:.3g} {unit})"
     )
-
-
-def display_unit(name: str) -> tuple[float, str]:
-    """Factor from internal to display units, and the unit, of a parameter by its name's suffix."""
-    if name.endswith("_deg"):
-        return float(np.degrees(1.0)), "deg"
-    if name.endswith("_urad_per_Nm"):
-        return 1.0, "urad/(N m)"
-    return 1.0, "mm"
 
 
 @dataclass
@@ -458,12 +455,11 @@ def robust_weights(
 
 
 def _downweighted_rows(model, result: LMResult, scale, options: CalibrationOptions) -> np.ndarray:
-    """Sample rows with a residual the robust loss cut to below a quarter of its weight (for the
-    Cauchy loss at 3 sigma: beyond 5.2 noise scales): the gross readings."""
+    """Sample rows the robust loss down-weighted (``DOWNWEIGHTED_BELOW``): the gross readings."""
     if options.loss == "linear":
         return np.array([], int)
     w = robust_weights(result.residuals, model.groups, scale, options)
-    rows = model.rows[w**2 < 0.25]
+    rows = model.rows[w**2 < DOWNWEIGHTED_BELOW]
     return np.unique(rows[rows >= 0])
 
 

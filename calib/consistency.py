@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaincc
 
+from calib.calibrate import DOWNWEIGHTED_BELOW
+
 
 @dataclass(frozen=True)
 class NoiseTest:
@@ -61,8 +63,8 @@ def noise_test(residuals: np.ndarray, weights: np.ndarray, n_free: int) -> Noise
     residuals : ndarray, shape (m,)
         The data rows' residuals at the solution, whitened by their stated noise (no prior rows).
     weights : ndarray, shape (m,)
-        The robust loss's weights there (``sqrt(rho')``); a row below half (its square below a
-        quarter) counts as down-weighted and stays out of the test.
+        The robust loss's weights there (``sqrt(rho')``); a down-weighted row
+        (``calibrate.DOWNWEIGHTED_BELOW``) stays out of the test.
     n_free : int
         Unknowns the fit estimated.
 
@@ -71,7 +73,7 @@ def noise_test(residuals: np.ndarray, weights: np.ndarray, n_free: int) -> Noise
     NoiseTest
     """
     r = np.asarray(residuals, float)
-    kept = np.asarray(weights, float) ** 2 >= 0.25
+    kept = np.asarray(weights, float) ** 2 >= DOWNWEIGHTED_BELOW
     chi2 = float(np.sum(r[kept] ** 2))
     dof = max(int(kept.sum()) - n_free, 1)
     dof_all = max(r.size - n_free, 1)

@@ -31,6 +31,12 @@ def display_factor(names) -> np.ndarray:
     return np.array([np.degrees(1.0) if n.endswith("_deg") else 1.0 for n in names])
 
 
+def display_unit(name: str) -> tuple[float, str]:
+    """``display_factor`` of one parameter and its display unit, by its name's suffix."""
+    unit = "deg" if name.endswith("_deg") else "urad/(N m)" if name.endswith("_urad_per_Nm") else "mm"
+    return float(display_factor([name])[0]), unit
+
+
 def dh_from_degrees(table_deg: np.ndarray) -> np.ndarray:
     """A table in display units to internal units.
 

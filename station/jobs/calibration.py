@@ -24,7 +24,6 @@ from calib.calibrate import (
     WithPrior,
     calibrate,
     covariance,
-    display_unit,
     fit_setup,
     robust_weights,
     row_noise,
@@ -41,7 +40,7 @@ from calib.models import (
     MeasurementModel,
 )
 from calib.observability import MCSResult, select_configurations
-from calib.params import DH_NAMES, dh_from_degrees, display_factor
+from calib.params import DH_NAMES, dh_from_degrees, display_factor, display_unit
 from calib.position import PositionModel, PositionSamples
 from calib.selection import TermSelection
 from errors import InputError, ParameterError
