@@ -175,7 +175,7 @@ def run(
     calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
     progress to the messages. Devices are opened first: an unreachable one fails before anything
     else, and a new session's folder is made only once they all answered."""
-    worker = FitWorker(inputs.robot, inputs.setup)  # starts while the devices open
+    worker = FitWorker.start(inputs.robot, inputs.setup)  # starts while the devices open
     view = None
     try:
         devices = open_devices(inputs.cfg)

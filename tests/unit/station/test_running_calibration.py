@@ -18,7 +18,7 @@ import pytest
 import configs
 from sim_fixtures.world import World
 from station.acquire import runner
-from station.acquire.livefit import LiveListener, RunningCalibration
+from station.acquire.livefit import WORKER_ENDED, FitWorker, LiveListener, RunningCalibration
 from station.acquire.progress import Progress
 from station.acquire.session import State
 from station.formats.plan import Plan
@@ -38,6 +38,8 @@ GOAL_MM = 1.0  # --until-mm
 
 class LaggingWorker:
     """Runs each job at once but answers only after ``lag`` more samples were added."""
+
+    ended = False
 
     def __init__(self, lag: int):
         self.lag, self.busy, self.jobs = lag, False, []
@@ -150,6 +152,8 @@ def test_refits_coalesce_when_they_fall_behind(session):
 class ClockedWorker:
     """Runs each job at once but answers ``fit_s`` seconds of the session's clock later."""
 
+    ended = False
+
     def __init__(self, session_clock, fit_s: float):
         self.clock, self.fit_s = session_clock, fit_s
         self.busy, self.jobs = False, []
@@ -206,3 +210,64 @@ def test_the_log_says_once_why_the_live_error_waits_and_once_when_it_starts(sess
     first = next(f for f in session["refits"] if f.judged)
     assert len(waiting) == 1 and waiting[0].endswith(f"(1 of {session['refits'][0].needed} so far)")
     assert started == [f"running calibration: the model is determined by {first.n} samples"]
+
+
+class Pipe:
+    """The station's end of a worker's pipe, in memory: ``answers`` to receive in order; ``gone``
+    as once the worker process died (a send breaks, a receive finds the end of the pipe)."""
+
+    def __init__(self, *answers):
+        self.answers, self.sent, self.gone = list(answers), [], False
+
+    def send(self, obj):
+        if self.gone:
+            raise BrokenPipeError(32, "Broken pipe")
+        self.sent.append((obj[0], len(obj[1])))
+
+    def poll(self, timeout_s=0.0):
+        return bool(self.answers) or self.gone
+
+    def recv(self):
+        if not self.answers:
+            raise EOFError
+        return self.answers.pop(0)
+
+    def close(self):
+        pass
+
+
+class Process:
+    def terminate(self):
+        pass
+
+    def join(self, timeout=None):
+        pass
+
+
+def _calibration(pipe: Pipe):
+    messages = []
+    worker = FitWorker(pipe, Process())
+    running = RunningCalibration(ROBOT, SETUP, worker, np.zeros(1), LiveListener(message=messages.append))
+    return running, worker, messages
+
+
+def _add(running: RunningCalibration, n: int = 1) -> None:
+    for _ in range(n):
+        running.add([10.0, -30.0, 40.0, 0.0, 20.0, 5.0], 1200.0, 0.0, 0)
+
+
+@pytest.mark.parametrize("dies", ["while idle", "during a refit"])
+def test_a_dead_worker_stops_the_running_calibration_with_one_message_and_the_session_goes_on(dies):
+    pipe = Pipe(("ready", None))
+    running, worker, messages = _calibration(pipe)
+    assert worker.wait_ready(0.0)
+    if dies == "during a refit":
+        _add(running)
+        assert worker.busy and pipe.sent == [("refit", 1)]
+    pipe.gone = True
+    for _ in range(3):
+        _add(running)
+        assert running.poll() is None
+    assert messages == [WORKER_ENDED]
+    assert worker.ended and not worker.busy  # a drain returns at once
+    assert len(pipe.sent) == (dies == "during a refit")  # no job after the first that found it gone
