@@ -212,6 +212,7 @@ class RunningCalibration:
         self.saturated: set[int] = set()
         self.goal_met = False
         self._want_next = False  # a planner suggestion is wanted and not yet started
+        self._refit_n = 0  # samples in the latest refit started (a failed one is not retried on them)
         self._said_undetermined = False
         self._said_ended = False
 
@@ -267,8 +268,9 @@ class RunningCalibration:
         if self._want_next:
             self.worker.submit("next", self.samples)
             self._want_next = False
-        elif len(self.samples) > (0 if self.latest is None else self.latest.n):
+        elif len(self.samples) > self._refit_n:
             self.worker.submit("refit", self.samples)
+            self._refit_n = len(self.samples)
         self._ended()  # the submit found the worker gone
 
     def _ended(self) -> bool:

@@ -18,7 +18,7 @@ import pytest
 import configs
 from sim_fixtures.world import World
 from station.acquire import runner
-from station.acquire.livefit import WORKER_ENDED, FitWorker, LiveListener, RunningCalibration
+from station.acquire.livefit import WORKER_ENDED, FitFailed, FitWorker, LiveListener, RunningCalibration
 from station.acquire.progress import Progress
 from station.acquire.session import State
 from station.formats.plan import Plan
@@ -271,3 +271,21 @@ def test_a_dead_worker_stops_the_running_calibration_with_one_message_and_the_se
     assert messages == [WORKER_ENDED]
     assert worker.ended and not worker.busy  # a drain returns at once
     assert len(pipe.sent) == (dies == "during a refit")  # no job after the first that found it gone
+
+
+def test_a_failed_refit_is_tried_again_only_once_more_samples_came():
+    pipe = Pipe(("ready", None))
+    running, worker, messages = _calibration(pipe)
+    worker.wait_ready(0.0)
+    _add(running, 2)  # the second sample waits for the first's refit
+    pipe.answers.append(("refit", FitFailed("LinAlgError: SVD did not converge")))
+    for _ in range(3):
+        running.poll()
+    assert pipe.sent == [("refit", 1), ("refit", 2)]  # the second started when the first failed
+    pipe.answers.append(("refit", FitFailed("LinAlgError: SVD did not converge")))
+    for _ in range(3):
+        running.poll()
+    assert pipe.sent == [("refit", 1), ("refit", 2)] and not worker.busy
+    assert messages == ["running calibration: refit failed: LinAlgError: SVD did not converge"] * 2
+    _add(running)
+    assert pipe.sent[-1] == ("refit", 3)
