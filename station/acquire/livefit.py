@@ -244,23 +244,22 @@ class RunningCalibration:
 
     def poll(self, timeout_s: float = 0.0) -> Refit | None:
         """Look in on the worker (waiting up to ``timeout_s``): a finished refit is reported and
-        judged for guidance, and the next job starts. Returns the refit that arrived, if any."""
+        judged for guidance, and the next job starts whenever the worker is idle (also once it is
+        ready, for samples added while it started). Returns the refit that arrived, if any."""
         answer = self.worker.poll(timeout_s)
-        if answer is None:
-            self._ended()
-            return None
-        kind, result = answer
+        fit = None if answer is None else self._answer(*answer)
+        self._next_job()
+        return fit
+
+    def _answer(self, kind: str, result) -> Refit | None:
         if isinstance(result, FitFailed):
             self.listener.message(f"running calibration: {kind} failed: {result}")
-            self._next_job()
-            return None
-        if kind == "next":
+        elif kind == "next":
             self.listener.message(_next_text(result))
-            self._next_job()
-            return None
-        self._take(result)
-        self._next_job()
-        return result
+        else:
+            self._take(result)
+            return result
+        return None
 
     def _next_job(self) -> None:
         if self.worker.busy or self._ended():

@@ -289,3 +289,13 @@ def test_a_failed_refit_is_tried_again_only_once_more_samples_came():
     assert messages == ["running calibration: refit failed: LinAlgError: SVD did not converge"] * 2
     _add(running)
     assert pipe.sent[-1] == ("refit", 3)
+
+
+def test_samples_added_while_the_worker_starts_are_refitted_once_it_is_ready():
+    pipe = Pipe()
+    running, worker, _ = _calibration(pipe)
+    _add(running, 2)
+    assert running.poll() is None and pipe.sent == []  # still starting
+    pipe.answers.append(("ready", None))
+    running.poll()
+    assert pipe.sent == [("refit", 2)] and worker.busy  # a drain now waits for it
