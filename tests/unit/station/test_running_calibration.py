@@ -11,6 +11,8 @@ does), ``ClockedWorker`` after a time on the session's clock.
 from __future__ import annotations
 
 import io
+import signal
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,14 +20,25 @@ import pytest
 import configs
 from sim_fixtures.world import World
 from station.acquire import runner
+from station.acquire.capture import Devices
 from station.acquire.livefit import WORKER_ENDED, FitFailed, FitWorker, LiveListener, RunningCalibration
 from station.acquire.progress import Progress
-from station.acquire.session import State
+from station.acquire.session import Session, State
 from station.formats.plan import Plan
+from station.formats.session_folder import SessionFolder
 from station.formats.tables import load_robot, load_setup
 from station.jobs.running import refit
 from station.view.live import LiveView
-from tests.unit.station.test_session_engine import RULES, T0_WALL, Cell, clock, timeline, walk  # noqa: F401
+from tests.unit.station.test_session_engine import (  # noqa: F401
+    BACKOFF,
+    PLAN,
+    RULES,
+    T0_WALL,
+    Cell,
+    clock,
+    timeline,
+    walk,
+)
 
 ROBOT = load_robot(configs.path("robots/hsr_jr680.toml"))
 SETUP = load_setup(configs.path("setups/sim.toml"))
@@ -299,3 +312,44 @@ def test_samples_added_while_the_worker_starts_are_refitted_once_it_is_ready():
     pipe.answers.append(("ready", None))
     running.poll()
     assert pipe.sent == [("refit", 2)] and worker.busy  # a drain now waits for it
+
+
+class UnansweredWorker:
+    """A worker whose refit never answers; its first poll delivers a SIGTERM to this process (a
+    service manager stopping the station while the session's end waits for the refit)."""
+
+    busy = ended = False
+    polls = 0
+
+    def wait_ready(self, timeout_s):
+        return True
+
+    def poll(self, timeout_s=0.0):
+        self.polls += 1
+        if self.polls == 1:
+            signal.raise_signal(signal.SIGTERM)
+        return None
+
+    def close(self):
+        pass
+
+
+def test_a_signal_ends_the_wait_for_the_final_refit_and_the_session_keeps_its_state(tmp_path, monkeypatch):
+    worker = UnansweredWorker()
+
+    class EndedSession(Session):
+        def run(self):
+            worker.busy = True  # the refit on the last sample runs
+            return State.DONE
+
+    monkeypatch.setattr(runner, "Session", EndedSession)
+    monkeypatch.setattr(runner, "FINAL_FIT_S", 3.0)  # a failing test waits this long, not 30 s
+    folder = SessionFolder.new(tmp_path / "s", {"start_wall_s": T0_WALL})
+    folder.make()
+    inputs = runner.SessionInputs(folder, SimpleNamespace(session=None, time_scale=1.0), PLAN, ROBOT, SETUP)
+    monkeypatch.setattr(runner.Rules, "from_config", staticmethod(lambda *_: RULES))
+    view = LiveView(tmp_path / "session.rrd")
+    live = runner.Live(ROBOT, SETUP, PLAN.line, worker, view, Progress(len(PLAN), stream=io.StringIO()), None)
+    assert runner._run_session(inputs, Devices({}, BACKOFF), live) is State.DONE
+    view.close()
+    assert worker.polls == 1  # the signal's stop request ended the wait at once
