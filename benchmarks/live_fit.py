@@ -124,7 +124,7 @@ def main() -> None:
         cfg = load_station_config(config)
         rules = Rules.from_config(cfg.session, 1.0)
         devices = open_devices(cfg)
-        worker = FitWorker(robot, setup)
+        worker = FitWorker.start(robot, setup)
         worker.submit("refit", data)
         worker.poll(60.0)  # started and warm
         results = {name: ([], 0) for name in CONDITIONS}

@@ -39,6 +39,7 @@ from station.jobs.running import Refit, SessionSamples, refit
 SUSPECT_SIGMAS = 5.0
 WORKER_NICE = 10
 SATURATION_SAMPLES, SATURATION_GAIN = 10, 0.05
+WORKER_ENDED = "running calibration stopped: the worker process ended; sampling goes on"
 
 
 class FitFailed(Exception):
@@ -83,36 +84,55 @@ def _yield_cpu() -> None:
 
 
 class FitWorker:
-    """Jobs (``"refit"``, ``"next"``) on a session's samples in a spawned worker process, one at a
-    time: :meth:`submit` never waits, :meth:`poll` returns a finished ``(kind, result)`` or None."""
+    """Jobs (``"refit"``, ``"next"``) on a session's samples in a worker process, one at a time,
+    over the pipe ``conn`` to ``proc`` (:meth:`start` spawns them): :meth:`submit` never waits,
+    :meth:`poll` returns a finished ``(kind, result)`` or None. Once the process is gone (killed,
+    crashed) the worker has ``ended``: never busy, it drops every job."""
 
-    def __init__(self, robot: RobotFile, setup: SetupFile):
-        ctx = multiprocessing.get_context("spawn")  # no fork of a process with device threads
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve, args=(child, robot, setup), daemon=True, name="station-refit")
-        with _one_blas_thread():  # the spawned interpreter reads these as numpy loads
-            self._proc.start()
-        child.close()
+    def __init__(self, conn, proc):
+        self._conn, self._proc = conn, proc
         self.busy = True  # until it says it is ready
+        self.ended = False
+
+    @classmethod
+    def start(cls, robot: RobotFile, setup: SetupFile) -> FitWorker:
+        ctx = multiprocessing.get_context("spawn")  # no fork of a process with device threads
+        conn, child = ctx.Pipe()
+        proc = ctx.Process(target=_serve, args=(child, robot, setup), daemon=True, name="station-refit")
+        with _one_blas_thread():  # the spawned interpreter reads these as numpy loads
+            proc.start()
+        child.close()
+        return cls(conn, proc)
 
     def wait_ready(self, timeout_s: float) -> bool:
         """Wait up to ``timeout_s`` for the worker to have started (imports take a second or two)."""
-        if self.busy and self._conn.poll(timeout_s):
-            self._conn.recv()
-            self.busy = False
+        self.poll(timeout_s)
         return not self.busy
 
     def submit(self, kind: str, samples: SessionSamples) -> None:
-        self._conn.send((kind, samples))
+        if self.ended:
+            return
+        try:
+            self._conn.send((kind, samples))
+        except OSError:  # BrokenPipeError, ConnectionResetError: the process is gone
+            self._end()
+            return
         self.busy = True
 
     def poll(self, timeout_s: float = 0.0):
         """The finished job's ``(kind, result)``, waiting up to ``timeout_s``; None if none."""
-        if not self.busy or not self._conn.poll(timeout_s):
+        try:
+            if not self.busy or not self._conn.poll(timeout_s):
+                return None
+            answer = self._conn.recv()
+        except (EOFError, OSError):
+            self._end()
             return None
         self.busy = False
-        answer = self._conn.recv()
         return None if answer[0] == "ready" else answer
+
+    def _end(self) -> None:
+        self.ended, self.busy = True, False
 
     def close(self) -> None:
         self._conn.close()
@@ -192,7 +212,9 @@ class RunningCalibration:
         self.saturated: set[int] = set()
         self.goal_met = False
         self._want_next = False  # a planner suggestion is wanted and not yet started
+        self._refit_n = 0  # samples in the latest refit started (a failed one is not retried on them)
         self._said_undetermined = False
+        self._said_ended = False
 
     def nominal_tcp_mm(self, q_deg) -> np.ndarray:
         """Nominal TCPs (N, 3) [mm] of configurations (N, 6) [deg]."""
@@ -222,33 +244,40 @@ class RunningCalibration:
 
     def poll(self, timeout_s: float = 0.0) -> Refit | None:
         """Look in on the worker (waiting up to ``timeout_s``): a finished refit is reported and
-        judged for guidance, and the next job starts. Returns the refit that arrived, if any."""
+        judged for guidance, and the next job starts whenever the worker is idle (also once it is
+        ready, for samples added while it started). Returns the refit that arrived, if any."""
         answer = self.worker.poll(timeout_s)
-        if answer is None:
-            return None
-        kind, result = answer
+        fit = None if answer is None else self._answer(*answer)
+        self._next_job()
+        return fit
+
+    def _answer(self, kind: str, result) -> Refit | None:
         if isinstance(result, FitFailed):
             self.listener.message(f"running calibration: {kind} failed: {result}")
-            self._next_job()
-            return None
-        if kind == "next":
+        elif kind == "next":
             self.listener.message(_next_text(result))
-            self._next_job()
-            return None
-        self._take(result)
-        self._next_job()
-        return result
+        else:
+            self._take(result)
+            return result
+        return None
 
     def _next_job(self) -> None:
-        if self.worker.busy:
+        if self.worker.busy or self._ended():
             return
         if self._want_next:
             self.worker.submit("next", self.samples)
             self._want_next = False
-            return
-        covered = 0 if self.latest is None else self.latest.n
-        if len(self.samples) > covered:
+        elif len(self.samples) > self._refit_n:
             self.worker.submit("refit", self.samples)
+            self._refit_n = len(self.samples)
+        self._ended()  # the submit found the worker gone
+
+    def _ended(self) -> bool:
+        """Whether the worker process is gone (the session goes on without it); said once."""
+        if self.worker.ended and not self._said_ended:
+            self._said_ended = True
+            self.listener.message(WORKER_ENDED)
+        return self.worker.ended
 
     def _take(self, fit: Refit) -> None:
         self.latest = fit

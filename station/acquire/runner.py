@@ -7,6 +7,7 @@ import json
 import signal
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -30,6 +31,7 @@ from station.view.live import LiveView
 WORKER_START_S = 30.0  # the session waits this long at most for the running calibration's worker
 RESUME_FIT_S = 120.0  # a resumed session waits this long at most for the refit of its samples
 FINAL_FIT_S = 30.0  # the session's end waits this long at most for the refit on every sample
+STOP_CHECK_S = 0.1  # a drain looks for a stop request this often [s]
 
 
 @dataclass
@@ -175,7 +177,7 @@ def run(
     calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
     progress to the messages. Devices are opened first: an unreachable one fails before anything
     else, and a new session's folder is made only once they all answered."""
-    worker = FitWorker(inputs.robot, inputs.setup)  # starts while the devices open
+    worker = FitWorker.start(inputs.robot, inputs.setup)  # starts while the devices open
     view = None
     try:
         devices = open_devices(inputs.cfg)
@@ -250,14 +252,14 @@ class Live:
         if self.session is not None:
             self.session.finish("accuracy reached")
 
-    def drain(self, timeout_s: float) -> None:
-        """Wait (up to ``timeout_s``) for the refit on every sample taken."""
+    def drain(self, timeout_s: float, stopped: Callable[[], bool] = lambda: False) -> None:
+        """Wait (up to ``timeout_s`` [s]) for the refit on every sample taken, or until ``stopped()``."""
         deadline = time.monotonic() + timeout_s
         while self.running.latest is None or self.running.latest.n < len(self.ids):
             left = deadline - time.monotonic()
-            if left <= 0 or not self.running.worker.busy:
+            if left <= 0 or not self.running.worker.busy or stopped():
                 return
-            self.running.poll(left)
+            self.running.poll(min(left, STOP_CHECK_S))
 
 
 def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
@@ -286,7 +288,7 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     try:
         state = session.run()
         if state is not State.STOPPED:
-            live.drain(FINAL_FIT_S)
+            live.drain(FINAL_FIT_S, lambda: session.stop_requested)  # a signal now ends the wait
         return state
     finally:
         for s, handler in previous.items():

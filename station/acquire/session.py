@@ -104,6 +104,10 @@ class Session:
         """Stop at the next checkpoint (safe from a signal handler)."""
         self._stop = True
 
+    @property
+    def stop_requested(self) -> bool:
+        return self._stop
+
     def finish(self, reason: str) -> None:
         """End as DONE at the next checkpoint, saying ``reason``, with targets left unmeasured."""
         self._finish = reason

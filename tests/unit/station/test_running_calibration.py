@@ -11,6 +11,8 @@ does), ``ClockedWorker`` after a time on the session's clock.
 from __future__ import annotations
 
 import io
+import signal
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,14 +20,25 @@ import pytest
 import configs
 from sim_fixtures.world import World
 from station.acquire import runner
-from station.acquire.livefit import LiveListener, RunningCalibration
+from station.acquire.capture import Devices
+from station.acquire.livefit import WORKER_ENDED, FitFailed, FitWorker, LiveListener, RunningCalibration
 from station.acquire.progress import Progress
-from station.acquire.session import State
+from station.acquire.session import Session, State
 from station.formats.plan import Plan
+from station.formats.session_folder import SessionFolder
 from station.formats.tables import load_robot, load_setup
 from station.jobs.running import refit
 from station.view.live import LiveView
-from tests.unit.station.test_session_engine import RULES, T0_WALL, Cell, clock, timeline, walk  # noqa: F401
+from tests.unit.station.test_session_engine import (  # noqa: F401
+    BACKOFF,
+    PLAN,
+    RULES,
+    T0_WALL,
+    Cell,
+    clock,
+    timeline,
+    walk,
+)
 
 ROBOT = load_robot(configs.path("robots/hsr_jr680.toml"))
 SETUP = load_setup(configs.path("setups/sim.toml"))
@@ -38,6 +51,8 @@ GOAL_MM = 1.0  # --until-mm
 
 class LaggingWorker:
     """Runs each job at once but answers only after ``lag`` more samples were added."""
+
+    ended = False
 
     def __init__(self, lag: int):
         self.lag, self.busy, self.jobs = lag, False, []
@@ -150,6 +165,8 @@ def test_refits_coalesce_when_they_fall_behind(session):
 class ClockedWorker:
     """Runs each job at once but answers ``fit_s`` seconds of the session's clock later."""
 
+    ended = False
+
     def __init__(self, session_clock, fit_s: float):
         self.clock, self.fit_s = session_clock, fit_s
         self.busy, self.jobs = False, []
@@ -206,3 +223,133 @@ def test_the_log_says_once_why_the_live_error_waits_and_once_when_it_starts(sess
     first = next(f for f in session["refits"] if f.judged)
     assert len(waiting) == 1 and waiting[0].endswith(f"(1 of {session['refits'][0].needed} so far)")
     assert started == [f"running calibration: the model is determined by {first.n} samples"]
+
+
+class Pipe:
+    """The station's end of a worker's pipe, in memory: ``answers`` to receive in order; ``gone``
+    as once the worker process died (a send breaks, a receive finds the end of the pipe)."""
+
+    def __init__(self, *answers):
+        self.answers, self.sent, self.gone = list(answers), [], False
+
+    def send(self, obj):
+        if self.gone:
+            raise BrokenPipeError(32, "Broken pipe")
+        self.sent.append((obj[0], len(obj[1])))
+
+    def poll(self, timeout_s=0.0):
+        return bool(self.answers) or self.gone
+
+    def recv(self):
+        if not self.answers:
+            raise EOFError
+        return self.answers.pop(0)
+
+    def close(self):
+        pass
+
+
+class Process:
+    def terminate(self):
+        pass
+
+    def join(self, timeout=None):
+        pass
+
+
+def _calibration(pipe: Pipe):
+    messages = []
+    worker = FitWorker(pipe, Process())
+    running = RunningCalibration(ROBOT, SETUP, worker, np.zeros(1), LiveListener(message=messages.append))
+    return running, worker, messages
+
+
+def _add(running: RunningCalibration, n: int = 1) -> None:
+    for _ in range(n):
+        running.add([10.0, -30.0, 40.0, 0.0, 20.0, 5.0], 1200.0, 0.0, 0)
+
+
+@pytest.mark.parametrize("dies", ["while idle", "during a refit"])
+def test_a_dead_worker_stops_the_running_calibration_with_one_message_and_the_session_goes_on(dies):
+    pipe = Pipe(("ready", None))
+    running, worker, messages = _calibration(pipe)
+    assert worker.wait_ready(0.0)
+    if dies == "during a refit":
+        _add(running)
+        assert worker.busy and pipe.sent == [("refit", 1)]
+    pipe.gone = True
+    for _ in range(3):
+        _add(running)
+        assert running.poll() is None
+    assert messages == [WORKER_ENDED]
+    assert worker.ended and not worker.busy  # a drain returns at once
+    assert len(pipe.sent) == (dies == "during a refit")  # no job after the first that found it gone
+
+
+def test_a_failed_refit_is_tried_again_only_once_more_samples_came():
+    pipe = Pipe(("ready", None))
+    running, worker, messages = _calibration(pipe)
+    worker.wait_ready(0.0)
+    _add(running, 2)  # the second sample waits for the first's refit
+    pipe.answers.append(("refit", FitFailed("LinAlgError: SVD did not converge")))
+    for _ in range(3):
+        running.poll()
+    assert pipe.sent == [("refit", 1), ("refit", 2)]  # the second started when the first failed
+    pipe.answers.append(("refit", FitFailed("LinAlgError: SVD did not converge")))
+    for _ in range(3):
+        running.poll()
+    assert pipe.sent == [("refit", 1), ("refit", 2)] and not worker.busy
+    assert messages == ["running calibration: refit failed: LinAlgError: SVD did not converge"] * 2
+    _add(running)
+    assert pipe.sent[-1] == ("refit", 3)
+
+
+def test_samples_added_while_the_worker_starts_are_refitted_once_it_is_ready():
+    pipe = Pipe()
+    running, worker, _ = _calibration(pipe)
+    _add(running, 2)
+    assert running.poll() is None and pipe.sent == []  # still starting
+    pipe.answers.append(("ready", None))
+    running.poll()
+    assert pipe.sent == [("refit", 2)] and worker.busy  # a drain now waits for it
+
+
+class UnansweredWorker:
+    """A worker whose refit never answers; its first poll delivers a SIGTERM to this process (a
+    service manager stopping the station while the session's end waits for the refit)."""
+
+    busy = ended = False
+    polls = 0
+
+    def wait_ready(self, timeout_s):
+        return True
+
+    def poll(self, timeout_s=0.0):
+        self.polls += 1
+        if self.polls == 1:
+            signal.raise_signal(signal.SIGTERM)
+        return None
+
+    def close(self):
+        pass
+
+
+def test_a_signal_ends_the_wait_for_the_final_refit_and_the_session_keeps_its_state(tmp_path, monkeypatch):
+    worker = UnansweredWorker()
+
+    class EndedSession(Session):
+        def run(self):
+            worker.busy = True  # the refit on the last sample runs
+            return State.DONE
+
+    monkeypatch.setattr(runner, "Session", EndedSession)
+    monkeypatch.setattr(runner, "FINAL_FIT_S", 3.0)  # a failing test waits this long, not 30 s
+    folder = SessionFolder.new(tmp_path / "s", {"start_wall_s": T0_WALL})
+    folder.make()
+    inputs = runner.SessionInputs(folder, SimpleNamespace(session=None, time_scale=1.0), PLAN, ROBOT, SETUP)
+    monkeypatch.setattr(runner.Rules, "from_config", staticmethod(lambda *_: RULES))
+    view = LiveView(tmp_path / "session.rrd")
+    live = runner.Live(ROBOT, SETUP, PLAN.line, worker, view, Progress(len(PLAN), stream=io.StringIO()), None)
+    assert runner._run_session(inputs, Devices({}, BACKOFF), live) is State.DONE
+    view.close()
+    assert worker.polls == 1  # the signal's stop request ended the wait at once
