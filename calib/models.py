@@ -120,9 +120,9 @@ class MeasurementModel(Protocol):
         configurations keeps some rows of every placement."""
         ...
 
-    def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice | None:
-        """What to measure next when the rows fit well but cannot promise the workspace; None
-        where no further measurement of this kind would change that."""
+    def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice:
+        """What the rows cover, and what to measure next when they fit well but cannot promise the
+        workspace."""
         ...
 
 

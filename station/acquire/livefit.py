@@ -336,7 +336,7 @@ class RunningCalibration:
             self._want_next = True
             self._next_job()
             return "the planner is placing a new line (a message follows)"
-        return fit.advice or "another gauge-line placement"
+        return fit.advice
 
     def close(self) -> None:
         self.worker.close()

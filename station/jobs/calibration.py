@@ -456,13 +456,11 @@ def workspace_warnings(
     model: MeasurementModel, x: np.ndarray, fit: ErrorMetrics, workspace: WorkspacePrediction
 ) -> list[str]:
     """Say when the samples fit well but cannot deliver that accuracy over the workspace, and what
-    to measure next: the model knows, and says nothing where no measurement of its kind helps."""
+    to measure next: the model knows."""
     predicted = workspace.predicted_rmse_mm
     if predicted <= max(WORKSPACE_WARNING_RATIO * fit.rmse_mm, WORKSPACE_WARNING_FLOOR_MM):
         return []
     advice = model.measurement_advice(x)
-    if advice is None:
-        return []
     return [
         WARNINGS["workspace"].format(
             cover=advice.cover,

@@ -15,7 +15,6 @@ workspace error) on the first ``n`` samples, with two rules for a session still 
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,7 +56,7 @@ class Refit:
     ``covariance`` of the ``free`` unknowns, the drawstring's noise ``noise_mm`` per sample (robust
     spread of its residuals), the predicted ``workspace`` error (None while the samples cannot
     determine the ``needed`` unknowns: then neither the covariance nor the noise mean anything), what
-    the model advises to measure next, and the fit's ``time_s``."""
+    the model advises to measure next."""
 
     n: int
     model: MeasurementModel
@@ -67,8 +66,7 @@ class Refit:
     noise_mm: float
     workspace: WorkspacePrediction | None
     needed: int
-    advice: str | None
-    time_s: float
+    advice: str
 
     @property
     def judged(self) -> bool:
@@ -89,12 +87,10 @@ class Refit:
 
 def refit(robot: RobotFile, setup: SetupFile, samples: SessionSamples) -> Refit:
     """The pipeline on ``samples`` (see the module notes)."""
-    t0 = time.perf_counter()
     model = build_model(samples.as_samples("session"), robot, setup, "setup")
     needed = unknowns(model)
     enough = len(samples) >= needed
     cal = calibrate(model, CalibrationOptions() if enough else CalibrationOptions(loss="linear"))
-    advice = model.measurement_advice(cal.x)
     return Refit(
         n=len(samples),
         model=model,
@@ -104,6 +100,5 @@ def refit(robot: RobotFile, setup: SetupFile, samples: SessionSamples) -> Refit:
         noise_mm=1.4826 * float(np.median(np.abs(model.row_error_mm(cal.x)))),
         workspace=predicted_workspace(robot, cal, model) if enough else None,
         needed=needed,
-        advice=None if advice is None else advice.next_measurement,
-        time_s=time.perf_counter() - t0,
+        advice=model.measurement_advice(cal.x).next_measurement,
     )
