@@ -5,3 +5,4 @@ BASELINES = ("pso", "ekf", "ukf", "gn", "sa", "pf", "de")  # the paper's M1-M7 (
 METHODS = BASELINES + ("lmlc",)  # M8: calib.calibrate.robust_fit
 ALL_METHODS = METHODS + ("mcs-lmlc",)  # M9: LMLC on the configurations MCS selects
 TERM_MODELS = ("geometric", "compliance", "full", "auto")  # joint-space terms beside the table
+DEFAULT_TERM_MODEL = "auto"  # what `station calibrate` and the demo fit (the running calibration: geometric)

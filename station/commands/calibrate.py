@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from calib.methods import ALL_METHODS, TERM_MODELS
+from calib.methods import ALL_METHODS, DEFAULT_TERM_MODEL, TERM_MODELS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
 
@@ -42,7 +42,7 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--model",
-        default="auto",
+        default=DEFAULT_TERM_MODEL,
         choices=TERM_MODELS,
         help="terms beside the D-H table: geometric (none), compliance (load-bearing joints under "
         "gravity), full (plus 1st and 2nd harmonics of every joint), auto (those of full that cut "

@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from calib.methods import DEFAULT_TERM_MODEL
 from errors import DeviceError, InputError
 
 if TYPE_CHECKING:
@@ -219,7 +220,13 @@ def _calibrate(out: Path, inputs, view, seed: int) -> int:
     outcomes = {}
     for method in ("lmlc", "mcs-lmlc"):
         outcome = calibration.calibrate_samples(
-            samples, inputs.robot, inputs.setup, setup_where=where, holdout=holdout, method=method
+            samples,
+            inputs.robot,
+            inputs.setup,
+            setup_where=where,
+            holdout=holdout,
+            method=method,
+            terms=DEFAULT_TERM_MODEL,
         )
         outcomes[method] = outcome
         cal = outcome.calibration

@@ -62,7 +62,7 @@ def test_a_jr680_session_calibrated_with_the_ur10_table_is_refused(
     setup = [] if with_session else ["--setup", three_lines.setup]
     out, report, plot = _outputs(tmp_path)
     argv = ["calibrate", samples, "--robot", UR10, *setup, "--out", out, "--report", report, "--plot", plot]
-    # --model geometric: under auto every cross-validation fold hits the iteration cap too (30 s)
+    # --model geometric: the table alone is refused the same way, and sooner
     code, stdout, err = _cli(capsys, *argv, "--model", "geometric")
     assert code == 2 and stdout == ""
     assert err.count("\n") == 1 and err.startswith(f"station: error: {samples}: these samples do not fit")
