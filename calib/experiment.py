@@ -16,9 +16,9 @@ import numpy as np
 
 from calib import ik
 from calib.accuracy import workspace_error_modes
-from calib.calibrate import CalibrationOptions, covariance, fit_setup
+from calib.calibrate import CalibrationOptions, covariance, fit_setup, row_noise
 from calib.kinematics import dh_table, tcp_position
-from calib.models import GROUP_PRIOR, DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 
 MIN_CONDITIONING = 0.04
 """Inverse condition number of the scaled geometric Jacobian below which a pose counts as near a
@@ -146,7 +146,7 @@ def expected_modes(model: DrawstringLineModel, workspace_q: np.ndarray, readings
         Workspace error mode variances [mm^2] (``accuracy.workspace_error_modes``).
     """
     prep = fit_setup(model, CalibrationOptions(loss="linear"))
-    noise = np.where(prep.prior.groups == GROUP_PRIOR, 1.0, 1.0 / np.sqrt(readings))
+    noise = row_noise(prep.prior, np.full(prep.prior.groups.max() + 1, 1.0 / np.sqrt(readings)))
     _, robot_cov = covariance(prep.prior, prep.before.x, prep.free, noise=noise)
     x = prep.before.x
     return workspace_error_modes(dh_table(x), model.tcp_in_flange(x), workspace_q, robot_cov, model.terms)
