@@ -617,7 +617,7 @@ def _excursion(model: MeasurementModel, cal: Calibration, z: np.ndarray, k: int)
         source, what = "setup's", "stated uncertainty"
     else:
         source, what = "robot file's", "tolerance" if k < N_DH else "prior"
-    sigma = abs(delta) / z[k]
+    sigma = model.prior_sigma()[k] * factor
     return (
         f"{name} moved {delta:+.4g} {unit} from the {source} value, "
         f"{z[k]:.0f} times its {what} ({sigma:.3g} {unit})"
