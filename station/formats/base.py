@@ -74,7 +74,7 @@ def read_toml(path: Path) -> dict:
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, expected a TOML file") from None
+        raise InputError(f"{path}: {folder_kind(path)}, expected a TOML file") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
@@ -83,6 +83,14 @@ def read_toml(path: Path) -> dict:
         raise InputError(f"{path}: not valid TOML: not UTF-8 text") from None
     except RecursionError:
         raise InputError(f"{path}: not valid TOML: nested too deeply") from None
+
+
+def folder_kind(path: Path) -> str:
+    """What a folder given for a file is, for a message: a session folder (``session.toml`` inside,
+    whose files are named) or any directory."""
+    if (Path(path) / "session.toml").is_file():
+        return f"a session folder (its files: {Path(path) / 'session.toml'}, {Path(path) / 'samples.csv'})"
+    return "is a directory"
 
 
 def validate(schema: type[BaseModel], data: dict, where: str):
