@@ -29,6 +29,7 @@ from station.formats.base import (
     read_toml,
     validate,
 )
+from station.formats.units import check_positions_in_mm, check_robot_units
 
 Mass = Annotated[float, Field(ge=0, le=1e4)]  # kg: a link or a payload, up to 10 t
 Compliance = Annotated[float, Field(ge=-1e6, le=1e6)]  # urad/(N m)
@@ -236,6 +237,7 @@ def check_same_tool(table: RobotFile, table_where: str, nominal: RobotFile, nomi
 
 def load_robot(path) -> RobotFile:
     robot = validate(RobotFile, read_toml(path), str(path))
+    check_robot_units(str(path), robot.table_deg(), robot.limits_deg())
     compliant = [j for j, joint in enumerate(robot.joints) if joint.compliance_urad_per_Nm is not None]
     if compliant and robot.link_masses() is None:
         raise InputError(
@@ -245,4 +247,7 @@ def load_robot(path) -> RobotFile:
 
 
 def load_setup(path) -> SetupFile:
-    return validate(SetupFile, read_toml(path), str(path))
+    setup = validate(SetupFile, read_toml(path), str(path))
+    points = {f"lines.{k}.point_mm": ln.point_mm for k, ln in enumerate(setup.lines) if ln.point_mm}
+    check_positions_in_mm(str(path), points)
+    return setup
