@@ -189,7 +189,9 @@ class SetupLine(Strict):
 
 class SetupFile(Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
-    tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight;
+    tool sits on the gauge edge (joint-reading noise at the TCP included); ``contact_sigma_mm``: how
+    far off the edge it may sit where no dial reading measures it (a dial-less cell, a row without a
+    reading, a line without a ``dial_axis``); ``rho``: line-term weight;
     ``payload``: what the flange carried while measuring (for the gravity torques)."""
 
     drawstring: SetupDrawstring | None = None
@@ -197,6 +199,7 @@ class SetupFile(Strict):
     payload: Payload | None = None
     lines: list[SetupLine] = []
     line_sigma_mm: Sigma = 0.01
+    contact_sigma_mm: Sigma = 0.2
     rho: Annotated[float, Field(ge=1e-6, le=1e6)] = 1.0
 
     @model_validator(mode="after")

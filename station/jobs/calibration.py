@@ -203,6 +203,7 @@ def drawstring_setup(setup: SetupFile, where: str) -> DrawstringSetup:
         length_offset=setup.drawstring.length_offset_mm,
         sigma_length=setup.drawstring.sigma_mm,
         sigma_line=setup.line_sigma_mm,
+        sigma_contact=setup.contact_sigma_mm,
         dial_axis={ln.id: _unit(ln.dial_axis) for ln in setup.lines if ln.dial_axis is not None},
         default_dial_axis=None if default_axis is None else _unit(default_axis),
         rho=setup.rho,
