@@ -163,6 +163,9 @@ def summary(report: CalibrationReport) -> str:
         f"predicted workspace error: {ws.predicted_rmse_mm:.3f} mm RMS "
         f"(95 %: below {ws.predicted_rmse_95_mm:.3f} mm)"
     )
+    mode = report.fit_check.dial_mode if report.fit_check else None
+    if mode and not any(mode in w for w in report.warnings):
+        lines.append(f"dial-less: {mode}")
     lines += [f"warning: {w}" for w in report.warnings]
     return "\n".join(lines)
 
