@@ -189,9 +189,16 @@ def downweighted(model: MeasurementModel, cal: Calibration, weights: np.ndarray)
 
 
 # -- better than the nominal table? ---------------------------------------------------------------
+NOMINAL_SHARE = 1 / 3
+"""A calibration whose predicted workspace error exceeds this share of the nominal table's expected
+error, both predicted from the same tolerances (so an overstated tolerance cancels), cannot be
+trusted to improve on the table: on simulated cells fits above it were as often worse than the
+nominal table as better, those below it better (``benchmarks/mistakes.py``)."""
+
+
 def nominal_rmse(model: MeasurementModel, cal: Calibration, q: np.ndarray) -> float:
-    """The expected workspace error [mm] of the nominal table: its parameters' priors (the
-    manufacturing tolerance) over configurations ``q`` [rad], as a calibration's is predicted."""
+    """The nominal table's expected workspace error [mm] as the parameters' priors (the
+    manufacturing tolerance) predict it over configurations ``q`` [rad], as a calibration's is."""
     sigma = model.prior_sigma()[cal.robot_index]
     cov = np.diag(np.where(np.isfinite(sigma), sigma, 0.0) ** 2)
     modes = workspace_error_modes(

@@ -548,15 +548,15 @@ def fit_check(
 def _absorbed_refusal(
     found: absorbed.Findings, workspace: WorkspacePrediction | None, nominal: float | None
 ) -> str | None:
-    """A mistake ``station.jobs.absorbed`` names with its fix, or a calibration whose 95 % bound does
-    not beat the nominal table's expected workspace error; None if neither."""
+    """A mistake ``station.jobs.absorbed`` names with its fix, or a calibration predicted to keep
+    more than ``absorbed.NOMINAL_SHARE`` of the nominal table's expected error; None if neither."""
     if found.refusal:
         return f"{found.refusal}; nothing else in the fit can be trusted until it is"
-    if workspace is not None and nominal is not None and workspace.predicted_rmse_95_mm >= nominal:
+    if workspace and nominal and workspace.predicted_rmse_mm >= absorbed.NOMINAL_SHARE * nominal:
         return (
-            f"its predicted workspace error (up to {workspace.predicted_rmse_95_mm:.2f} mm, 95 %) does not "
-            f"beat the nominal table's expected {nominal:.2f} mm: the samples cannot be trusted to improve "
-            "it; measure more rows, or lines with a dial"
+            f"its predicted workspace error {workspace.predicted_rmse_mm:.2f} mm is over a third of the "
+            f"nominal table's expected {nominal:.2f} mm (both from the tolerances): the samples cannot be "
+            "trusted to improve on the nominal table; measure more rows, on more lines, or with a dial"
         )
     return None
 
