@@ -548,11 +548,13 @@ def fit_check(
 def _absorbed_refusal(
     found: absorbed.Findings, workspace: WorkspacePrediction | None, nominal: float | None
 ) -> str | None:
-    """A mistake ``station.jobs.absorbed`` names with its fix, or a calibration predicted to keep
-    more than ``absorbed.NOMINAL_SHARE`` of the nominal table's expected error; None if neither."""
+    """A mistake ``station.jobs.absorbed`` names with its fix, or a calibration on lines read
+    without a dial predicted to keep more than ``absorbed.NOMINAL_SHARE`` of the nominal table's
+    expected error; None if neither."""
     if found.refusal:
         return f"{found.refusal}; nothing else in the fit can be trusted until it is"
-    if workspace and nominal and workspace.predicted_rmse_mm >= absorbed.NOMINAL_SHARE * nominal:
+    weak = workspace and nominal and workspace.predicted_rmse_mm >= absorbed.NOMINAL_SHARE * nominal
+    if found.unread and weak:
         return (
             f"its predicted workspace error {workspace.predicted_rmse_mm:.2f} mm is over a third of the "
             f"nominal table's expected {nominal:.2f} mm (both from the tolerances): the samples cannot be "
