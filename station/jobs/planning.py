@@ -167,7 +167,7 @@ def unreachable_cause(dh: np.ndarray, tool: np.ndarray, limits: np.ndarray, line
         )
     _, flipped = line_candidates(dh, tool, limits, (point, direction, length, -approach), 20, rng)
     if flipped.sum() >= 4:
-        a = vector_text(-approach, 2)
+        a = vector_text(0.0 - approach, 2)
         return (
             f"with approach = {a} {int(flipped.sum())} of 20 points are reachable: the approach likely "
             "points the wrong way (it is the way the tool points as it meets the edge)"

@@ -210,6 +210,18 @@ def test_plan_names_the_likely_unit_mistake(robot, setup, phrases, tmp_path):
     assert not out.exists()
 
 
+def test_plan_names_an_approach_pointing_the_wrong_way(tmp_path):
+    # a far edge the tool can touch pointing away from the robot, not pointing back at it
+    data = read_toml(SIM_SETUP)
+    data["lines"][0].update(point_mm=[-1700.0, 0.0, 150.0], approach=[1.0, 0.0, 0.0])
+    setup = tmp_path / "setup.toml"
+    setup.write_text(tomli_w.dumps(data))
+    out = tmp_path / "plan.csv"
+    result = _station("plan", "--robot", JR680, "--setup", setup, "--out", out, "--no-suggest")
+    _refused(result, "[[lines]] id 0: only", "with approach = [-1.00, 0.00, 0.00]", "points the wrong way")
+    assert not out.exists()
+
+
 def test_a_program_in_radians_is_refused(three_lines, tmp_path):
     program = tmp_path / "program.csv"
     rng = np.random.default_rng(1)
