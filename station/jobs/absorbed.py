@@ -118,9 +118,10 @@ def _dial_text(d: LineDial) -> str:
             f"(dial_axis = {_v(-axis)} on [[lines]] id {d.line})"
         )
     if d.verdict == "other axis":
+        seen = _v(gain / np.linalg.norm(gain))
         return (
-            f"line {d.line}'s dial readings move the tool along {_v(gain / np.linalg.norm(gain))}, not along "
-            f"its dial_axis {_v(axis)}: set dial_axis to the way the indicator reads positive"
+            f"line {d.line}'s dial readings move the tool along {seen}, not along its dial_axis {_v(axis)}: "
+            f"set dial_axis = {seen} on [[lines]] id {d.line} (the way the indicator reads positive)"
         )
     return (
         f"line {d.line}'s dial readings do not follow the tool's distance from the edge (gain "

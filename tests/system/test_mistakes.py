@@ -125,7 +125,7 @@ def test_a_dial_axis_along_another_direction_is_refused(three_lines, tmp_path):
     result = _station(
         "calibrate", three_lines.samples, "--robot", three_lines.robot, "--setup", setup, "--out", out
     )
-    _refused(result, "line 1's dial readings", "set dial_axis")
+    _refused(result, "line 1's dial readings move the tool along", "set dial_axis = [")
     assert not out.exists()
 
 
