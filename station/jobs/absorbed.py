@@ -19,10 +19,10 @@ from calib.consistency import DialGain, dial_gain
 from calib.kinematics import dh_table
 from calib.models import GROUP_LENGTH, MeasurementModel
 
-DIAL_GAIN_TOLERANCE = 0.3
-"""How far (mm per mm of reading) a line's dial gain may differ from its stated axis before it
-disagrees; judged only where the gain is known to ``DIAL_GAIN_SIGMA_MAX`` (readings that spread)."""
-DIAL_GAIN_SIGMA_MAX = 0.1
+DIAL_GAIN_TOLERANCE, DIAL_GAIN_SIGMAS = 0.3, 4.0
+"""How far (mm per mm of reading) a line's dial gain may lie from its stated axis before it
+disagrees: this much, or this many of the gain's standard errors where it is known less well (few
+rows, readings that hardly spread)."""
 DIAL_GAIN_FOLLOWS = 0.5
 """A gain shorter than this: the dial does not read the tool's distance from the edge at all."""
 DOWNWEIGHTED_FINDING = 0.05
@@ -34,7 +34,7 @@ class LineDial:
     """One gauge line's dial judged against its rows: ``line`` id, stated unit ``axis``, the
     ``gain`` its readings show (``calib.consistency.dial_gain``: the stated axis across the line
     where right) with its ``sigma``, and the ``verdict`` (``agrees``, ``flipped``, ``other axis``,
-    ``does not follow``, ``inconclusive``)."""
+    ``does not follow``, or ``inconclusive`` for an axis nearly along the line)."""
 
     line: int
     axis: tuple[float, float, float]
@@ -99,14 +99,15 @@ def line_dials(model) -> list[LineDial]:
 
 def _verdict(found: DialGain, axis: np.ndarray, direction: np.ndarray) -> str:
     across = axis - (axis @ direction) * direction
-    if found.sigma > DIAL_GAIN_SIGMA_MAX or np.linalg.norm(across) < 0.3:
-        return "inconclusive"
-    if np.linalg.norm(found.gain - across) <= DIAL_GAIN_TOLERANCE:
+    if np.linalg.norm(across) < 0.3:
+        return "inconclusive"  # an axis nearly along the line: its readings barely move the TCP across it
+    slack = max(DIAL_GAIN_TOLERANCE, DIAL_GAIN_SIGMAS * found.sigma)
+    if np.linalg.norm(found.gain - across) <= slack:
         return "agrees"
-    if np.linalg.norm(found.gain) < DIAL_GAIN_FOLLOWS:
-        return "does not follow"
-    if np.linalg.norm(found.gain + across) <= DIAL_GAIN_TOLERANCE:
+    if np.linalg.norm(found.gain + across) <= slack:
         return "flipped"
+    if np.linalg.norm(found.gain) <= max(DIAL_GAIN_FOLLOWS, DIAL_GAIN_SIGMAS * found.sigma):
+        return "does not follow"
     return "other axis"
 
 

@@ -59,3 +59,18 @@ def test_a_dial_read_on_another_axis_is_named_with_its_direction(three_lines):
     assert "line 1's dial readings move the tool along" in check.refusal
     gain = np.array(verdicts[1].gain)
     assert abs(gain @ axis) / np.linalg.norm(gain) > 0.95  # the gain points along the true axis
+
+
+def test_dial_readings_that_do_not_follow_the_tool_are_refused(three_lines, tmp_path):
+    # line 2's readings shuffled among its rows: the dial reads, but not this tool on this edge
+    samples = load_samples(three_lines.samples)
+    rows = np.flatnonzero(samples.line == 2)
+    dial = samples.dial_mm.copy()
+    dial[rows] = np.random.default_rng(0).permutation(dial[rows])
+    shuffled = dataclasses.replace(samples, dial_mm=dial)
+    outcome = calibration.calibrate_samples(
+        shuffled, load_robot(three_lines.robot), load_setup(three_lines.setup)
+    )
+    check = outcome.report.fit_check
+    assert [d.verdict for d in check.dial_lines] == ["agrees", "agrees", "does not follow"]
+    assert "line 2's dial readings do not follow the tool's distance from the edge" in check.refusal
