@@ -46,6 +46,7 @@ from calib.selection import TermSelection
 from errors import InputError, ParameterError
 from station.formats.samples import Samples
 from station.formats.tables import Payload, RobotFile, SetupFile
+from station.jobs import absorbed
 from station.jobs.report import (
     CalibrationReport,
     CrossValidation,
@@ -203,6 +204,7 @@ def drawstring_setup(setup: SetupFile, where: str) -> DrawstringSetup:
         length_offset=setup.drawstring.length_offset_mm,
         sigma_length=setup.drawstring.sigma_mm,
         sigma_line=setup.line_sigma_mm,
+        sigma_contact=setup.contact_sigma_mm,
         dial_axis={ln.id: _unit(ln.dial_axis) for ln in setup.lines if ln.dial_axis is not None},
         default_dial_axis=None if default_axis is None else _unit(default_axis),
         rho=setup.rho,
@@ -381,7 +383,7 @@ def _report(
     model, cal = choice.model, fit.calibration
     after = metrics(model, hold_model, cal.x)
     workspace = predicted_workspace(robot, cal, model)
-    check, doubts = fit_check(model, cal, after.train, robot, notes, lm=fit.lm)
+    check, doubts = fit_check(model, cal, after.train, robot, notes, lm=fit.lm, workspace=workspace)
     messages = [*notes, *doubts]
     messages += [choice.warning] if choice.warning else []
     messages += workspace_warnings(model, cal.x, after.train, workspace)
@@ -441,8 +443,7 @@ def _errors(model: MeasurementModel, x: np.ndarray) -> ErrorMetrics:
 def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementModel) -> WorkspacePrediction:
     """Expected RMS error [mm] of the measured point (the model's TCP) over random configurations
     within the joint limits, and the RMS one calibration stays below with 95 % probability."""
-    limits = np.radians(robot.limits_deg())
-    q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    q = workspace_configurations(robot)
     dh = dh_table(cal.x)
     modes = workspace_error_modes(
         dh, model.tcp_in_flange(cal.x), q, cal.robot_covariance, model.terms, model.tool_mask.any()
@@ -450,6 +451,13 @@ def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementMo
     return WorkspacePrediction(
         predicted_workspace_rmse(modes), workspace_rmse_bound(modes, 0.95), WORKSPACE_POSES
     )
+
+
+def workspace_configurations(robot: RobotFile) -> np.ndarray:
+    """The random configurations [rad] (``WORKSPACE_POSES``, 6) within the joint limits over which
+    a workspace error is predicted."""
+    limits = np.radians(robot.limits_deg())
+    return np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
 
 
 def workspace_warnings(
@@ -493,6 +501,7 @@ def fit_check(
     notes: tuple[str, ...],
     *,
     lm: bool = True,
+    workspace: WorkspacePrediction | None = None,
 ) -> tuple[FitCheck, list[str]]:
     """How the fit agrees with the stated noise and tolerances, and the warnings it calls for: a
     residual beyond the noise (chi-square), the iteration cap, a parameter far beyond its prior.
@@ -501,17 +510,22 @@ def fit_check(
     ``refusal`` naming the likely cause (the first of ``notes``, else a wild reading, else what the
     evidence points at). Judged at ``cal.x`` on every row of ``model`` (the training set, whatever
     subset the solver saw), weighted by LMLC's robust loss where ``lm`` (else every row counts, and
-    there is no iteration cap)."""
+    there is no iteration cap). The mistakes of ``station.jobs.absorbed`` (a dial axis its readings
+    contradict, many rows down-weighted) add their warnings and refusal, and a ``workspace``
+    prediction whose 95 % bound does not beat the nominal table's expected error is refused."""
     r = model.residuals(cal.x)
     options = CalibrationOptions() if lm else CalibrationOptions(loss="linear")
     weights = robust_weights(r, model.groups, cal.scale, options)
+    found = absorbed.findings(model, cal, weights)
+    nominal = workspace and absorbed.nominal_rmse(model, cal, workspace_configurations(robot))
     test = noise_test(r, weights, int(cal.identified.sum()))
     capped = bool(lm and cal.after.status == 0)
     z = excursions(cal.x, model.x0, model.prior_sigma(), cal.identified)
     wild = _wild(model, cal)
     messages = [wild] if wild else []
-    messages += _doubts(model, cal, test, z, fit, capped)
+    messages += [*found.warnings, *_doubts(model, cal, test, z, fit, capped)]
     refusal = _refusal(model, cal, test, z, fit, robot, (*notes, *([wild] if wild else [])))
+    refusal = refusal or _absorbed_refusal(found, workspace, nominal)
     verdict = "inconsistent" if refusal else "doubtful" if messages else "consistent"
     top = int(np.argmax(z))
     check = FitCheck(
@@ -524,8 +538,29 @@ def fit_check(
         iteration_cap=capped,
         verdict=verdict,
         refusal=refusal,
+        dial_lines=found.dials,
+        dial_mode=absorbed.dial_mode(found, model),
+        nominal_rmse_mm=nominal,
     )
     return check, messages
+
+
+def _absorbed_refusal(
+    found: absorbed.Findings, workspace: WorkspacePrediction | None, nominal: float | None
+) -> str | None:
+    """A mistake ``station.jobs.absorbed`` names with its fix, or a calibration on lines read
+    without a dial predicted to keep more than ``absorbed.NOMINAL_SHARE`` of the nominal table's
+    expected error; None if neither."""
+    if found.refusal:
+        return f"{found.refusal}; nothing else in the fit can be trusted until it is"
+    weak = workspace and nominal and workspace.predicted_rmse_mm >= absorbed.NOMINAL_SHARE * nominal
+    if found.unread and weak:
+        return (
+            f"its predicted workspace error {workspace.predicted_rmse_mm:.2f} mm is over a third of the "
+            f"nominal table's expected {nominal:.2f} mm (both from the tolerances): the samples cannot be "
+            "trusted to improve on the nominal table; measure more rows, on more lines, or with a dial"
+        )
+    return None
 
 
 def _doubts(
