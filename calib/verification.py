@@ -166,7 +166,7 @@ def likely_changes(
     out = []
     for k in np.flatnonzero(seen):
         a = float(cols[:, k] @ u)
-        change = a / norm2[k]
+        change = -a / norm2[k]  # the step that takes the residual away
         sigma = float(np.hypot(1.0 / np.sqrt(norm2[k]), table_sigma[k]))
         out.append(Change(int(columns[k]), change, sigma, a * a / norm2[k] / total, abs(change) / sigma))
     return sorted(out, key=lambda c: -c.explains)

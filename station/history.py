@@ -103,6 +103,7 @@ def file_hash(path: Path) -> str:
 
 def _connect(path: Path, create: bool) -> sqlite3.Connection:
     """An open, checked history database; ``create``: make it (and its folder) if missing."""
+    path = Path(path)
     if not path.exists():
         if not create:
             raise InputError(f"{path}: no history database here (station calibrate and verify write one)")

@@ -308,6 +308,7 @@ def _unit(v, what: str) -> np.ndarray:
 
 
 VERIFY_POSES = 15
+"""The default short plan: what one line gives in a few minutes (see the README for what it sees)."""
 USUALLY_MOVE = ("theta_deg", "a_mm", "alpha_deg")
 """What a crash or wear changes: a joint's zero (an encoder that slipped, a joint re-zeroed) and a
 link's length and twist (a bent link); a verification plan is chosen to see these."""

@@ -16,8 +16,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from calib.calibrate import DOWNWEIGHTED_BELOW, CalibrationOptions, hold_robot, robust_weights, setup_unknowns
-from calib.joint_terms import JointTerms
 from calib.consistency import chi_square_sf
+from calib.joint_terms import JointTerms
 from calib.metrics import error_metrics
 from calib.models import GROUP_PRIOR, MeasurementModel
 from calib.params import display_unit
@@ -25,7 +25,7 @@ from calib.verification import Change, DriftTest, drift_test, likely_changes
 from errors import InputError
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
-from station.jobs.calibration import build_model, check_joint_limits, payload_of
+from station.jobs.calibration import NOISE_DOUBT_RATIO, build_model, check_joint_limits, payload_of
 
 DRIFT_P = 1e-3
 """The chi-square's p-value below which the residual is more than an unchanged robot leaves."""
@@ -207,8 +207,9 @@ def is_drifted(test: DriftTest, changes: list[Change], scale: np.ndarray) -> boo
     """More than an unchanged robot leaves: the residual's chi-square, or the single parameter that
     best explains it (its z-score, Bonferroni over the candidates), rejects at ``DRIFT_P``; where
     the calibration itself left more than the stated noise (the model misses errors), the residual
-    must also exceed what it left by ``DRIFT_EXCESS``."""
-    if np.any(scale > 1.0) and test.excess < DRIFT_EXCESS:
+    must also exceed what it left by ``DRIFT_EXCESS`` (the calibration's own fit check doubts a fit
+    at ``NOISE_DOUBT_RATIO`` times the stated noise; within it, the noise was stated loosely)."""
+    if np.any(scale >= NOISE_DOUBT_RATIO) and test.excess < DRIFT_EXCESS:
         return False
     if test.p_value < DRIFT_P:
         return True

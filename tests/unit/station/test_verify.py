@@ -1,0 +1,165 @@
+"""``station verify`` and ``station history`` on a simulated cell that really changed: a fresh
+session of the calibrated cell holds, the cell with J2's link 0.3 mm longer drifts and names it; a
+history of three calibrations flags that change and nothing else; the database survives two
+writers and refuses a damaged or foreign file without losing a record."""
+
+import json
+import sqlite3
+import threading
+
+import numpy as np
+import pytest
+
+import configs
+from sim_fixtures.scenario import setup_dict
+from sim_fixtures.world import World
+from station import history
+from station.cli import main
+from station.formats.tables import load_robot, load_setup
+from station.jobs.planning import verify_design
+
+SEED = 1
+CHANGE = {"J2.a_mm": 0.3}
+TRAIN_PER_LINE = 60
+ROBOT = configs.path("robots/hsr_jr680.toml")
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    """A calibrated simulated cell (3 lines x 60 poses, 5 readings per capture), its table written
+    by ``station calibrate``, and verification sessions on a 30-pose plan: the cell as it was, and
+    after J2's link grew by 0.3 mm."""
+    folder = tmp_path_factory.mktemp("verify")
+    world = World.create(SEED)
+    rng = np.random.default_rng([SEED, 1])
+    import tomli_w
+
+    (folder / "setup.toml").write_text(tomli_w.dumps(setup_dict(world, rng)))
+    world.sample_set(TRAIN_PER_LINE, rng, readings=5).to_csv(folder / "train.csv")
+    plan = verify_design(load_robot(ROBOT), load_setup(configs.path("setups/sim.toml")), n_select=30).plan
+    for name, w in (("fresh", world), ("changed", world.changed(CHANGE))):
+        q, lines = w.touch_lines(plan.q_deg, plan.line, rng)
+        w.measure(q, lines, rng, readings=5).to_csv(folder / f"{name}.csv")
+    w = world.changed(CHANGE)
+    w.sample_set(TRAIN_PER_LINE, rng, readings=5).to_csv(folder / "train-changed.csv")
+    world.sample_set(TRAIN_PER_LINE, rng, readings=5).to_csv(folder / "train-again.csv")
+    db = folder / "cell.sqlite"
+    args = ["--robot", str(ROBOT), "--setup", str(folder / "setup.toml"), "--db", str(db)]
+    assert main(["calibrate", str(folder / "train.csv"), "--out", str(folder / "table.toml"), *args]) == 0
+    return folder, args
+
+
+def _verify(folder, args, samples, table, capsys):
+    code = main(
+        ["verify", str(folder / samples), "--table", str(table), *args, "--report", str(folder / "v.json")]
+    )
+    out = capsys.readouterr().out
+    return code, json.loads((folder / "v.json").read_text()), out
+
+
+def test_a_fresh_session_of_the_calibrated_cell_holds(cell, capsys):
+    folder, args = cell
+    code, report, out = _verify(folder, args, "fresh.csv", folder / "table.toml", capsys)
+    assert code == 0 and report["verdict"] == "holds", out
+    assert report["likely"] == []
+    # what an unchanged robot leaves: within a few tenths of the stated noise (joint noise adds ~15 %)
+    assert 0.7 < report["noise_ratio"] < 1.5
+    assert {"rmse_mm", "mean_mm", "max_mm", "noise_ratio", "lines", "likely"} <= set(report)
+    assert [ln["id"] for ln in report["lines"]] == [2]
+
+
+def test_the_cell_after_a_bent_link_drifts_and_names_it(cell, capsys):
+    folder, args = cell
+    code, report, out = _verify(folder, args, "changed.csv", folder / "table.toml", capsys)
+    assert code == 3 and report["verdict"] == "drifted", out
+    named = {p["param"]: p for p in report["likely"]}
+    assert "J2.a_mm" in named
+    j2 = named["J2.a_mm"]
+    assert abs(j2["change"] - 0.3) < 3 * j2["sigma"]  # the change it names is the one made
+    assert "J2.a_mm" in out
+
+
+def test_the_nominal_table_drifts_on_the_same_session(cell, capsys):
+    folder, args = cell
+    code, report, _ = _verify(folder, args, "fresh.csv", ROBOT, capsys)
+    assert code == 3 and report["noise_ratio"] > 10
+
+
+def test_verify_bad_input_is_one_line_and_exit_2(cell, capsys, tmp_path):
+    folder, args = cell
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = 'x'\n")
+    assert main(["verify", str(folder / "fresh.csv"), "--table", str(bad), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(bad) in err
+
+
+def test_three_calibrations_flag_the_change_and_nothing_else(cell, capsys):
+    folder, args = cell
+    db = folder / "three.sqlite"
+    args = [*args[:-1], str(db)]
+    for k, name in enumerate(("train.csv", "train-again.csv", "train-changed.csv")):
+        assert main(["calibrate", str(folder / name), "--out", str(folder / f"t{k}.toml"), *args]) == 0
+    capsys.readouterr()
+    assert main(["history", "HSR-JR680", "--db", str(db), "--json", "--plot", str(folder / "h.png")]) == 0
+    data = json.loads(capsys.readouterr().out.split("\nwrote ")[0])
+    assert len(data["records"]) == 3
+    moved = data["moved"]
+    assert [m["param"] for m in moved] == ["J2.a_mm"], moved
+    assert moved[0]["record"] == data["records"][2]["id"]
+    assert abs(moved[0]["change"] - 0.3) < 0.1
+    assert (folder / "h.png").stat().st_size > 0
+
+
+def _record(k: int) -> history.Record:
+    return history.Record(
+        "R1", "robot", f"2026-01-01T00:00:{k:02d}+00:00", "verify", f"s{k}", "t", "", "holds", 0.1, {}
+    )
+
+
+def test_two_writers_at_once_lose_no_record(tmp_path):
+    db = tmp_path / "shared.sqlite"
+    errors = []
+
+    def writer(base):
+        try:
+            for k in range(40):
+                history.append(db, _record(base + k % 10))
+        except Exception as exc:  # noqa: BLE001 (the test reports any)
+            errors.append(exc)
+
+    threads = [threading.Thread(target=writer, args=(b,)) for b in (0, 10)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    assert len(history.records(db, "R1")) == 80
+
+
+def test_a_truncated_database_is_refused_and_left_as_it_was(tmp_path, capsys):
+    db = tmp_path / "h.sqlite"
+    for k in range(200):
+        history.append(db, _record(k % 60))
+    conn = sqlite3.connect(db)
+    conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    conn.close()
+    data = db.read_bytes()
+    db.write_bytes(data[: len(data) // 2])
+    truncated = db.read_bytes()
+    assert main(["history", "R1", "--db", str(db)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(db) in err and "damaged" in err or "not a readable" in err
+    with pytest.raises(Exception, match="damaged|not a readable"):
+        history.append(db, _record(1))
+    assert db.read_bytes() == truncated
+
+
+def test_a_foreign_sqlite_file_is_refused(tmp_path, capsys):
+    db = tmp_path / "other.sqlite"
+    conn = sqlite3.connect(db)
+    conn.execute("CREATE TABLE t (x)")
+    conn.commit()
+    conn.close()
+    assert main(["history", "--db", str(db)]) == 2
+    assert "not a station history" in capsys.readouterr().err
