@@ -37,7 +37,8 @@ def cell(tmp_path_factory):
 
     (folder / "setup.toml").write_text(tomli_w.dumps(setup_dict(world, rng)))
     world.sample_set(TRAIN_PER_LINE, rng, readings=5).to_csv(folder / "train.csv")
-    plan = verify_design(load_robot(ROBOT), load_setup(configs.path("setups/sim.toml")), n_select=VERIFY_POSES).plan
+    sim_setup = load_setup(configs.path("setups/sim.toml"))
+    plan = verify_design(load_robot(ROBOT), sim_setup, n_select=VERIFY_POSES).plan
     for name, w in (("fresh", world), ("changed", world.changed(CHANGE))):
         q, lines = w.touch_lines(plan.q_deg, plan.line, rng)
         w.measure(q, lines, rng, readings=5).to_csv(folder / f"{name}.csv")
