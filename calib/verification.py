@@ -4,9 +4,10 @@ only the setup unknowns fitted (``calibrate.hold_robot``).
 With ``u`` the residuals whitened by what an unchanged robot leaves (the stated noise times the
 calibration's own fitted noise scale, at least 1) and ``P`` the projector off the setup's columns,
 an unchanged robot gives ``u = P (e + J_r d)``: ``e`` unit noise, ``d`` the table's own error
-(covariance ``C`` of the calibration). So ``|u|^2`` is about chi-square on ``dof = m - rank(J_s)``,
-inflated by ``tr(P J_r C J_r^T P)``. A robot that changed leaves more: the test divides the
-inflation out and rejects at ``p``.
+(covariance ``C`` of the calibration). So ``|u|^2`` is chi-square on ``dof = m - rank(J_s)`` plus
+the table's part, ``sum_i l_i chi-square_1`` with ``l_i`` the eigenvalues of ``(P J_r C^1/2)^T (P J_r
+C^1/2)``; the test matches that sum by a scaled chi-square (mean and variance, Satterthwaite). A
+robot that changed leaves more.
 
 Which parameters moved: each robot column's projection (the setup's part taken out) explains
 ``(p_k . u)^2 / |p_k|^2`` of the chi-square, with the change ``p_k . u / |p_k|^2`` and its standard
@@ -36,12 +37,12 @@ class DriftTest:
         What an unchanged robot would leave there: the calibration's noise scale and the table's
         uncertainty, in stated noises.
     chi2 : float
-        The kept rows' residual in units of what an unchanged robot leaves, the table's
-        uncertainty divided out.
+        The kept rows' residual in units of what an unchanged robot leaves, scaled so that with
+        the table's uncertainty it is about chi-square on ``nu`` (Satterthwaite).
     dof : int
         Kept rows minus the setup unknowns they determine (at least 1).
     p_value : float
-        Probability of a chi-square on ``dof`` at or above ``chi2``.
+        Probability of that chi-square at or above ``chi2``.
     """
 
     noise_ratio: float
@@ -116,16 +117,20 @@ def drift_test(
     basis = setup_basis(jac_setup[kept] / s[:, None])
     dof = max(int(kept.sum()) - basis.shape[1], 1)
     u = _project(basis, r / s)
-    inflation = 0.0
+    table = np.zeros(0)
     if robot_cov is not None:
         value, vector = np.linalg.eigh(robot_cov)
         root = vector * np.sqrt(np.clip(value, 0.0, None))
-        inflation = float(np.sum(_project(basis, (jac_robot[kept] / s[:, None]) @ root) ** 2))
-    factor = 1.0 + inflation / dof
-    chi2 = float(u @ u) / factor
+        a = _project(basis, (jac_robot[kept] / s[:, None]) @ root)
+        table = np.clip(np.linalg.eigvalsh(a.T @ a), 0.0, None)
+    # |u|^2 = chi-square on dof plus sum_i table_i chi-square_1: matched in mean and variance by
+    # c chi-square on nu (Satterthwaite)
+    mean, variance = dof + table.sum(), 2.0 * (dof + np.sum(table**2))
+    c, nu = variance / (2.0 * mean), 2.0 * mean**2 / variance
+    chi2 = float(u @ u) / c
     ratio = float(np.sqrt(np.sum(r**2) / dof))
-    expected = float(np.sqrt(np.mean(s**2) * factor))
-    return DriftTest(ratio, expected, chi2, dof, chi_square_sf(chi2, dof))
+    expected = float(np.sqrt(np.mean(s**2) * mean / dof))
+    return DriftTest(ratio, expected, chi2, dof, chi_square_sf(chi2, nu))
 
 
 def likely_changes(

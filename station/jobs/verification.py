@@ -41,13 +41,14 @@ LIKELY_MAX = 5
 
 MEANINGS = {
     "holds": (
-        "the table holds: these samples leave {ratio:.2f} times the stated noise, what an unchanged "
-        "robot leaves ({expected:.2f}); keep using it"
+        "these samples leave {ratio:.2f} times the stated noise, as an unchanged robot would "
+        "({expected:.2f}: "
+        "the noise the calibration itself left and the table's own uncertainty); keep using the table"
     ),
     "drifted": (
-        "the table no longer fits this robot: these samples leave {ratio:.2f} times the stated noise "
-        "against {expected:.2f} for an unchanged robot (chi-square p {p}); {likely}recalibrate "
-        "(station calibrate) before relying on it"
+        "these samples leave {ratio:.2f} times the stated noise against {expected:.2f} for an unchanged "
+        "robot (chi-square p {p}): the robot is no longer what the table describes; {likely}"
+        "recalibrate (station calibrate) before relying on it"
     ),
 }
 
@@ -282,5 +283,5 @@ def summary(report: VerifyReport) -> str:
     )
     if report.downweighted:
         lines.append(f"down-weighted rows (gross readings): {list(report.downweighted)}")
-    lines.append(f"{report.verdict}: {report.meaning}")
+    lines.append(f"verdict: {report.verdict} ({report.meaning})")
     return "\n".join(lines)
