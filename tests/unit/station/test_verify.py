@@ -4,8 +4,8 @@ history of three calibrations flags that change and nothing else; the database s
 writers and refuses a damaged or foreign file without losing a record."""
 
 import json
+import multiprocessing
 import sqlite3
-import threading
 
 import numpy as np
 import pytest
@@ -119,24 +119,23 @@ def _record(k: int) -> history.Record:
     )
 
 
+def _writer(db, base: int, count: int) -> None:
+    for k in range(count):
+        history.append(db, _record(base + k % 10))
+
+
 def test_two_writers_at_once_lose_no_record(tmp_path):
+    """Two stations (processes) appending to one new database at the same time."""
     db = tmp_path / "shared.sqlite"
-    errors = []
-
-    def writer(base):
-        try:
-            for k in range(40):
-                history.append(db, _record(base + k % 10))
-        except Exception as exc:  # noqa: BLE001 (the test reports any)
-            errors.append(exc)
-
-    threads = [threading.Thread(target=writer, args=(b,)) for b in (0, 10)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    assert errors == []
-    assert len(history.records(db, "R1")) == 80
+    context = multiprocessing.get_context("fork")
+    writers = [context.Process(target=_writer, args=(db, base, 60)) for base in (0, 10)]
+    for w in writers:
+        w.start()
+    for w in writers:
+        w.join(60)
+    assert [w.exitcode for w in writers] == [0, 0]
+    found = history.records(db, "R1")
+    assert len(found) == 120 and len({r["id"] for r in found}) == 120
 
 
 def test_a_truncated_database_is_refused_and_left_as_it_was(tmp_path, capsys):
@@ -151,7 +150,7 @@ def test_a_truncated_database_is_refused_and_left_as_it_was(tmp_path, capsys):
     truncated = db.read_bytes()
     assert main(["history", "R1", "--db", str(db)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and str(db) in err and "damaged" in err or "not a readable" in err
+    assert err.count("\n") == 1 and str(db) in err and ("damaged" in err or "not a readable" in err)
     with pytest.raises(Exception, match="damaged|not a readable"):
         history.append(db, _record(1))
     assert db.read_bytes() == truncated
