@@ -5,7 +5,10 @@ with J2.a_mm among the named parameters.
 Per seed: a JR680 cell (``World.create(seed)``), calibrated on 3 lines x ``--train`` poses (5
 readings per capture) through the calibration service, the table written as ``station calibrate``
 writes it; then ``station plan --verify N``'s plan measured on the cell as it is and after the
-change, each verified. Usage: ``python benchmarks/verify_drift.py [--seeds 40] [--poses 15 30]``.
+change, each verified. Usage: ``python benchmarks/verify_drift.py [--seeds 40] [--poses 15 30 60]``.
+
+Measured (40 seeds, 3 x 70 training poses, 175 s on the shared 2-core machine): unchanged cell
+called drifted 0/40 for each of 15, 30, 60 poses; J2.a +0.3 mm caught and named 23/40, 33/40, 40/40.
 """
 
 from __future__ import annotations
