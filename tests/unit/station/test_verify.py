@@ -205,3 +205,25 @@ def test_the_simulated_robot_changes_only_the_named_parameter():
     assert SimConfig(change={"J2.a_mm": 0.3}).change == CHANGE
     with pytest.raises(ValueError, match="J2.b_mm"):
         SimConfig(change={"J2.b_mm": 0.3})
+
+
+def test_a_damaged_history_keeps_the_calibration_and_says_so(cell, tmp_path, capsys):
+    folder, args = cell
+    db = tmp_path / "damaged.sqlite"
+    db.write_bytes(b"SQLite format 3\x00" + bytes(200))
+    flags = [*args[:-1], str(db)]
+    assert main(["calibrate", str(folder / "train.csv"), "--out", str(tmp_path / "t.toml"), *flags]) == 0
+    err = capsys.readouterr().err
+    assert (tmp_path / "t.toml").exists() and err.startswith("station: history not written: ")
+    assert err.count("\n") == 1 and str(db) in err
+    assert db.read_bytes() == b"SQLite format 3\x00" + bytes(200)
+
+
+def test_plan_verify_writes_a_short_plan_on_one_line(tmp_path, capsys):
+    out = tmp_path / "check.csv"
+    setup = str(configs.path("setups/sim.toml"))
+    assert main(["plan", "--verify", "12", "--robot", str(ROBOT), "--setup", setup, "--out", str(out)]) == 0
+    rows = out.read_text().splitlines()
+    assert rows[0].startswith("target,line,q1_deg") and len(rows) == 13
+    assert len({r.split(",")[1] for r in rows[1:]}) == 1
+    assert "verification plan: 12 poses" in capsys.readouterr().out
