@@ -101,12 +101,10 @@ def file_hash(path: Path) -> str:
         return ""
 
 
-def _connect(path: Path, create: bool) -> sqlite3.Connection:
-    """An open, checked history database; ``create``: make it (and its folder) if missing."""
+def _connect(path: Path) -> sqlite3.Connection:
+    """An open, checked history database, made (with its folder) where missing."""
     path = Path(path)
     if not path.exists():
-        if not create:
-            raise InputError(f"{path}: no history database here (station calibrate and verify write one)")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -153,7 +151,7 @@ def _damaged_hint(path: Path) -> str:
 
 def append(path: Path, record: Record) -> int:
     """Append ``record`` (one transaction); returns its id."""
-    conn = _connect(path, create=True)
+    conn = _connect(path)
     try:
         cur = conn.execute(
             "INSERT INTO records (robot, robot_name, time_utc, command, samples, table_path, table_hash, "
@@ -179,8 +177,11 @@ def append(path: Path, record: Record) -> int:
 
 
 def robots(path: Path) -> list[dict]:
-    """Every robot in the history: identity, name, records, calibrations, last time and verdict."""
-    conn = _connect(path, create=False)
+    """Every robot in the history: identity, name, records, calibrations, last time and verdict
+    (none while no database exists)."""
+    if not Path(path).exists():
+        return []
+    conn = _connect(path)
     try:
         rows = conn.execute(
             "SELECT robot, robot_name, COUNT(*), SUM(command = 'calibrate'), MAX(time_utc), "
@@ -194,8 +195,10 @@ def robots(path: Path) -> list[dict]:
 
 
 def records(path: Path, robot: str) -> list[dict]:
-    """One robot's records, oldest first (figures parsed)."""
-    conn = _connect(path, create=False)
+    """One robot's records, oldest first (figures parsed); none while no database exists."""
+    if not Path(path).exists():
+        return []
+    conn = _connect(path)
     try:
         rows = conn.execute(
             "SELECT id, time_utc, command, samples, table_path, table_hash, verdict, rmse_mm, figures "
