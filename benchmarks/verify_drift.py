@@ -73,6 +73,11 @@ def main(argv=None) -> int:
             others = [m for m in flagged if not (m["param"] == "J2.a_mm" and m["record"] == 3)]
             flags["cells with another flag"] += bool(others)
             flags["other flags"] += len(others)
+            for m in others:
+                print(
+                    f"  cell {seed}: also flagged {m['param']} {m['change']:+.3g} "
+                    f"({m['sigmas']:.1f} sigma) at record {m['record']}"
+                )
         for n, plan in plans.items():
             for name, w in (("fresh", world), ("changed", world.changed(CHANGE))):
                 q, lines = w.touch_lines(plan.q_deg, plan.line, rng)
