@@ -302,11 +302,26 @@ def fit_setup(model: MeasurementModel, options: CalibrationOptions = Calibration
     SetupFit
     """
     gauges = model.gauges()
-    free_setup = model.setup_mask & ~np.isin(model.names, list(gauges))
-    prior = WithPrior(model, model.x0)
-    before, _ = robust_fit(prior, model.x0, free_setup, options)
+    free_setup = setup_unknowns(model)
+    prior, before, _ = hold_robot(model, model.x0, options)
     table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol, options.hold_weak)
     return SetupFit(prior, before, free_setup | table, held)
+
+
+def setup_unknowns(model: MeasurementModel) -> np.ndarray:
+    """The setup unknowns a fit determines, shape (n,) of bool: all but the model's gauges."""
+    return model.setup_mask & ~np.isin(model.names, list(model.gauges()))
+
+
+def hold_robot(
+    model: MeasurementModel, x: np.ndarray, options: CalibrationOptions = CalibrationOptions()
+) -> tuple[WithPrior, LMResult, np.ndarray]:
+    """The setup unknowns fitted with the robot (table and terms) held at ``x``'s (n,): the
+    contract's "before" at the nominal robot, ``station verify`` at a corrected one. Returns the
+    prior-augmented model (centred at ``x``), the fit and its noise scale per residual group."""
+    prior = WithPrior(model, x)
+    result, scale = robust_fit(prior, np.asarray(x, float), setup_unknowns(model), options)
+    return prior, result, scale
 
 
 def calibrate(

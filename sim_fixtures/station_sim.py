@@ -15,6 +15,7 @@ the simulated true robot's pose implies at the instant they are asked:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from collections.abc import Sequence
@@ -117,6 +118,8 @@ class SimStation:
             faults=faults,
             rng=np.random.default_rng([cfg.sim.seed, 3]),
         )
+        if cfg.sim.change:  # the robot changed after the plan was taught (a bent link)
+            cell = dataclasses.replace(cell, world=cell.world.changed(cfg.sim.change))
         self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
         self.source = CellSource(self.robot, cell)
         rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in (0, 1, 6)]

@@ -25,6 +25,7 @@ Units as a person measures them: mm and degrees. The nominal robot is the shippe
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,7 +35,7 @@ import configs
 from calib import ik
 from calib.joint_terms import JointTerms
 from calib.kinematics import tcp_position
-from calib.params import DH_KEYS, dh_from_degrees
+from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees
 from sim_fixtures.sources import Instrument
 
 try:
@@ -255,6 +256,15 @@ class World:
         return cls(
             nominal, true, anchor, 200.0 + rng.normal(0, 2.0), DEFAULT_LINES[:n_lines], noise or Noise()
         )
+
+    def changed(self, offsets: dict[str, float]) -> World:
+        """This cell after its robot changed (a bent link, a slipped encoder): ``offsets`` [mm, deg]
+        by D-H parameter name (``{"J2.a_mm": 0.3}``) added to the true table."""
+        table = self.true.table_deg.copy()
+        for name, value in offsets.items():
+            table.flat[DH_NAMES.index(name)] += value
+        true = Robot(table, self.true.tool.copy(), self.true.limits_deg.copy())
+        return dataclasses.replace(self, true=true)
 
     def rough_setup(self, rng: np.random.Generator) -> dict:
         """Setup values as a person would measure them: anchor to +-30 mm, offset to +-8 mm."""

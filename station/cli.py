@@ -35,6 +35,8 @@ COMMANDS = (  # in the order of the workflow, as the help lists them
     "compare",
     "export",
     "compensate",
+    "verify",
+    "history",
     "import-ipa",
 )
 

@@ -12,6 +12,7 @@ from typing import Annotated
 
 from pydantic import Field, TypeAdapter, ValidationError, model_validator
 
+from calib.params import DH_NAMES
 from drivers.config import (
     DialConfig,
     DrawstringConfig,
@@ -39,6 +40,14 @@ class SimConfig(Section):
     dwell_s: float = Field(3.0, ge=0, le=3600)
     targets_per_line: int = Field(70, ge=2, le=10000)  # the cell's plan: targets along each gauge line
     plan_csv: Name = "/tmp/station-sim/plan.csv"  # sim serve publishes the plan it walks here
+    change: dict[str, Annotated[float, Field(ge=-100, le=100)]] = {}  # the robot after its calibration
+
+    @model_validator(mode="after")
+    def _change_names(self) -> SimConfig:
+        unknown = sorted(set(self.change) - set(DH_NAMES))
+        if unknown:
+            raise ValueError(f"change: {unknown[0]!r} is no D-H parameter (J1.theta_deg .. J6.alpha_deg)")
+        return self
 
 
 class SessionConfig(Section):

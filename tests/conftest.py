@@ -30,3 +30,11 @@ def outliers(tmp_path_factory):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(autouse=True)
+def history_db(tmp_path, monkeypatch):
+    """Every command's history record goes to a database of the test's own, never the user's."""
+    path = tmp_path / "history.sqlite"
+    monkeypatch.setenv("STATION_HISTORY_DB", str(path))
+    return path

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from calib.methods import ALL_METHODS, DEFAULT_TERM_MODEL, TERM_MODELS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
+from station.commands.verify import add_history_flags, record_history
 
 if TYPE_CHECKING:
     from station.formats.samples import Samples
@@ -52,6 +53,7 @@ def register(sub) -> None:
     p.add_argument(
         "--plot", type=Path, help="PNG to write: error per sample and per line, predicted workspace error"
     )
+    add_history_flags(p)
     p.set_defaults(func=run)
 
 
@@ -98,6 +100,7 @@ def run(args) -> int:
     write_outputs(outputs)
     print(summary(outcome.report))
     print("wrote " + ", ".join(str(o.path) for o in outputs))
+    record_history(args, inputs.robot, "calibrate", inputs.samples.path, args.out, outcome.report.as_json())
     return 0
 
 

@@ -10,7 +10,10 @@ The steps a user takes at a real station, each with a one-line summary:
    faster -> ``session/`` (samples, ``session.rrd``);
 4. calibrate: LMLC and MCS-LMLC on the session, with a simulated hold-out set -> ``corrected.toml``,
    ``report.json``, ``report-mcs-lmlc.json``, each with the simulated truth beside it;
-5. export: the corrected table as URDF beside ``corrected.toml``.
+5. export: the corrected table as URDF beside ``corrected.toml``;
+6. verify: a second, short simulated session (``station plan --verify``'s poses) judged with the
+   table just written (holds) and with the nominal table (drifted) -> ``verify.csv``,
+   ``verify.json``, ``verify-nominal.json``.
 """
 
 from __future__ import annotations
@@ -91,6 +94,7 @@ def run(args) -> int:
     finally:
         session.view.close()
     _export(out)
+    _verify(out, inputs, args.seed)
     return outcome
 
 
@@ -295,3 +299,37 @@ def truth_line(world, outcome) -> str:
         for x in (cal.before.x, cal.x)
     ]
     return f"true workspace error (simulation, 1000 random poses) {rms[0]:.3f} -> {rms[1]:.3f} mm RMS"
+
+
+def _verify(out: Path, inputs, seed: int) -> None:
+    """Step 6: a short second session of the same cell, verified with the corrected table and with
+    the nominal one (what ``station verify`` prints, in one line each)."""
+    import numpy as np
+
+    from sim_fixtures.world import World
+    from station.formats.base import atomic_write
+    from station.formats.samples import load_samples
+    from station.formats.tables import load_robot
+    from station.jobs import planning, verification
+
+    t0 = time.perf_counter()
+    plan = planning.verify_design(inputs.robot, inputs.setup, n_select=planning.VERIFY_POSES).plan
+    world = World.create(seed)
+    rng = np.random.default_rng([seed, 8])
+    q, lines = world.touch_lines(plan.q_deg, plan.line, rng)
+    world.measure(q, lines, rng, readings=inputs.cfg.session.readings).to_csv(out / "verify.csv")
+    samples = load_samples(out / "verify.csv")
+    tables = {"corrected": load_robot(out / "corrected.toml"), "nominal": inputs.robot}
+    for label, table in tables.items():
+        name = "verify.json" if label == "corrected" else f"verify-{label}.json"
+        report = verification.verify_samples(samples, table, inputs.setup, table_where=label).report
+        atomic_write(out / name, json.dumps(report.as_json(), indent=2) + "\n")
+        likely = ", ".join(p.param for p in report.likely[:3])
+        print(
+            f"verify:    {len(samples)} new poses on line {plan.line[0]} with the {label} table: "
+            f"{report.verdict} "
+            f"(RMSE {report.rmse_mm:.3f} mm, {report.test.noise_ratio:.2f} x the stated noise"
+            f"{'; most likely moved: ' + likely if likely else ''}) -> {out / name}",
+            flush=True,
+        )
+    print(f"verify:    ({time.perf_counter() - t0:.1f} s)", flush=True)

@@ -31,6 +31,15 @@ def register(sub) -> None:
         help="readings averaged per capture, for the promise (default: the session's or the shipped "
         "station config's [session] readings, 5)",
     )
+    p.add_argument(
+        "--verify",
+        type=_positive,
+        nargs="?",
+        const=15,
+        metavar="N",
+        help="a short verification plan instead (station verify): N poses (default 15) on one gauge line, "
+        "those most sensitive to joint zeros and link lengths and twists",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -46,6 +55,14 @@ def run(args) -> int:
         if path:
             check_writable(path, flag)
     robot, setup, where = _inputs(args)
+    if args.verify:
+        design = planning.verify_design(robot, setup, where, n_select=args.verify, seed=args.seed)
+        write_outputs([Output.text(args.out, "--out", design.plan.csv_text())])
+        print(
+            f"verification plan: {len(design.plan)} poses on gauge line {design.report['line']}, chosen "
+            f"to see joint zeros and link lengths and twists -> {args.out} (measure, then station verify)"
+        )
+        return 0
     with parameters_as_flags(FLAGS):
         design = planning.design(
             robot,

@@ -17,8 +17,11 @@ import numpy as np
 
 from calib import ik
 from calib.accuracy import predicted_workspace_rmse, workspace_rmse_bound
+from calib.calibrate import setup_unknowns
 from calib.experiment import design_model, expected_modes, line_candidates
+from calib.kinematics import N_DH
 from calib.params import dh_from_degrees
+from calib.verification import sensitive_rows
 from errors import InputError, ParameterError
 from station.formats.plan import Plan
 from station.formats.tables import RobotFile, SetupFile
@@ -323,3 +326,54 @@ def _unit(v, what: str) -> np.ndarray:
     if not np.isfinite(n) or n < 1e-9:
         raise InputError(f"{what}: {list(v)} is not a direction")
     return v / n
+
+
+VERIFY_POSES = 15
+"""The default short plan: what one line gives in a few minutes (see the README for what it sees)."""
+USUALLY_MOVE = ("theta_deg", "a_mm", "alpha_deg")
+"""What a crash or wear changes: a joint's zero (an encoder that slipped, a joint re-zeroed) and a
+link's length and twist (a bent link); a verification plan is chosen to see these."""
+
+
+def verify_design(
+    robot: RobotFile,
+    setup: SetupFile,
+    where: str = "setup",
+    *,
+    n_select: int = VERIFY_POSES,
+    per_line: int = 100,
+    seed: int = 0,
+) -> Design:
+    """A short verification plan: ``n_select`` configurations on one gauge line, greedily the most
+    informative (``calib.verification.sensitive_rows``) on ``USUALLY_MOVE`` with the line, anchor and
+    offset fitted; of the setup's lines, the one whose plan sees them best."""
+    lines = placements(setup, where)
+    ds_setup = drawstring_setup(setup, where)
+    dh, tool = robot_arrays(robot)
+    limits = np.radians(robot.limits_deg())
+    rng = np.random.default_rng(seed)
+    best = None
+    for lid, line in lines.items():
+        q, ok = line_candidates(dh, tool, limits, line, per_line, rng)
+        q = q[ok]
+        if len(q) < n_select:
+            continue
+        model = design_model(dh, tool, ds_setup, q, np.full(len(q), lid))
+        _, jac = model.residuals_and_jacobian(model.x0)
+        gauges = model.gauges()
+        moving = [k for k, name in enumerate(model.names[:N_DH]) if name.partition(".")[2] in USUALLY_MOVE]
+        moving = [k for k in moving if model.names[k] not in gauges]
+        setup_cols = setup_unknowns(model)
+        prior = model.prior_sigma()[moving]
+        rows, info = sensitive_rows(jac[:, setup_cols], jac[:, moving], model.rows, prior, n_select)
+        if best is None or info > best[0]:
+            best = (info, lid, q[np.sort(rows)])
+    if best is None:
+        raise InputError(
+            f"{where}: no gauge line has {n_select} reachable points within the joint limits: "
+            "move the gauge block or plan fewer poses"
+        )
+    _, lid, q = best
+    plan = Plan(np.arange(len(q)), np.full(len(q), lid), np.degrees(q))
+    report = {"verify": True, "line": int(lid), "n": len(q), "sensitive_to": list(USUALLY_MOVE)}
+    return Design(plan, report)

@@ -12,7 +12,7 @@ import numpy as np
 from calib.calibrate import Calibration
 from calib.joint_terms import TERM_KINDS
 from calib.kinematics import N_DH, dh_table
-from calib.models import DrawstringSetupEstimate
+from calib.models import GROUP_PRIOR, DrawstringSetupEstimate
 from calib.params import DH_KEYS, DH_NAMES, dh_to_degrees, display_factor
 from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
@@ -224,6 +224,7 @@ def corrected_table(
         joints.append(entry)
     out = {
         "name": robot.name,
+        **({"serial": robot.serial} if robot.serial else {}),
         "convention": "dh",
         "tool_mm": list(robot.tool_mm),
         "calibration": {
@@ -234,6 +235,7 @@ def corrected_table(
             "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
             **_covariance(cal),
+            **_noise_scale(cal, samples.kind),
         },
         **({"controller_hash": robot.controller_hash} if robot.controller_hash else {}),
         "joints": joints,
@@ -256,3 +258,12 @@ def _covariance(cal: Calibration) -> dict:
     factor = display_factor([cal.names[k] for k in index])
     cov = cal.robot_covariance[np.ix_(keep, keep)] * np.outer(factor, factor)
     return {"covariance_parameters": [cal.names[k] for k in index], "covariance": cov.tolist()}
+
+
+def _noise_scale(cal: Calibration, kind: str) -> dict:
+    """The noise the fit found per residual group (``calib.models``' groups, the prior's left out),
+    in stated noises, and the kind of samples: what an unchanged robot leaves (``station verify``)."""
+    scale = np.ones(GROUP_PRIOR)
+    found = cal.scale[:GROUP_PRIOR]
+    scale[: found.size] = found
+    return {"kind": kind, "noise_scale": [float(v) for v in scale]}

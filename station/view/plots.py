@@ -142,3 +142,83 @@ def _bars_with_bound(ax, rows: list[tuple[str, dict]], ylabel: str, colours: lis
     ax.set_ylim(bottom=min(heights) / 3)
     ax.set_ylabel(ylabel)
     ax.legend()
+
+
+VERDICT_COLOURS = {"holds": "C2", "drifted": "C3", "consistent": "C0", "doubtful": "C1", "inconsistent": "C3"}
+
+
+def verification_figure(data: dict, path: Path) -> None:
+    """Two panels from ``station verify`` (``VerifyOutcome.row_errors``): (a) each sample's error
+    [mm] with the table held, coloured by gauge line; (b) the RMS error per line, the verdict and the
+    parameters most likely moved in the title."""
+    fig, (ax_rows, ax_lines) = plt.subplots(1, 2, figsize=(13, 4.8), width_ratios=(2, 1))
+    errors, placement = np.asarray(data["error_mm"]), np.asarray(data["placement"])
+    lines = data["kind"] == "drawstring"
+    names = {i: (f"line {i}" if i >= 0 else "no line") if lines else "all rows" for i in np.unique(placement)}
+    size = 5 if len(errors) < 200 else 2
+    for k, lid in enumerate(np.unique(placement)):
+        rows = np.flatnonzero(placement == lid)
+        ax_rows.plot(rows, errors[rows], "o", ms=size, color=f"C{k}", label=names[lid])
+    ax_rows.axhline(0.0, color="0.5", lw=0.8)
+    ax_rows.set_xlabel("sample row")
+    ax_rows.set_ylabel(f"{data['kind']} error, table held [mm]")
+    ax_rows.set_title(f"(a) error per sample: RMSE {data['rmse_mm']:.4f} mm")
+    ax_rows.legend(fontsize=8)
+    ids, rms = rms_per_placement(np.abs(errors), placement)
+    ax_lines.bar(range(len(ids)), rms, color=VERDICT_COLOURS[data["verdict"]], label=data["verdict"])
+    # what an unchanged robot would leave, in mm: the residual scaled by expected / observed ratio
+    unchanged = data["rmse_mm"] * data["expected_ratio"] / data["noise_ratio"]
+    ax_lines.axhline(unchanged, color="k", ls="--", label=f"unchanged robot ~{unchanged:.3g} mm")
+    ax_lines.legend(fontsize=8)
+    ax_lines.set_xticks(range(len(ids)), [names[i] for i in ids])
+    ax_lines.set_ylabel("RMS error [mm]")
+    ax_lines.set_title(
+        f"(b) {data['verdict']}: {data['noise_ratio']:.2f} x stated noise "
+        f"({data['expected_ratio']:.2f} expected)"
+    )
+    likely = ", ".join(f"{p['param']} {p['change']:+.3g} {p['unit']}" for p in data["likely"][:3])
+    if likely:
+        fig.suptitle(f"most likely moved: {likely}", color="C3")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def history_figure(robot: str, records: list[dict], moved: list[dict], path: Path) -> None:
+    """A robot's history (``station history ROBOT --plot``): each record's RMSE [mm] in order,
+    coloured by its verdict (calibrations as circles, verifications as squares), dated below, every
+    flagged move annotated at the calibration that showed it."""
+    fig, ax = plt.subplots(figsize=(11, 4.8))
+    markers = {"calibrate": "o", "verify": "s"}
+    for k, r in enumerate(records):
+        if r["rmse_mm"] is not None:
+            colour = VERDICT_COLOURS.get(r["verdict"], "0.4")
+            ax.plot(k, r["rmse_mm"], markers.get(r["command"], "^"), color=colour, ms=10)
+    for command, marker in markers.items():
+        if any(r["command"] == command for r in records):
+            ax.plot([], [], marker, color="0.4", ls="none", label=command)
+    for verdict, colour in VERDICT_COLOURS.items():
+        if any(r["verdict"] == verdict for r in records):
+            ax.plot([], [], "D", color=colour, ls="none", label=verdict)
+    index = {r["id"]: k for k, r in enumerate(records)}
+    for m in moved:
+        k = index[m["record"]]
+        ax.annotate(
+            f"{m['param']} {m['change']:+.3g} ({m['sigmas']:.1f} sigma)",
+            (k, records[k]["rmse_mm"] or 0.0),
+            textcoords="offset points",
+            xytext=(-12, 14 + 14 * moved.index(m)),
+            ha="right",
+            color="C3",
+            fontsize=9,
+            arrowprops={"arrowstyle": "->", "color": "C3"},
+        )
+    labels = [f"#{r['id']}\n{r['time_utc'][:16].replace('T', ' ')}" for r in records]
+    ax.set_xticks(range(len(records)), labels, fontsize=8)
+    ax.set_xlim(-0.5, len(records) - 0.5)
+    ax.set_ylabel("RMSE [mm] (calibrate: training fit; verify: new samples)")
+    ax.set_title(f"robot {robot}: {len(records)} records")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

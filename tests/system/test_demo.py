@@ -68,3 +68,6 @@ def test_demo_runs_the_workflow_and_its_live_view_tells_the_story(tmp_path, caps
     assert f"{predicted[-1]:.3f} mm predicted" in session_line
     entities = {c.entity_path for c in RrdReader(rrd).stream().to_chunks()}
     assert {"/calibration/residual/lmlc/after", "/calibration/cost/lmlc", "/log"} <= entities
+    # the demo ends with a short second session: the table just written holds, the nominal drifts
+    assert json.loads((out / "verify.json").read_text())["verdict"] == "holds", text
+    assert json.loads((out / "verify-nominal.json").read_text())["verdict"] == "drifted", text

@@ -150,3 +150,29 @@ def test_station_calibrate_on_the_first_30_rows_of_series_b(tmp_path):
     r = json.loads(report.read_text())
     assert r["kind"] == "position" and "tracker_from_base" in r and "lines" not in r
     assert r["workspace"]["predicted_rmse_mm"] > 2 * r["after"]["train"]["rmse_mm"]
+
+
+REGISTERED = {  # benchmarks/IPA_UR10.md, train B, position --model auto: RMSE / MEAN / MAX [mm]
+    "C": ("Series_C/measurements_random_poses.csv", (0.503, 0.454, 1.561)),
+    "D": ("Series_D/measurements_iso_cubes.csv", (0.488, 0.451, 1.290)),
+}
+
+
+@needs_data
+def test_verify_series_c_and_d_with_the_table_of_b_gives_the_benchmarks_figures(tmp_path, capsys):
+    """``station verify`` is the benchmark's registration: table of B (``station calibrate``'s
+    default model) held, each test series' tracker transform and probe fitted; to 1 %."""
+    robot = str(ROOT / "configs/robots/ur10.toml")
+    assert main(["import-ipa", str(SERIES_B), "--out", str(tmp_path / "B.csv")]) == 0
+    assert (
+        main(["calibrate", str(tmp_path / "B.csv"), "--robot", robot, "--out", str(tmp_path / "B.toml")]) == 0
+    )
+    for name, (series, registered) in REGISTERED.items():
+        assert main(["import-ipa", str(DATA / series), "--out", str(tmp_path / f"{name}.csv")]) == 0
+        report = tmp_path / f"V{name}.json"
+        table = str(tmp_path / "B.toml")
+        code = main(["verify", str(tmp_path / f"{name}.csv"), "--table", table, "--report", str(report)])
+        found = json.loads(report.read_text())
+        assert code == 0 and found["verdict"] == "holds"
+        got = (found["rmse_mm"], found["mean_mm"], found["max_mm"])
+        np.testing.assert_allclose(got, registered, rtol=0.01)

@@ -1,0 +1,237 @@
+"""Is a table still right? Statistics of a table judged on rows it never saw, the robot held and
+only the setup unknowns fitted (``calibrate.hold_robot``).
+
+With ``u`` the residuals whitened by what an unchanged robot leaves (the stated noise times the
+calibration's own fitted noise scale, at least 1) and ``P`` the projector off the setup's columns,
+an unchanged robot gives ``u = P (e + J_r d)``: ``e`` unit noise, ``d`` the table's own error
+(covariance ``C`` of the calibration). So ``|u|^2`` is chi-square on ``dof = m - rank(J_s)`` plus
+the table's part, ``sum_i l_i chi-square_1`` with ``l_i`` the eigenvalues of ``(P J_r C^1/2)^T (P J_r
+C^1/2)``; the test matches that sum by a scaled chi-square (mean and variance, Satterthwaite). A
+robot that changed leaves more.
+
+Which parameters moved: each robot column's projection (the setup's part taken out) explains
+``(p_k . u)^2 / |p_k|^2`` of the chi-square, with the change ``p_k . u / |p_k|^2`` and its standard
+deviation ``1 / |p_k|`` (the table's own sigma added in quadrature): the single changes that would
+best explain the residual, the parameters a recalibration would most likely move.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.calibrate import DOWNWEIGHTED_BELOW
+from calib.consistency import chi_square_sf
+
+
+@dataclass(frozen=True)
+class DriftTest:
+    """The residual of rows the robust loss kept against what an unchanged robot leaves.
+
+    Attributes
+    ----------
+    noise_ratio : float
+        RMS residual per degree of freedom in stated noises (as ``consistency.noise_test``).
+    expected_ratio : float
+        What an unchanged robot would leave there: the calibration's noise scale and the table's
+        uncertainty, in stated noises.
+    chi2 : float
+        The kept rows' residual in units of what an unchanged robot leaves, scaled so that with
+        the table's uncertainty it is about chi-square on ``nu`` (Satterthwaite).
+    dof : int
+        Kept rows minus the setup unknowns they determine (at least 1).
+    p_value : float
+        Probability of that chi-square at or above ``chi2``.
+    """
+
+    noise_ratio: float
+    expected_ratio: float
+    chi2: float
+    dof: int
+    p_value: float
+
+    @property
+    def excess(self) -> float:
+        """The residual against what an unchanged robot leaves (1: as expected)."""
+        return self.noise_ratio / self.expected_ratio
+
+
+@dataclass(frozen=True)
+class Change:
+    """One parameter's likely change: column ``index`` of ``x``, the ``change`` and its ``sigma``
+    (internal units), the fraction of the chi-square it ``explains`` alone, its ``z`` score."""
+
+    index: int
+    change: float
+    sigma: float
+    explains: float
+    z: float
+
+
+def setup_basis(jac_setup: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (m, r) of the setup columns' span (m, s); rank r by singular values."""
+    if jac_setup.size == 0:
+        return np.zeros((jac_setup.shape[0], 0))
+    u, s, _ = np.linalg.svd(jac_setup, full_matrices=False)
+    return u[:, s > 1e-10 * s.max()] if s.size and s.max() > 0 else u[:, :0]
+
+
+def _project(basis: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """``a`` (m,) or (m, k) with its part in the basis' span taken out."""
+    return a - basis @ (basis.T @ a)
+
+
+def drift_test(
+    residuals: np.ndarray,
+    weights: np.ndarray,
+    scale: np.ndarray,
+    jac_setup: np.ndarray,
+    jac_robot: np.ndarray,
+    robot_cov: np.ndarray | None,
+) -> DriftTest:
+    """The drift test of a verification fit.
+
+    Parameters
+    ----------
+    residuals : ndarray, shape (m,)
+        Data residuals at the setup fit, whitened by the stated noise.
+    weights : ndarray, shape (m,)
+        The robust loss's weights there; a down-weighted row (``DOWNWEIGHTED_BELOW``) stays out.
+    scale : ndarray, shape (m,)
+        Per row, what an unchanged robot leaves in stated noises (the calibration's noise scale,
+        at least 1).
+    jac_setup : ndarray, shape (m, s)
+        Jacobian of the residuals by the fitted setup unknowns.
+    jac_robot : ndarray, shape (m, k)
+        Jacobian by the robot's parameters (table, terms) in ``robot_cov``'s order.
+    robot_cov : ndarray, shape (k, k), or None
+        The calibration's covariance of those parameters (internal units); None: exact.
+
+    Returns
+    -------
+    DriftTest
+    """
+    kept = np.asarray(weights, float) ** 2 >= DOWNWEIGHTED_BELOW
+    r, s = residuals[kept], scale[kept]
+    basis = setup_basis(jac_setup[kept] / s[:, None])
+    dof = max(int(kept.sum()) - basis.shape[1], 1)
+    u = _project(basis, r / s)
+    table = np.zeros(0)
+    if robot_cov is not None:
+        value, vector = np.linalg.eigh(robot_cov)
+        root = vector * np.sqrt(np.clip(value, 0.0, None))
+        a = _project(basis, (jac_robot[kept] / s[:, None]) @ root)
+        table = np.clip(np.linalg.eigvalsh(a.T @ a), 0.0, None)
+    # |u|^2 = chi-square on dof plus sum_i table_i chi-square_1: matched in mean and variance by
+    # c chi-square on nu (Satterthwaite)
+    mean, variance = dof + table.sum(), 2.0 * (dof + np.sum(table**2))
+    c, nu = variance / (2.0 * mean), 2.0 * mean**2 / variance
+    chi2 = float(u @ u) / c
+    ratio = float(np.sqrt(np.sum(r**2) / dof))
+    expected = float(np.sqrt(np.mean(s**2) * mean / dof))
+    return DriftTest(ratio, expected, chi2, dof, chi_square_sf(chi2, nu))
+
+
+def likely_changes(
+    residuals: np.ndarray,
+    weights: np.ndarray,
+    scale: np.ndarray,
+    jac_setup: np.ndarray,
+    jac_robot: np.ndarray,
+    columns: np.ndarray,
+    table_sigma: np.ndarray,
+) -> list[Change]:
+    """Each robot parameter's change that best explains the residual alone (see the module
+    docstring), by how much of the chi-square it explains, largest first.
+
+    Parameters
+    ----------
+    residuals, weights, scale, jac_setup : ndarray
+        As ``drift_test``.
+    jac_robot : ndarray, shape (m, k)
+        Jacobian by the candidate parameters.
+    columns : ndarray of int, shape (k,)
+        Their index in ``x`` (``Change.index``).
+    table_sigma : ndarray, shape (k,)
+        The calibration's standard deviation of each (0 where unknown), internal units.
+
+    Returns
+    -------
+    list of Change
+    """
+    kept = np.asarray(weights, float) ** 2 >= DOWNWEIGHTED_BELOW
+    s = scale[kept]
+    basis = setup_basis(jac_setup[kept] / s[:, None])
+    u = _project(basis, residuals[kept] / s)
+    cols = _project(basis, jac_robot[kept] / s[:, None])
+    norm2 = np.sum(cols**2, axis=0)
+    seen = norm2 > 1e-12 * max(float(norm2.max(initial=0.0)), 1e-300)
+    total = max(float(u @ u), 1e-300)
+    out = []
+    for k in np.flatnonzero(seen):
+        a = float(cols[:, k] @ u)
+        change = -a / norm2[k]  # the step that takes the residual away
+        sigma = float(np.hypot(1.0 / np.sqrt(norm2[k]), table_sigma[k]))
+        out.append(Change(int(columns[k]), change, sigma, a * a / norm2[k] / total, abs(change) / sigma))
+    return sorted(out, key=lambda c: -c.explains)
+
+
+def sensitive_rows(
+    jac_setup: np.ndarray,
+    jac_robot: np.ndarray,
+    rows: np.ndarray,
+    prior_sigma: np.ndarray,
+    n_select: int,
+) -> tuple[np.ndarray, float]:
+    """A short verification plan: ``n_select`` configurations, greedily, each the one that most
+    raises ``log det`` of the robot parameters' information with the setup fitted (its Schur
+    complement), a parameter's prior (``prior_sigma``, internal units) regularising what the rows
+    do not see yet.
+
+    Parameters
+    ----------
+    jac_setup : ndarray, shape (m, s)
+        Whitened Jacobian of every candidate's residuals by the setup unknowns.
+    jac_robot : ndarray, shape (m, k)
+        Same, by the parameters the plan should be sensitive to.
+    rows : ndarray of int, shape (m,)
+        The candidate configuration of each residual.
+    prior_sigma : ndarray, shape (k,)
+        What is known of each parameter beforehand.
+    n_select : int
+        How many configurations to choose.
+
+    Returns
+    -------
+    chosen : ndarray of int
+        The chosen configurations, in the order chosen.
+    logdet : float
+        The log det they reach.
+    """
+    jac = np.hstack([jac_setup, jac_robot])
+    n_s = jac_setup.shape[1]
+    ridge = np.concatenate([np.full(n_s, 1e-6), 1.0 / np.asarray(prior_sigma, float) ** 2])
+    blocks = {int(c): jac[rows == c] for c in np.unique(rows)}
+    info = np.diag(ridge)
+    chosen: list[int] = []
+    best_value = _schur_logdet(info, n_s)
+    for _ in range(min(n_select, len(blocks))):
+        best, best_value = -1, -np.inf
+        for c, block in blocks.items():
+            if c in chosen:
+                continue
+            trial = info + block.T @ block
+            value = _schur_logdet(trial, n_s)
+            if value > best_value:
+                best, best_value = c, value
+        chosen.append(best)
+        info = info + blocks[best].T @ blocks[best]
+    return np.array(chosen, int), float(best_value)
+
+
+def _schur_logdet(info: np.ndarray, n_setup: int) -> float:
+    """log det of the robot block's information once the first ``n_setup`` unknowns are fitted."""
+    a, b, d = info[:n_setup, :n_setup], info[:n_setup, n_setup:], info[n_setup:, n_setup:]
+    schur = d - b.T @ np.linalg.solve(a, b) if n_setup else d
+    return float(np.linalg.slogdet(schur)[1])

@@ -1,0 +1,287 @@
+"""``station verify`` behind the command line: a corrected table judged on samples it never saw.
+
+The samples' measurement model is built as the calibration service builds it
+(``calibration.build_model``), started at the table with its joint-space terms; only the setup
+unknowns are fitted (``calib.calibrate.hold_robot``: the calibration's "before" with this table
+instead of the nominal one). ``calib.verification`` judges the residual against what an unchanged
+robot leaves (the stated noise times the calibration's own noise scale, and the table's
+uncertainty from its covariance) and names the parameters a recalibration would most likely move.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from calib.calibrate import DOWNWEIGHTED_BELOW, CalibrationOptions, hold_robot, robust_weights, setup_unknowns
+from calib.consistency import chi_square_sf
+from calib.joint_terms import JointTerms
+from calib.metrics import error_metrics
+from calib.models import GROUP_PRIOR, MeasurementModel
+from calib.params import display_unit
+from calib.verification import Change, DriftTest, drift_test, likely_changes
+from errors import InputError
+from station.formats.samples import Samples
+from station.formats.tables import RobotFile, SetupFile
+from station.jobs.calibration import NOISE_DOUBT_RATIO, build_model, check_joint_limits, payload_of
+
+DRIFT_P = 1e-3
+"""The chi-square's p-value below which the residual is more than an unchanged robot leaves."""
+DRIFT_EXCESS = 1.5
+"""...and it must be this many times what an unchanged robot leaves: on real data the model misses
+errors that differ from pose to pose, so a new set of poses leaves a little more than the training
+rows did (IPA UR10, table of series B on series C: 1.2x), which thousands of rows make significant."""
+LIKELY_SIGMAS = 3.0
+"""A parameter is named when its change is this many of its sigmas ..."""
+LIKELY_SHARE = 0.5
+"""... and explains at least this share of what the best single parameter explains."""
+LIKELY_MAX = 5
+
+MEANINGS = {
+    "holds": (
+        "these samples leave {ratio:.2f} times the stated noise, as an unchanged robot would "
+        "({expected:.2f}: "
+        "the noise the calibration itself left and the table's own uncertainty); keep using the table"
+    ),
+    "drifted": (
+        "these samples leave {ratio:.2f} times the stated noise against {expected:.2f} for an unchanged "
+        "robot (chi-square p {p}): the robot is no longer what the table describes; {likely}"
+        "recalibrate (station calibrate) before relying on it"
+    ),
+}
+
+
+@dataclass(frozen=True)
+class LineResidual:
+    """One gauge line's (placement's) residual [mm]."""
+
+    id: int
+    rows: int
+    rmse_mm: float
+    mean_mm: float
+    max_mm: float
+
+
+@dataclass(frozen=True)
+class Likely:
+    """A parameter a recalibration would most likely move: its ``change`` and ``sigma`` in display
+    units, the share of the residual it ``explains`` alone."""
+
+    param: str
+    change: float
+    sigma: float
+    unit: str
+    explains: float
+
+    def text(self) -> str:
+        """``J2.a_mm +0.312 mm (+-0.011, 28.4 sigma)``."""
+        z = abs(self.change) / self.sigma
+        return f"{self.param} {self.change:+.4g} {self.unit} (+-{self.sigma:.2g}, {z:.1f} sigma)"
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    """What ``station verify`` found (the contract's V.json, ``as_json``)."""
+
+    verdict: str
+    meaning: str
+    kind: str
+    rmse_mm: float
+    mean_mm: float
+    max_mm: float
+    test: DriftTest
+    lines: tuple[LineResidual, ...]
+    likely: tuple[Likely, ...]
+    rows: int
+    downweighted: tuple[int, ...]
+    table: str
+    samples: str
+    time_s: float
+
+    def as_json(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "meaning": self.meaning,
+            "kind": self.kind,
+            "rmse_mm": self.rmse_mm,
+            "mean_mm": self.mean_mm,
+            "max_mm": self.max_mm,
+            "noise_ratio": self.test.noise_ratio,
+            "expected_ratio": self.test.expected_ratio,
+            "chi2": self.test.chi2,
+            "dof": self.test.dof,
+            "p_value": self.test.p_value,
+            "lines": [asdict(line) for line in self.lines],
+            "likely": [asdict(p) for p in self.likely],
+            "rows": self.rows,
+            "downweighted": list(self.downweighted),
+            "table": self.table,
+            "samples": self.samples,
+            "time_s": self.time_s,
+        }
+
+
+@dataclass(frozen=True)
+class VerifyOutcome:
+    """The ``report``, the ``model`` the samples were fitted with and its solution ``x``."""
+
+    report: VerifyReport
+    model: MeasurementModel
+    x: np.ndarray
+
+    def row_errors(self) -> dict:
+        """What ``--plot`` draws (JSON-ready): each row's error [mm] and placement, the verdict."""
+        return {
+            "error_mm": self.model.row_error_mm(self.x).tolist(),
+            "placement": self.model.placement_ids().tolist(),
+            **self.report.as_json(),
+        }
+
+
+def verify_samples(
+    samples: Samples,
+    table: RobotFile,
+    setup: SetupFile | None,
+    *,
+    table_where: str = "table",
+    setup_where: str = "setup",
+) -> VerifyOutcome:
+    """Judge ``table`` (a corrected table, or any robot file) on ``samples``: the setup unknowns
+    fitted with the table and its terms held. Raises ``InputError`` for too few samples, a joint
+    beyond the table's limits, a drawstring set without a setup (``ParameterError``)."""
+    t0 = time.perf_counter()
+    check_joint_limits(samples, table)
+    model = build_model(samples, table, setup, setup_where)
+    robot = table.model()
+    links = table.link_masses(payload_of(table, setup))
+    model = model.with_terms(JointTerms(table.terms(), robot.dh, links))
+    held = setup_unknowns(model)
+    if len(model.groups) <= int(held.sum()):
+        raise InputError(
+            f"{samples.path}: {len(model.samples)} samples cannot determine the {int(held.sum())} setup "
+            "unknowns and test the table: measure more (station plan --verify)"
+        )
+    x0 = model.x0.copy()
+    x0[~model.setup_mask] = np.concatenate([robot.dh.ravel(), robot.term_values])
+    _, fit, fit_scale = hold_robot(model, x0)
+    x = fit.x
+    r, jac = model.residuals_and_jacobian(x)
+    weights = robust_weights(r, model.groups, fit_scale, CalibrationOptions())
+    scale = reference_scale(table, model)
+    robot_cols = np.flatnonzero(~model.setup_mask)
+    cov = table.covariance(table_where)
+    test = drift_test(r, weights, scale, jac[:, held], jac[:, robot_cols], cov)
+    candidates = np.array([k for k in robot_cols if model.names[k] not in model.gauges()], int)
+    sigma = np.zeros(len(model.names))
+    if cov is not None:
+        sigma[robot_cols] = np.sqrt(np.diag(cov))
+    changes = likely_changes(
+        r, weights, scale, jac[:, held], jac[:, candidates], candidates, sigma[candidates]
+    )
+    drifted = is_drifted(test, changes, scale)
+    likely = tuple(_likely(model, c) for c in named(changes)) if drifted else ()
+    errors = model.row_error_mm(x)
+    overall = error_metrics(errors)
+    verdict = "drifted" if drifted else "holds"
+    kept_low = np.asarray(weights) ** 2 < DOWNWEIGHTED_BELOW
+    downweighted = np.unique(model.rows[kept_low])
+    report = VerifyReport(
+        verdict=verdict,
+        meaning=meaning(verdict, test, likely),
+        kind=model.kind,
+        **overall,
+        test=test,
+        lines=per_line(errors, model.placement_ids()),
+        likely=likely,
+        rows=len(model.samples),
+        downweighted=tuple(int(i) for i in downweighted),
+        table=table_where,
+        samples=samples.path,
+        time_s=round(time.perf_counter() - t0, 4),
+    )
+    return VerifyOutcome(report, model, x)
+
+
+def is_drifted(test: DriftTest, changes: list[Change], scale: np.ndarray) -> bool:
+    """More than an unchanged robot leaves: the residual's chi-square, or the single parameter that
+    best explains it (its z-score, Bonferroni over the candidates), rejects at ``DRIFT_P``; where
+    the calibration itself left more than the stated noise (the model misses errors), the residual
+    must also exceed what it left by ``DRIFT_EXCESS`` (the calibration's own fit check doubts a fit
+    at ``NOISE_DOUBT_RATIO`` times the stated noise; within it, the noise was stated loosely)."""
+    if np.any(scale >= NOISE_DOUBT_RATIO) and test.excess < DRIFT_EXCESS:
+        return False
+    if test.p_value < DRIFT_P:
+        return True
+    if not changes:
+        return False
+    best = changes[0]
+    return chi_square_sf(best.z**2, 1) * len(changes) < DRIFT_P
+
+
+def reference_scale(table: RobotFile, model: MeasurementModel) -> np.ndarray:
+    """Per residual row, what an unchanged robot leaves in stated noises: the calibration's fitted
+    noise scale of that row's group (``[calibration] noise_scale``, written for the same kind of
+    samples), at least 1 (1 without it: a nominal table, another kind of instrument)."""
+    record = table.calibration or {}
+    scale = np.ones(GROUP_PRIOR)
+    given = record.get("noise_scale")
+    if record.get("kind") == model.kind and isinstance(given, list) and len(given) == GROUP_PRIOR:
+        scale = np.maximum(np.nan_to_num(np.array(given, float), nan=1.0), 1.0)
+    return scale[model.groups]
+
+
+def named(changes: list[Change]) -> list[Change]:
+    """The changes worth naming: ``LIKELY_SIGMAS`` sigmas or more, explaining at least
+    ``LIKELY_SHARE`` of what the best explains, at most ``LIKELY_MAX``."""
+    if not changes:
+        return []
+    best = changes[0].explains
+    keep = [c for c in changes if c.z >= LIKELY_SIGMAS and c.explains >= LIKELY_SHARE * best]
+    return keep[:LIKELY_MAX]
+
+
+def _likely(model: MeasurementModel, change: Change) -> Likely:
+    name = model.names[change.index]
+    factor, unit = display_unit(name)
+    return Likely(name, change.change * factor, change.sigma * factor, unit, round(change.explains, 4))
+
+
+def per_line(errors: np.ndarray, placement: np.ndarray) -> tuple[LineResidual, ...]:
+    """The residual of each placement (gauge line id >= 0)."""
+    out = []
+    for lid in np.unique(placement[placement >= 0]):
+        m = error_metrics(errors[placement == lid])
+        out.append(LineResidual(int(lid), int(np.sum(placement == lid)), **m))
+    return tuple(out)
+
+
+def meaning(verdict: str, test: DriftTest, likely: tuple[Likely, ...]) -> str:
+    """What the verdict means, in one sentence."""
+    p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
+    what = ""
+    if likely:
+        what = "most likely moved: " + "; ".join(item.text() for item in likely) + "; "
+    return MEANINGS[verdict].format(ratio=test.noise_ratio, expected=test.expected_ratio, p=p, likely=what)
+
+
+def summary(report: VerifyReport) -> str:
+    """A short human summary: the residual overall and per line, the test, the verdict."""
+    lines = [
+        f"{report.kind} verification of {report.table} on {report.rows} samples ({report.time_s:.2f} s)",
+        f"{'':18}{'RMSE':>8}{'MEAN':>8}{'MAX':>8}  mm",
+        f"{'all rows':18}{report.rmse_mm:8.3f}{report.mean_mm:8.3f}{report.max_mm:8.3f}",
+    ]
+    for line in report.lines:
+        label = f"line {line.id} ({line.rows})"
+        lines.append(f"{label:18}{line.rmse_mm:8.3f}{line.mean_mm:8.3f}{line.max_mm:8.3f}")
+    t = report.test
+    lines.append(
+        f"residual {t.noise_ratio:.2f} x the stated noise, {t.expected_ratio:.2f} expected of an "
+        f"unchanged robot (chi-square {t.chi2:.4g} on {t.dof}, p {t.p_value:.2g})"
+    )
+    if report.downweighted:
+        lines.append(f"down-weighted rows (gross readings): {list(report.downweighted)}")
+    lines.append(f"verdict: {report.verdict} ({report.meaning})")
+    return "\n".join(lines)

@@ -1,0 +1,68 @@
+"""The drift test and the likely changes against a known truth: a linear model whose rows are unit
+noise, the table's own error drawn from its covariance, and (for a drift) one parameter changed."""
+
+import numpy as np
+
+from calib.verification import drift_test, likely_changes, sensitive_rows
+
+M, S, K = 120, 4, 6
+
+
+def _model(rng):
+    return rng.normal(size=(M, S)), rng.normal(size=(M, K)) * 0.5
+
+
+def test_an_unchanged_robot_passes_at_the_stated_rate_with_the_tables_uncertainty_counted(rng):
+    jac_s, jac_r = _model(rng)
+    cov = np.diag(rng.uniform(0.5, 2.0, K))  # the table's own error: as large as the noise
+    p, p_ignored = [], []
+    for _ in range(400):
+        d = rng.multivariate_normal(np.zeros(K), cov)
+        r = rng.normal(size=M) - jac_r @ d + jac_s @ rng.normal(size=S)
+        r -= jac_s @ np.linalg.lstsq(jac_s, r, rcond=None)[0]  # the setup fit
+        args = (r, np.ones(M), np.ones(M), jac_s, jac_r)
+        p.append(drift_test(*args, cov).p_value)
+        p_ignored.append(drift_test(*args, None).p_value)
+    # with the table's covariance the p-values are about uniform: 5 % below 0.05 (binomial 3 sigma
+    # of 400 draws: +-3.3 %); without it, the table's error reads as drift
+    assert abs(np.mean(np.array(p) < 0.05) - 0.05) < 0.033
+    assert np.mean(np.array(p_ignored) < 0.05) > 0.3
+
+
+def test_a_changed_parameter_is_named_first_with_its_change_and_sigma(rng):
+    jac_s, jac_r = _model(rng)
+    delta = np.zeros(K)
+    delta[3] = 2.0
+    hits = 0
+    for _ in range(50):
+        r = rng.normal(size=M) - jac_r @ delta  # residual = model - measurement
+        r -= jac_s @ np.linalg.lstsq(jac_s, r, rcond=None)[0]
+        changes = likely_changes(r, np.ones(M), np.ones(M), jac_s, jac_r, np.arange(K), np.zeros(K))
+        best = changes[0]
+        assert best.index == 3
+        hits += abs(best.change - 2.0) < 3 * best.sigma
+        assert drift_test(r, np.ones(M), np.ones(M), jac_s, jac_r, None).p_value < 1e-3
+    assert hits >= 47  # 3 sigma: 99.7 %
+
+
+def test_a_down_weighted_row_stays_out_of_the_test(rng):
+    jac_s, jac_r = _model(rng)
+    r = rng.normal(size=M)
+    r -= jac_s @ np.linalg.lstsq(jac_s, r, rcond=None)[0]
+    clean = drift_test(r, np.ones(M), np.ones(M), jac_s, jac_r, None)
+    r[7], weights = 500.0, np.ones(M)
+    weights[7] = 0.01
+    assert drift_test(r, weights, np.ones(M), jac_s, jac_r, None).dof == clean.dof - 1
+
+
+def test_the_sensitive_rows_see_the_parameters_better_than_random_ones(rng):
+    jac_s = rng.normal(size=(3 * 40, S))
+    jac_r = rng.normal(size=(3 * 40, K)) * np.repeat(rng.uniform(0.1, 2.0, 40), 3)[:, None]
+    rows = np.repeat(np.arange(40), 3)
+    chosen, logdet = sensitive_rows(jac_s, jac_r, rows, np.full(K, 10.0), 10)
+    assert len(set(chosen.tolist())) == 10
+    for _ in range(20):
+        other = rng.choice(40, 10, replace=False)
+        keep = np.isin(rows, other)
+        _, random_logdet = sensitive_rows(jac_s[keep], jac_r[keep], rows[keep], np.full(K, 10.0), 10)
+        assert logdet > random_logdet
