@@ -31,7 +31,7 @@ from sim_fixtures.robot_program import RobotFault, SimRobot
 from sim_fixtures.rtde_server import RtdeServerProcess
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, SimClock
-from sim_fixtures.world import World
+from sim_fixtures.world import Placement, Robot, World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
 SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
@@ -70,6 +70,26 @@ def planned_cell(seed: int, plan_deg: np.ndarray, plan_lines: np.ndarray) -> Wor
     return WorldCell(world, q, lines)
 
 
+def rehearsal_cell(
+    nominal: Robot,
+    placement: Placement,
+    seed: int,
+    plan: tuple[np.ndarray, np.ndarray] | None = None,
+    targets_per_line: int = 70,
+) -> WorldCell:
+    """Your own cell rehearsed (``sim serve --robot R --setup S``): the true robot, anchor and lines
+    drawn around ``nominal`` and ``placement`` (``World.around``), the robot program walking the
+    plan's joints as commanded, so the tool lands off the edge by the robot's error as on a real
+    robot. ``plan`` (configurations (M, 6) [deg], line ids (M,)): the plan's; None: the nominal
+    model's own ``targets_per_line`` contacts along each line of the placement."""
+    world = World.around(nominal, placement, seed)
+    if plan is None:
+        drawn = World(nominal, nominal, placement.anchor_mm, placement.length_offset_mm, placement.lines)
+        plan = drawn.line_configurations(targets_per_line, np.random.default_rng([seed, 2]))
+    q, lines = plan
+    return WorldCell(world, np.asarray(q, float).reshape(-1, 6), np.asarray(lines, int))
+
+
 def _pty_link(port: str, section: str) -> Path:
     """A pty link path from the config; refuses to replace anything that is not a symlink."""
     path = Path(port)
@@ -86,7 +106,8 @@ class SimStation:
     ``drivers.config``, ``time_scale`` and ``sim``: seed and robot motion); ``start()`` returns one
     address dict per device and ``stop()`` ends them all (safe after a partial start).
     ``plan_deg``/``plan_lines`` are the targets the simulated robot walks; it waits ``start_delay_s``
-    (real s) still at the first before it runs (an operator presses play once the station listens)."""
+    (real s) still at the first before it runs (an operator presses play once the station listens).
+    ``cell``: another cell than the JR680 of ``[sim] seed`` (``rehearsal_cell``), ``plan`` unused."""
 
     def __init__(
         self,
@@ -95,6 +116,7 @@ class SimStation:
         faults: Sequence[RobotFault] = (),
         plan: tuple[np.ndarray, np.ndarray] | None = None,
         start_delay_s: float = 0.0,
+        cell: WorldCell | None = None,
     ):
         if not isinstance(cfg.robot, RobotRtde):
             raise InputError(
@@ -103,9 +125,9 @@ class SimStation:
             )
         self.cfg = cfg
         self.clock = SimClock(time.monotonic() + start_delay_s)
-        if plan is None:
+        if cell is None and plan is None:
             cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
-        else:
+        elif cell is None:
             cell = planned_cell(cfg.sim.seed, *plan)
         self.robot = SimRobot(
             cell.plan_deg,
