@@ -20,13 +20,15 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import numpy as np
 
 from drivers.ascii import DIALECTS
-from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotRtde
+from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotOpcUa, RobotRtde
 from errors import InputError
 from sim_fixtures.modbus_device import ModbusDevice
+from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.robot_program import RobotFault, SimRobot
 from sim_fixtures.rtde_server import RtdeServerProcess
 from sim_fixtures.serial_device import SerialAsciiDevice
@@ -90,6 +92,27 @@ def rehearsal_cell(
     return WorldCell(world, np.asarray(q, float).reshape(-1, 6), np.asarray(lines, int))
 
 
+def opcua_robot(section: RobotOpcUa, robot: SimRobot, clock: SimClock) -> OpcUaRobotServer:
+    """The robot program's joints on an OPC UA server at the section's ``url``; the config's node
+    ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout)."""
+    positions, speeds = section.nodes()
+    if positions != [position_node(i) for i in range(1, 7)] or speeds not in (
+        None,
+        [speed_node(i) for i in range(1, 7)],
+    ):
+        raise InputError(
+            f"[robot] position_node, speed_node: the simulated OPC UA server publishes {position_node(1)!r} "
+            "(Axis1 .. Axis6) and ActualSpeed beside it: leave both at their defaults"
+        )
+    url = urlsplit(section.url)
+
+    def state():
+        now = robot.state(clock.now())
+        return now.q_deg, now.qd_deg_s
+
+    return OpcUaRobotServer(state, url.hostname, url.port or 4840)
+
+
 def _pty_link(port: str, section: str) -> Path:
     """A pty link path from the config; refuses to replace anything that is not a symlink."""
     path = Path(port)
@@ -118,10 +141,10 @@ class SimStation:
         start_delay_s: float = 0.0,
         cell: WorldCell | None = None,
     ):
-        if not isinstance(cfg.robot, RobotRtde):
+        if not isinstance(cfg.robot, RobotRtde | RobotOpcUa):
             raise InputError(
-                f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE "
-                'controller only (kind = "rtde")'
+                f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE controller "
+                '(kind = "rtde") or an OPC UA server (kind = "opcua")'
             )
         self.cfg = cfg
         self.clock = SimClock(time.monotonic() + start_delay_s)
@@ -176,9 +199,12 @@ class SimStation:
     def start(self) -> list[dict]:
         try:
             robot = self.cfg.robot
-            self.devices["robot"] = RtdeServerProcess(
-                self.robot, robot.host, start_monotonic=self.clock.start_monotonic
-            ).start()
+            if isinstance(robot, RobotOpcUa):
+                self.devices["robot"] = opcua_robot(robot, self.robot, self.clock).start()
+            else:
+                self.devices["robot"] = RtdeServerProcess(
+                    self.robot, robot.host, start_monotonic=self.clock.start_monotonic
+                ).start()
             self.devices["drawstring"] = self._drawstring()
             self.devices["drawstring"].start()
             if self.cfg.dial:
@@ -206,6 +232,8 @@ class SimStation:
             }
         if isinstance(dev, ModbusDevice):
             return {"device": name, **dev.address}
+        if isinstance(dev, OpcUaRobotServer):
+            return {"device": name, "protocol": "opcua", "url": dev.url, "time_scale": self.cfg.time_scale}
         return {
             "device": name,
             "protocol": "serial-ascii",
