@@ -36,6 +36,7 @@ from sim_fixtures.sources import CellSource, SimClock
 from sim_fixtures.world import Placement, Robot, World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
+PLAY_WAIT_S = 1e6  # a program run once waits this long (real s) at its first target for play
 SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
 
 
@@ -80,21 +81,25 @@ def rehearsal_cell(
     targets_per_line: int = 70,
 ) -> WorldCell:
     """Your own cell rehearsed (``sim serve --robot R --setup S``): the true robot, anchor and lines
-    drawn around ``nominal`` and ``placement`` (``World.around``), the robot program walking the
-    plan's joints as commanded, so the tool lands off the edge by the robot's error as on a real
-    robot. ``plan`` (configurations (M, 6) [deg], line ids (M,)): the plan's; None: the nominal
-    model's own ``targets_per_line`` contacts along each line of the placement."""
+    drawn around ``nominal`` and ``placement`` (``World.around``), the robot program commanding the
+    plan's joints, so the tool lands off the edge along the dial axis by the robot's error, as on a
+    real robot (``World.land``). ``plan`` (configurations (M, 6) [deg], line ids (M,)): the plan's;
+    None: the nominal model's own ``targets_per_line`` contacts along each line of the placement."""
     world = World.around(nominal, placement, seed)
     if plan is None:
         drawn = World(nominal, nominal, placement.anchor_mm, placement.length_offset_mm, placement.lines)
         plan = drawn.line_configurations(targets_per_line, np.random.default_rng([seed, 2]))
-    q, lines = plan
-    return WorldCell(world, np.asarray(q, float).reshape(-1, 6), np.asarray(lines, int))
+    q, lines = world.land(np.asarray(plan[0], float).reshape(-1, 6), plan[1])
+    return WorldCell(world, q, lines)
 
 
-def opcua_robot(section: RobotOpcUa, robot: SimRobot, clock: SimClock) -> OpcUaRobotServer:
+def opcua_robot(
+    section: RobotOpcUa, robot: SimRobot, clock: SimClock, play: bool = False
+) -> OpcUaRobotServer:
     """The robot program's joints on an OPC UA server at the section's ``url``; the config's node
-    ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout)."""
+    ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout).
+    ``play``: the program (waiting at its first target) starts at the first read, as an operator
+    presses play once the station listens."""
     positions, speeds = section.nodes()
     if positions != [position_node(i) for i in range(1, 7)] or speeds not in (
         None,
@@ -107,6 +112,8 @@ def opcua_robot(section: RobotOpcUa, robot: SimRobot, clock: SimClock) -> OpcUaR
     url = urlsplit(section.url)
 
     def state():
+        if play and clock.now() < 0:
+            clock.start_monotonic = time.monotonic()
         now = robot.state(clock.now())
         return now.q_deg, now.qd_deg_s
 
@@ -130,7 +137,9 @@ class SimStation:
     address dict per device and ``stop()`` ends them all (safe after a partial start).
     ``plan_deg``/``plan_lines`` are the targets the simulated robot walks; it waits ``start_delay_s``
     (real s) still at the first before it runs (an operator presses play once the station listens).
-    ``cell``: another cell than the JR680 of ``[sim] seed`` (``rehearsal_cell``), ``plan`` unused."""
+    ``cell``: another cell than the JR680 of ``[sim] seed`` (``rehearsal_cell``), ``plan`` unused;
+    ``once``: the program runs the plan once, as a real one does, instead of round and round, from
+    the station's first read of an OPC UA robot (an RTDE robot's starts at once)."""
 
     def __init__(
         self,
@@ -140,6 +149,7 @@ class SimStation:
         plan: tuple[np.ndarray, np.ndarray] | None = None,
         start_delay_s: float = 0.0,
         cell: WorldCell | None = None,
+        once: bool = False,
     ):
         if not isinstance(cfg.robot, RobotRtde | RobotOpcUa):
             raise InputError(
@@ -147,7 +157,8 @@ class SimStation:
                 '(kind = "rtde") or an OPC UA server (kind = "opcua")'
             )
         self.cfg = cfg
-        self.clock = SimClock(time.monotonic() + start_delay_s)
+        self.once = once
+        self.clock = SimClock(time.monotonic() + (PLAY_WAIT_S if once else start_delay_s))
         if cell is None and plan is None:
             cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
         elif cell is None:
@@ -161,6 +172,7 @@ class SimStation:
             time_scale=cfg.time_scale,
             faults=faults,
             rng=np.random.default_rng([cfg.sim.seed, 3]),
+            once=once,
         )
         self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
         self.source = CellSource(self.robot, cell)
@@ -200,7 +212,7 @@ class SimStation:
         try:
             robot = self.cfg.robot
             if isinstance(robot, RobotOpcUa):
-                self.devices["robot"] = opcua_robot(robot, self.robot, self.clock).start()
+                self.devices["robot"] = opcua_robot(robot, self.robot, self.clock, self.once).start()
             else:
                 self.devices["robot"] = RtdeServerProcess(
                     self.robot, robot.host, start_monotonic=self.clock.start_monotonic

@@ -364,6 +364,23 @@ class World:
         q_true, reached = self.true.ik(targets, q_plan)
         return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
 
+    def land(self, q_plan_deg, line_ids) -> tuple[np.ndarray, np.ndarray]:
+        """Where a program commanding configurations (N, 6) [deg] really touches: the pose the true
+        robot reaches there, brought across onto its true line (the edge guides the tool across it)
+        but left off it along the dial axis by the robot's own miss, which the dial reads. Returns
+        true configurations [deg] and the line ids of those reached."""
+        by_id = {ln.id: ln for ln in self.lines}
+        q_plan = np.atleast_2d(q_plan_deg)
+        targets = np.empty((len(q_plan), 4, 4))
+        for k, (q, lid) in enumerate(zip(q_plan, line_ids, strict=True)):
+            ln = by_id[int(lid)]
+            targets[k] = self.true.pose(q)
+            rel = targets[k, :3, 3] - ln.centre
+            kept = (rel @ ln.direction) * ln.direction + (rel @ ln.dial_axis) * ln.dial_axis
+            targets[k, :3, 3] = ln.centre + kept
+        q_true, reached = self.true.ik(targets, q_plan)
+        return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
+
     def _seed_for(self, ln: GaugeLine) -> np.ndarray:
         """A configuration at the line's centre with the tool along its approach direction: of the
         IK solutions from 40 seeded restarts, the one closest to the working pose."""

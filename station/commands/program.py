@@ -31,6 +31,12 @@ def register(sub) -> None:
         metavar="S",
         help="dwell at each contact, s (3: settle + capture)",
     )
+    p.add_argument(
+        "--table",
+        type=Path,
+        help="a corrected table (station calibrate --out): the plan's joints are corrected to land the "
+        "contact poses on the edge (station compensate PLAN --table T --robot R), the stand-offs follow it",
+    )
     p.set_defaults(func=run)
 
 
@@ -42,6 +48,13 @@ def run(args) -> int:
 
     check_writable(args.out, "--out")
     plan, robot = load_plan(args.plan), load_robot(args.robot)
+    if args.table is not None:
+        from station.formats.tables import check_same_robot, check_same_tool
+
+        table = load_robot(args.table)
+        check_same_robot(table, str(args.table), robot, str(args.robot))
+        check_same_tool(table, str(args.table), robot, str(args.robot))
+        robot = table
     motion = measurement.Motion(standoff_mm=args.standoff_mm, dwell_s=args.dwell_s)
     found = measurement.measurement(plan, robot, str(args.plan), motion)
     if args.format == "urscript":

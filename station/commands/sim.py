@@ -4,7 +4,8 @@
 Without ``--robot`` it simulates the shipped HSR-JR680 cell, whose robot program moves every
 target onto its true line; with ``--robot R --setup S`` it rehearses your own cell
 (``station.jobs.rehearsal``): that robot with random errors, that setup's drawstring and lines, the
-program walking the plan's nominal joints, so the tool lands off the edge by the robot's error.
+program commanding the plan's nominal joints, so the tool lands off the edge by the robot's error;
+joints over OPC UA: the program runs the plan once, from the station's first read of the robot.
 
 Publishes the plan its robot walks at ``[sim] plan_csv`` (where ``station sample`` looks by
 default) and announces its robot and time scale beside it (``station.formats.announcement``: a
@@ -81,7 +82,8 @@ def run(args) -> int:
     plan = load_plan(args.plan) if args.plan else None
     joints = None if plan is None else (plan.q_deg, plan.line)
     model, cell = _rehearsal(args, cfg, joints)
-    station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell)
+    once = cell is not None and cfg.robot.kind == "opcua"  # a program run once, started by the station
+    station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell, once=once)
     publish_plan(Path(cfg.sim.plan_csv), plan or Plan.of(station.plan_deg, station.plan_lines))
     try:
         # Children start with Ctrl-C ignored (a terminal sends it to the whole process group):
@@ -148,9 +150,9 @@ def publish_plan(path: Path, plan: Plan) -> None:
 # The robot file and setup a person wrote for a real cell become the simulator's nominal robot and
 # placement; the truth is drawn around them (``World.around``) and the program walks the plan's
 # joints as commanded, so the tool lands off the edge by the robot's error, as a real robot's does.
-LINE_PLACEMENT_MM = 2.0
-"""How far (1 sigma per axis) a true gauge edge lies from where the setup puts it: a block placed
-by hand and measured with a rule."""
+LINE_PLACEMENT_MM = 0.5
+"""How far (1 sigma per axis) a true gauge edge lies from where the setup puts it: a block set
+against a scribed mark, its edge measured with a caliper."""
 
 
 def placement(setup: SetupFile, where: str) -> Placement:

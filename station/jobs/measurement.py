@@ -26,8 +26,9 @@ from station.jobs.planning import contact_poses, robot_arrays
 
 MIN_STANDOFF_MM = 2.0
 """A target near a joint limit gets a shorter stand-off (halved until it fits), down to this."""
-POSE_AGREES_MM = 1.0
-"""A plan's contact pose this far from the nominal TCP at its joints belongs to another robot."""
+POSE_AGREES_MM = 10.0
+"""A plan's contact pose this far from the model's TCP at its joints belongs to another robot or tool
+(beyond the few mm a robot's own error, or a compensation, moves it)."""
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,9 @@ class Measurement:
 
 
 def measurement(plan: Plan, robot: RobotFile, where: str, motion: Motion = Motion()) -> Measurement:
-    """The poses and joints of the program for ``plan`` (read from ``where``) on ``robot``."""
+    """The poses and joints of the program for ``plan`` (read from ``where``) on ``robot`` (the
+    nominal model, or a corrected table for a plan ``station compensate`` corrected: its stand-offs
+    then follow the corrected model too)."""
     q = np.radians(plan.q_deg)
     nominal = contact_poses(robot, q)
     pose = nominal if plan.pose is None else plan.pose
