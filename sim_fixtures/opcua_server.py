@@ -17,7 +17,7 @@ from datetime import datetime, timezone
 
 from asyncua import Server, ua
 
-logging.getLogger("asyncua").setLevel(logging.ERROR)  # its notes on unencrypted endpoints are not ours
+logging.getLogger("asyncua").setLevel(logging.CRITICAL)  # its notes and tracebacks: start() reports
 
 NAMESPACE = "urn:station:sim:robot"
 AXES = 6
