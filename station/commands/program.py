@@ -63,6 +63,9 @@ def run(args) -> int:
         text = measurement.poses_csv(found, motion)
     write_outputs([Output.text(args.out, "--out", text)])
     source = "the plan" if plan.pose is not None else "the nominal TCP at the plan's joints (an older plan)"
+    if found.skipped.any():
+        left = ", ".join(str(int(t)) for t in plan.target[found.skipped])
+        print(f"left out (no stand-off of even 2 mm within the joint limits): targets {left}")
     short = int((found.distance_mm < args.standoff_mm).sum())
     if short:
         least = found.distance_mm.min()

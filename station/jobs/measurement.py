@@ -48,7 +48,8 @@ class Motion:
 class Measurement:
     """Every target's contact joints ``q_deg`` (M, 6), ``pose`` (M, 6: mm, rotation vector deg) and
     unit ``approach`` (M, 3), and the stand-off pose's joints ``standoff_q_deg``, position
-    ``standoff_mm`` (M, 3) and distance back from the contact ``distance_mm`` (M,)."""
+    ``standoff_mm`` (M, 3) and distance back from the contact ``distance_mm`` (M,; NaN: no
+    stand-off down to ``MIN_STANDOFF_MM`` within the joint limits, the target left out)."""
 
     plan: Plan
     pose: np.ndarray
@@ -56,6 +57,11 @@ class Measurement:
     standoff_q_deg: np.ndarray
     standoff_mm: np.ndarray
     distance_mm: np.ndarray
+
+    @property
+    def skipped(self) -> np.ndarray:
+        """The targets (M,) the program leaves out."""
+        return np.isnan(self.distance_mm)
 
 
 def measurement(plan: Plan, robot: RobotFile, where: str, motion: Motion = Motion()) -> Measurement:
@@ -79,12 +85,7 @@ def measurement(plan: Plan, robot: RobotFile, where: str, motion: Motion = Motio
     while bad.any() and distance[bad].max() > MIN_STANDOFF_MM:  # near a joint limit: come in closer
         distance[bad] /= 2
         q_off_deg[bad], bad[bad] = _standoff(robot, pose[bad], rot[bad], approach[bad], q[bad], distance[bad])
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise InputError(
-            f"{where}: target {int(plan.target[k])}: no stand-off of even {MIN_STANDOFF_MM:g} mm back "
-            f"along the approach within {robot.name}'s reach and joint limits; drop it from the plan"
-        )
+    distance[bad] = np.nan  # no stand-off within the limits: the program leaves the target out
     standoff = pose[:, :3] - distance[:, None] * approach
     return Measurement(plan, pose, approach, q_off_deg, standoff, distance)
 
@@ -118,6 +119,9 @@ def urscript(m: Measurement, robot: RobotFile, source: str, motion: Motion = Mot
     ]
     for k in range(len(m.plan)):
         q, q_off = deg(m.plan.q_deg[k]), deg(m.standoff_q_deg[k])
+        if m.skipped[k]:
+            lines.append(f"  # target {int(m.plan.target[k])} left out: no stand-off within the joint limits")
+            continue
         lines += [
             f"  # target {int(m.plan.target[k])}, line {int(m.plan.line[k])}: contact "
             f"{_numbers(m.pose[k], 3)}, approach {_numbers(m.approach[k], 4)}, "
@@ -154,7 +158,7 @@ def poses_csv(m: Measurement, motion: Motion = Motion()) -> str:
     quaternion w, x, y, z), the approach, the stand-off position, both joint sets, the dwell."""
     quat = Rotation.from_rotvec(m.pose[:, 3:], degrees=True).as_quat()[:, [3, 0, 1, 2]]
     out = [",".join(POSES_COLUMNS)]
-    for k in range(len(m.plan)):
+    for k in np.flatnonzero(~m.skipped):
         cells = [
             str(int(m.plan.target[k])),
             str(int(m.plan.line[k])),

@@ -114,3 +114,18 @@ def test_a_plan_for_another_robot_is_refused_naming_the_target(irb_plan, tmp_pat
     )
     assert "the nominal TCP at the plan's joints" in capsys.readouterr().out
     assert out.read_text().count("movej(") == len(plan)
+
+
+def test_a_target_without_a_stand_off_within_the_limits_is_left_out_and_said(irb_plan):
+    robot, plan = irb_plan
+    q3 = float(plan.q_deg[0, 2])
+    joints = [j.model_copy() for j in robot.joints]
+    joints[2] = joints[2].model_copy(update={"q_min_deg": q3 - 1e-4, "q_max_deg": q3 + 1e-4})
+    pinned = robot.model_copy(update={"joints": joints})  # joint 3 cannot move from target 0's angle
+    found = measurement.measurement(plan, pinned, "plan.csv")
+    assert found.skipped[0]
+    script = measurement.urscript(found, pinned, "plan.csv")
+    assert "# target 0 left out: no stand-off within the joint limits" in script
+    assert script.count("movej(") == int((~found.skipped).sum())
+    rows = measurement.poses_csv(found).splitlines()[1:]
+    assert [int(r.split(",")[0]) for r in rows] == plan.target[~found.skipped].tolist()
