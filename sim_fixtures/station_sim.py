@@ -16,6 +16,7 @@ the simulated true robot's pose implies at the instant they are asked:
 from __future__ import annotations
 
 import functools
+import itertools
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,6 +38,7 @@ from sim_fixtures.world import Placement, Robot, World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
 PLAY_WAIT_S = 1e6  # a program run once waits this long (real s) at its first target for play
+PLAY_READS = 25  # node reads (12 per read of joints and speeds): the third read presses play
 SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
 
 
@@ -98,8 +100,9 @@ def opcua_robot(
 ) -> OpcUaRobotServer:
     """The robot program's joints on an OPC UA server at the section's ``url``; the config's node
     ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout).
-    ``play``: the program (waiting at its first target) starts at the first read, as an operator
-    presses play once the station listens."""
+    ``play``: the program (waiting at its first target) starts at the station's third read of the
+    joints (``PLAY_READS`` node reads: a session polling after its device check, not a one-off
+    ``station read``), as an operator presses play once the session waits for the robot."""
     positions, speeds = section.nodes()
     if positions != [position_node(i) for i in range(1, 7)] or speeds not in (
         None,
@@ -111,8 +114,10 @@ def opcua_robot(
         )
     url = urlsplit(section.url)
 
+    reads = itertools.count(1)
+
     def state():
-        if play and clock.now() < 0:
+        if play and clock.now() < 0 and next(reads) >= PLAY_READS:
             clock.start_monotonic = time.monotonic()
         now = robot.state(clock.now())
         return now.q_deg, now.qd_deg_s

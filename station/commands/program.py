@@ -41,6 +41,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    import numpy as np
+
     from station.formats.base import Output, check_writable, write_outputs
     from station.formats.plan import load_plan
     from station.formats.tables import load_robot
@@ -68,7 +70,7 @@ def run(args) -> int:
         print(f"left out (no stand-off of even 2 mm within the joint limits): targets {left}")
     short = int((found.distance_mm < args.standoff_mm).sum())
     if short:
-        least = found.distance_mm.min()
+        least = np.nanmin(found.distance_mm)
         print(f"{short} targets near a joint limit get a shorter stand-off (down to {least:g} mm)")
     print(f"{len(plan)} targets, contact poses from {source}; wrote {args.out}")
     return 0

@@ -25,7 +25,7 @@ from station.formats.tables import RobotFile
 from station.jobs.planning import contact_poses, robot_arrays
 
 MIN_STANDOFF_MM = 2.0
-"""A target near a joint limit gets a shorter stand-off (halved until it fits), down to this."""
+"""A target near a joint limit gets a shorter stand-off (halved until it fits), not below this."""
 POSE_AGREES_MM = 10.0
 """A plan's contact pose this far from the model's TCP at its joints belongs to another robot or tool
 (beyond the few mm a robot's own error, or a compensation, moves it)."""
@@ -82,7 +82,7 @@ def measurement(plan: Plan, robot: RobotFile, where: str, motion: Motion = Motio
     approach = rot[:, :, 2] if plan.approach is None else plan.approach
     distance = np.full(len(plan), motion.standoff_mm)
     q_off_deg, bad = _standoff(robot, pose, rot, approach, q, distance)
-    while bad.any() and distance[bad].max() > MIN_STANDOFF_MM:  # near a joint limit: come in closer
+    while bad.any() and distance[bad].max() / 2 >= MIN_STANDOFF_MM:  # near a joint limit: come in closer
         distance[bad] /= 2
         q_off_deg[bad], bad[bad] = _standoff(robot, pose[bad], rot[bad], approach[bad], q[bad], distance[bad])
     distance[bad] = np.nan  # no stand-off within the limits: the program leaves the target out
