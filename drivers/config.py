@@ -206,7 +206,30 @@ class RobotOpcUa(Section):
         return f"opcua {self.url}"
 
 
-RobotConfig = Annotated[RobotRtde | RobotModbusTcp | RobotOpcUa, Field(discriminator="kind")]
+class RobotRos(Section):
+    """A ROS ``sensor_msgs/JointState`` topic through rosbridge (its WebSocket at ``host:port``),
+    the six ``joint_names`` as the message names them, joint 1 first."""
+
+    kind: Literal["ros"]
+    host: Name = "127.0.0.1"
+    port: int = Field(9090, gt=0, le=65535)
+    topic: Annotated[str, Field(pattern=r"^/[A-Za-z0-9_/]*$")] = "/joint_states"
+    joint_names: Annotated[list[Name], Field(min_length=6, max_length=6)] = [
+        f"joint_{i}" for i in range(1, 7)
+    ]
+    timeout_s: Timeout = 2.0
+
+    def build(self) -> Driver:
+        from drivers.ros import RosJointSource
+
+        return RosJointSource(self.host, self.port, self.topic, self.joint_names, timeout_s=self.timeout_s)
+
+    def endpoint(self) -> str:
+        """Where the joints are read, as a simulator announces the robot it serves."""
+        return f"ros ws://{self.host}:{self.port}{self.topic}"
+
+
+RobotConfig = Annotated[RobotRtde | RobotModbusTcp | RobotOpcUa | RobotRos, Field(discriminator="kind")]
 
 
 class Reconnect(Section):
@@ -224,5 +247,5 @@ class Reconnect(Section):
 
 def error_key(loc: tuple) -> str:
     """``drawstring.registers.address`` from a pydantic error location (union tags dropped)."""
-    tags = {"rtde", "modbus_tcp", "modbus_rtu", "ascii", "opcua", "function-after", "function-wrap"}
+    tags = {"rtde", "modbus_tcp", "modbus_rtu", "ascii", "opcua", "ros", "function-after", "function-wrap"}
     return ".".join(str(part) for part in loc if part not in tags) or "(top level)"

@@ -26,11 +26,12 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from drivers.ascii import DIALECTS
-from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotOpcUa, RobotRtde
+from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotOpcUa, RobotRos, RobotRtde
 from errors import InputError
 from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.robot_program import RobotFault, SimRobot
+from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.rtde_server import RtdeServerProcess
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, SimClock
@@ -125,6 +126,21 @@ def opcua_robot(
     return OpcUaRobotServer(state, url.hostname, url.port or 4840)
 
 
+def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock) -> RosbridgeServer:
+    """The robot program's joints as ``sensor_msgs/JointState`` on a rosbridge at the section's
+    host and port; its ``joint_names`` must be the ones published (``JOINT_NAMES``)."""
+    if list(section.joint_names) != list(JOINT_NAMES):
+        raise InputError(
+            f"[robot] joint_names: the simulated rosbridge publishes {list(JOINT_NAMES)}: name those"
+        )
+
+    def state():
+        now = robot.state(clock.now())
+        return now.q_deg, now.qd_deg_s
+
+    return RosbridgeServer(state, section.host, section.port, section.topic)
+
+
 def _pty_link(port: str, section: str) -> Path:
     """A pty link path from the config; refuses to replace anything that is not a symlink."""
     path = Path(port)
@@ -156,10 +172,10 @@ class SimStation:
         cell: WorldCell | None = None,
         once: bool = False,
     ):
-        if not isinstance(cfg.robot, RobotRtde | RobotOpcUa):
+        if not isinstance(cfg.robot, RobotRtde | RobotOpcUa | RobotRos):
             raise InputError(
                 f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE controller "
-                '(kind = "rtde") or an OPC UA server (kind = "opcua")'
+                '(kind = "rtde"), an OPC UA server (kind = "opcua") or a rosbridge (kind = "ros")'
             )
         self.cfg = cfg
         self.once = once
@@ -218,6 +234,8 @@ class SimStation:
             robot = self.cfg.robot
             if isinstance(robot, RobotOpcUa):
                 self.devices["robot"] = opcua_robot(robot, self.robot, self.clock, self.once).start()
+            elif isinstance(robot, RobotRos):
+                self.devices["robot"] = ros_robot(robot, self.robot, self.clock).start()
             else:
                 self.devices["robot"] = RtdeServerProcess(
                     self.robot, robot.host, start_monotonic=self.clock.start_monotonic
@@ -249,6 +267,8 @@ class SimStation:
             }
         if isinstance(dev, ModbusDevice):
             return {"device": name, **dev.address}
+        if isinstance(dev, RosbridgeServer):
+            return {"device": name, "protocol": "rosbridge", "url": dev.url, "topic": dev.topic}
         if isinstance(dev, OpcUaRobotServer):
             return {"device": name, "protocol": "opcua", "url": dev.url, "time_scale": self.cfg.time_scale}
         return {
