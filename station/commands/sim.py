@@ -22,8 +22,6 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 import configs
 from errors import DeviceError, InputError
 
@@ -31,6 +29,8 @@ JR680_NAME = "HSR-JR680"
 """The robot ``sim serve`` simulates without ``--robot``: ``configs/robots/hsr_jr680.toml``'s name."""
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from sim_fixtures.station_sim import WorldCell
     from sim_fixtures.world import Placement, Robot
     from station.formats.plan import Plan
@@ -158,6 +158,8 @@ against a scribed mark, its edge measured with a caliper."""
 def placement(setup: SetupFile, where: str) -> Placement:
     """The cell as the setup describes it: its drawstring and every ``[[lines]]`` entry (each with
     ``point_mm``, ``direction`` and an approach or dial axis, as ``station plan`` needs them)."""
+    import numpy as np
+
     from sim_fixtures.world import GaugeLine, Placement
     from station.jobs.planning import placements
 
@@ -180,6 +182,8 @@ def placement(setup: SetupFile, where: str) -> Placement:
 
 def nominal_robot(robot: RobotFile) -> Robot:
     """The simulator's nominal robot: the file's table (standard D-H), TCP and joint limits."""
+    import numpy as np
+
     from sim_fixtures.world import Robot
 
     return Robot(robot.table_deg(), np.asarray(robot.tool_mm, float), robot.limits_deg())
@@ -196,6 +200,8 @@ def rehearsed_cell(
     """The rehearsed cell of ``robot`` and ``setup`` (``where`` names the setup in messages); the
     simulated program walks ``plan`` (configurations [deg], line ids) or, None, the nominal
     model's contacts along each line."""
+    import numpy as np
+
     from sim_fixtures.station_sim import rehearsal_cell
 
     cell_placement = placement(setup, where)
