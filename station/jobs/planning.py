@@ -161,16 +161,6 @@ def design(
     return Design(plan, report)
 
 
-def contact_poses(robot: RobotFile, q: np.ndarray) -> np.ndarray:
-    """The nominal model's TCP poses (N, 6) at configurations ``q`` (N, 6) [rad]: position [mm] and
-    tool orientation as a rotation vector [deg] (``station.formats.plan.POSE_COLUMNS``)."""
-    from scipy.spatial.transform import Rotation
-
-    dh, tool = robot_arrays(robot)
-    p, rot = ik.tool_frames(dh, q, tool)
-    return np.column_stack([p, Rotation.from_matrix(rot).as_rotvec(degrees=True)])
-
-
 def next_placement(
     robot: RobotFile, setup: SetupFile, q_deg: np.ndarray, line: np.ndarray, *, seed: int = 0
 ) -> NextPlacement | None:
@@ -200,6 +190,16 @@ def next_placement(
 def robot_arrays(robot: RobotFile) -> tuple[np.ndarray, np.ndarray]:
     """The nominal table (6, 4) in internal units and the TCP [mm]."""
     return dh_from_degrees(robot.table_deg()), np.asarray(robot.tool_mm, float)
+
+
+def contact_poses(robot: RobotFile, q: np.ndarray) -> np.ndarray:
+    """The nominal model's TCP poses (N, 6) at configurations ``q`` (N, 6) [rad]: position [mm] and
+    tool orientation as a rotation vector [deg] (``station.formats.plan.POSE_COLUMNS``)."""
+    from scipy.spatial.transform import Rotation
+
+    dh, tool = robot_arrays(robot)
+    p, rot = ik.tool_frames(dh, q, tool)
+    return np.column_stack([p, Rotation.from_matrix(rot).as_rotvec(degrees=True)])
 
 
 def summary(design_: Design) -> str:
