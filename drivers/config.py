@@ -160,7 +160,76 @@ class RobotModbusTcp(Section):
         return f"modbus-tcp {self.host}:{self.port}"
 
 
-RobotConfig = Annotated[RobotRtde | RobotModbusTcp, Field(discriminator="kind")]
+def _axis_template(text: str) -> str:
+    if text and "{axis}" not in text:
+        raise ValueError(f"{text!r}: write {{axis}} where the node id numbers the axis (1 .. 6)")
+    return text
+
+
+NodeTemplate = Annotated[
+    str, Field(max_length=4096, pattern=r"^[^\x00{}]*(\{axis\}[^\x00{}]*)*$"), AfterValidator(_axis_template)
+]
+"""An OPC UA node id with ``{axis}`` for the axis number 1 .. 6, e.g.
+``ns=2;s=DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/ActualPosition``."""
+
+
+AXIS_PARAMETERS = "ns=2;s=DeviceSet/Robot/Axes/Axis{axis}/ParameterSet"
+"""Where ``station sim serve``'s OPC UA server puts each axis's parameters (the default node ids)."""
+
+
+class RobotOpcUa(Section):
+    """A controller's OPC UA server: the node ids of the axes' ``ActualPosition`` (the OPC UA
+    Robotics companion specification's ``DeviceSet/<MotionDevice>/Axes/<Axis>/ParameterSet``) and
+    ``ActualSpeed`` (empty: the change between reads), ``{axis}`` standing for 1 .. 6, in ``unit``
+    (per second for speeds)."""
+
+    kind: Literal["opcua"]
+    url: Annotated[str, Field(pattern=r"^opc\.tcp://[^\x00/]+(/[^\x00]*)?$")] = "opc.tcp://127.0.0.1:4840"
+    position_node: Annotated[NodeTemplate, Field(min_length=1)] = f"{AXIS_PARAMETERS}/ActualPosition"
+    speed_node: NodeTemplate = f"{AXIS_PARAMETERS}/ActualSpeed"
+    unit: Literal["deg", "rad"] = "deg"
+    timeout_s: Timeout = 1.0
+
+    def nodes(self) -> tuple[list[str], list[str] | None]:
+        """The six position node ids and the six speed node ids (None: no speed nodes)."""
+        axes = range(1, 7)
+        speeds = [self.speed_node.format(axis=i) for i in axes] if self.speed_node else None
+        return [self.position_node.format(axis=i) for i in axes], speeds
+
+    def build(self) -> Driver:
+        from drivers.opcua import OpcUaJointSource
+
+        return OpcUaJointSource(self.url, *self.nodes(), unit=self.unit, timeout_s=self.timeout_s)
+
+    def endpoint(self) -> str:
+        """Where the joints are read, as a simulator announces the robot it serves."""
+        return f"opcua {self.url}"
+
+
+class RobotRos(Section):
+    """A ROS ``sensor_msgs/JointState`` topic through rosbridge (its WebSocket at ``host:port``),
+    the six ``joint_names`` as the message names them, joint 1 first."""
+
+    kind: Literal["ros"]
+    host: Name = "127.0.0.1"
+    port: int = Field(9090, gt=0, le=65535)
+    topic: Annotated[str, Field(pattern=r"^/[A-Za-z0-9_/]*$")] = "/joint_states"
+    joint_names: Annotated[list[Name], Field(min_length=6, max_length=6)] = [
+        f"joint_{i}" for i in range(1, 7)
+    ]
+    timeout_s: Timeout = 2.0
+
+    def build(self) -> Driver:
+        from drivers.ros import RosJointSource
+
+        return RosJointSource(self.host, self.port, self.topic, self.joint_names, timeout_s=self.timeout_s)
+
+    def endpoint(self) -> str:
+        """Where the joints are read, as a simulator announces the robot it serves."""
+        return f"ros ws://{self.host}:{self.port}{self.topic}"
+
+
+RobotConfig = Annotated[RobotRtde | RobotModbusTcp | RobotOpcUa | RobotRos, Field(discriminator="kind")]
 
 
 class Reconnect(Section):
@@ -178,5 +247,5 @@ class Reconnect(Section):
 
 def error_key(loc: tuple) -> str:
     """``drawstring.registers.address`` from a pydantic error location (union tags dropped)."""
-    tags = {"rtde", "modbus_tcp", "modbus_rtu", "ascii", "function-after", "function-wrap"}
+    tags = {"rtde", "modbus_tcp", "modbus_rtu", "ascii", "opcua", "ros", "function-after", "function-wrap"}
     return ".".join(str(part) for part in loc if part not in tags) or "(top level)"

@@ -122,7 +122,8 @@ class SimRobot:
     """The program: targets (M, 6) in degrees, visited in order, cyclically.
 
     ``speed_deg_s`` / ``accel_deg_s2`` bound every joint, ``dwell_s`` is the stay at each target
-    (simulated s). ``rng`` (a seeded ``numpy.random.Generator``) is needed only for jitter faults.
+    (simulated s); ``once``: the program runs one cycle and stands at target 0 after it. ``rng`` (a
+    seeded ``numpy.random.Generator``) is needed only for jitter faults.
     """
 
     def __init__(
@@ -136,6 +137,7 @@ class SimRobot:
         time_scale: float = 1.0,
         faults: Sequence[RobotFault] = (),
         rng: np.random.Generator | None = None,
+        once: bool = False,
     ):
         targets = np.asarray(targets_deg, dtype=float)
         if targets.ndim != 2 or targets.shape[1] != 6 or len(targets) == 0:
@@ -156,6 +158,7 @@ class SimRobot:
         self.accel_deg_s2 = float(accel_deg_s2)
         self.dwell_s = float(dwell_s)
         self.hold = bool(hold)
+        self.once = bool(once)
         self.time_scale = float(time_scale)
         self.faults = tuple(faults)
         self.rng = rng
@@ -198,6 +201,8 @@ class SimRobot:
     def _program_state(self, prog_s: float) -> tuple[np.ndarray, np.ndarray, int, bool]:
         """Joints, joint speeds, target index and dwelling flag at program time ``prog_s``."""
         if self.hold or self.cycle_s == 0.0 or prog_s < 0:  # before the program starts: at target 0
+            return self.targets_deg[0].copy(), np.zeros(6), 0, True
+        if self.once and prog_s >= self.cycle_s:  # a program run once ends back at target 0
             return self.targets_deg[0].copy(), np.zeros(6), 0, True
         tau = prog_s % self.cycle_s
         seg = self._segments[bisect.bisect_right(self._starts, tau) - 1]

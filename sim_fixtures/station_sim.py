@@ -17,24 +17,30 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import numpy as np
 
 from drivers.ascii import DIALECTS
-from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotRtde
+from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotOpcUa, RobotRos, RobotRtde
 from errors import InputError
 from sim_fixtures.modbus_device import ModbusDevice
+from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.robot_program import RobotFault, SimRobot
+from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.rtde_server import RtdeServerProcess
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, SimClock
-from sim_fixtures.world import World
+from sim_fixtures.world import Placement, Robot, World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
+PLAY_WAIT_S = 1e6  # a program run once waits this long (real s) at its first target for play
+PLAY_READS = 25  # node reads (12 per read of joints and speeds): the third read presses play
 SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
 
 
@@ -71,6 +77,71 @@ def planned_cell(seed: int, plan_deg: np.ndarray, plan_lines: np.ndarray) -> Wor
     return WorldCell(world, q, lines)
 
 
+def rehearsal_cell(
+    nominal: Robot,
+    placement: Placement,
+    seed: int,
+    plan: tuple[np.ndarray, np.ndarray] | None = None,
+    targets_per_line: int = 70,
+) -> WorldCell:
+    """Your own cell rehearsed (``sim serve --robot R --setup S``): the true robot, anchor and lines
+    drawn around ``nominal`` and ``placement`` (``World.around``), the robot program commanding the
+    plan's joints, so the tool lands off the edge along the dial axis by the robot's error, as on a
+    real robot (``World.land``). ``plan`` (configurations (M, 6) [deg], line ids (M,)): the plan's;
+    None: the nominal model's own ``targets_per_line`` contacts along each line of the placement."""
+    world = World.around(nominal, placement, seed)
+    if plan is None:
+        drawn = World(nominal, nominal, placement.anchor_mm, placement.length_offset_mm, placement.lines)
+        plan = drawn.line_configurations(targets_per_line, np.random.default_rng([seed, 2]))
+    q, lines = world.land(np.asarray(plan[0], float).reshape(-1, 6), plan[1])
+    return WorldCell(world, q, lines)
+
+
+def opcua_robot(
+    section: RobotOpcUa, robot: SimRobot, clock: SimClock, play: bool = False
+) -> OpcUaRobotServer:
+    """The robot program's joints on an OPC UA server at the section's ``url``; the config's node
+    ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout).
+    ``play``: the program (waiting at its first target) starts at the station's third read of the
+    joints (``PLAY_READS`` node reads: a session polling after its device check, not a one-off
+    ``station read``), as an operator presses play once the session waits for the robot."""
+    positions, speeds = section.nodes()
+    if positions != [position_node(i) for i in range(1, 7)] or speeds not in (
+        None,
+        [speed_node(i) for i in range(1, 7)],
+    ):
+        raise InputError(
+            f"[robot] position_node, speed_node: the simulated OPC UA server publishes {position_node(1)!r} "
+            "(Axis1 .. Axis6) and ActualSpeed beside it: leave both at their defaults"
+        )
+    url = urlsplit(section.url)
+
+    reads = itertools.count(1)
+
+    def state():
+        if play and clock.now() < 0 and next(reads) >= PLAY_READS:
+            clock.start_monotonic = time.monotonic()
+        now = robot.state(clock.now())
+        return now.q_deg, now.qd_deg_s
+
+    return OpcUaRobotServer(state, url.hostname, url.port or 4840)
+
+
+def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock) -> RosbridgeServer:
+    """The robot program's joints as ``sensor_msgs/JointState`` on a rosbridge at the section's
+    host and port; its ``joint_names`` must be the ones published (``JOINT_NAMES``)."""
+    if list(section.joint_names) != list(JOINT_NAMES):
+        raise InputError(
+            f"[robot] joint_names: the simulated rosbridge publishes {list(JOINT_NAMES)}: name those"
+        )
+
+    def state():
+        now = robot.state(clock.now())
+        return now.q_deg, now.qd_deg_s
+
+    return RosbridgeServer(state, section.host, section.port, section.topic)
+
+
 def _pty_link(port: str, section: str) -> Path:
     """A pty link path from the config; refuses to replace anything that is not a symlink."""
     path = Path(port)
@@ -87,7 +158,10 @@ class SimStation:
     ``drivers.config``, ``time_scale`` and ``sim``: seed and robot motion); ``start()`` returns one
     address dict per device and ``stop()`` ends them all (safe after a partial start).
     ``plan_deg``/``plan_lines`` are the targets the simulated robot walks; it waits ``start_delay_s``
-    (real s) still at the first before it runs (an operator presses play once the station listens)."""
+    (real s) still at the first before it runs (an operator presses play once the station listens).
+    ``cell``: another cell than the JR680 of ``[sim] seed`` (``rehearsal_cell``), ``plan`` unused;
+    ``once``: the program runs the plan once, as a real one does, instead of round and round, from
+    the station's first read of an OPC UA robot (an RTDE robot's starts at once)."""
 
     def __init__(
         self,
@@ -96,17 +170,20 @@ class SimStation:
         faults: Sequence[RobotFault] = (),
         plan: tuple[np.ndarray, np.ndarray] | None = None,
         start_delay_s: float = 0.0,
+        cell: WorldCell | None = None,
+        once: bool = False,
     ):
-        if not isinstance(cfg.robot, RobotRtde):
+        if not isinstance(cfg.robot, RobotRtde | RobotOpcUa | RobotRos):
             raise InputError(
-                f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE "
-                'controller only (kind = "rtde")'
+                f"[robot] kind = {cfg.robot.kind!r}: sim serve simulates an RTDE controller "
+                '(kind = "rtde"), an OPC UA server (kind = "opcua") or a rosbridge (kind = "ros")'
             )
         self.cfg = cfg
-        self.clock = SimClock(time.monotonic() + start_delay_s)
-        if plan is None:
+        self.once = once
+        self.clock = SimClock(time.monotonic() + (PLAY_WAIT_S if once else start_delay_s))
+        if cell is None and plan is None:
             cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
-        else:
+        elif cell is None:
             cell = planned_cell(cfg.sim.seed, *plan)
         self.robot = SimRobot(
             cell.plan_deg,
@@ -117,6 +194,7 @@ class SimStation:
             time_scale=cfg.time_scale,
             faults=faults,
             rng=np.random.default_rng([cfg.sim.seed, 3]),
+            once=once,
         )
         if cfg.sim.change:  # the robot changed after the plan was taught (a bent link)
             cell = dataclasses.replace(cell, world=cell.world.changed(cfg.sim.change))
@@ -157,9 +235,14 @@ class SimStation:
     def start(self) -> list[dict]:
         try:
             robot = self.cfg.robot
-            self.devices["robot"] = RtdeServerProcess(
-                self.robot, robot.host, start_monotonic=self.clock.start_monotonic
-            ).start()
+            if isinstance(robot, RobotOpcUa):
+                self.devices["robot"] = opcua_robot(robot, self.robot, self.clock, self.once).start()
+            elif isinstance(robot, RobotRos):
+                self.devices["robot"] = ros_robot(robot, self.robot, self.clock).start()
+            else:
+                self.devices["robot"] = RtdeServerProcess(
+                    self.robot, robot.host, start_monotonic=self.clock.start_monotonic
+                ).start()
             self.devices["drawstring"] = self._drawstring()
             self.devices["drawstring"].start()
             if self.cfg.dial:
@@ -187,6 +270,10 @@ class SimStation:
             }
         if isinstance(dev, ModbusDevice):
             return {"device": name, **dev.address}
+        if isinstance(dev, RosbridgeServer):
+            return {"device": name, "protocol": "rosbridge", "url": dev.url, "topic": dev.topic}
+        if isinstance(dev, OpcUaRobotServer):
+            return {"device": name, "protocol": "opcua", "url": dev.url, "time_scale": self.cfg.time_scale}
         return {
             "device": name,
             "protocol": "serial-ascii",

@@ -8,11 +8,12 @@ formulation (elementary rotations and translations composed with scipy's ``Rotat
 random tables and configurations, and the analytic Jacobians against finite differences.
 
 Units as a person measures them: mm and degrees. The nominal robot is the shipped robot file
-(``configs/robots/hsr_jr680.toml``, the paper's Table I); tables are in the robot file's and
+(``configs/robots/hsr_jr680.toml``, the paper's Table I; ``World.around``: any robot and cell, as
+``station sim serve --robot R --setup S`` rehearses one); tables are in the robot file's and
 ``calib``'s column order (theta_deg, d_mm, a_mm, alpha_deg). The physics:
 
-- the true robot is the nominal table plus errors of a machined, assembled arm: N(0, 0.15 deg) on
-  each angle, N(0, 0.75 mm) on each length;
+- the true robot is the nominal table plus errors of a machined, assembled arm (:data:`TOLERANCES`,
+  their one statement): N(0, 0.15 deg) on each angle, N(0, 0.75 mm) on each length;
 - each gauge-block line is a straight edge the tool touches; the operator's placement leaves the
   TCP off the edge along the dial axis by U(-0.3, 0.3) mm, which the dial reads;
 - the instruments (:class:`Noise`, the one statement of the simulator's noise): the drawstring
@@ -25,8 +26,7 @@ Units as a person measures them: mm and degrees. The nominal robot is the shippe
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -231,6 +231,33 @@ class JointError:
         return np.degrees(q)
 
 
+@dataclass(frozen=True)
+class Tolerances:
+    """How far a true cell lies from what its files say, the one statement of it (1 sigma): each
+    D-H angle [deg] and length [mm] of a machined, assembled arm, the drawstring's cable exit [mm]
+    and offset [mm] from the factory's figures."""
+
+    angle_deg: float = 0.15
+    length_mm: float = 0.75
+    anchor_mm: float = 5.0
+    length_offset_mm: float = 2.0
+
+
+TOLERANCES = Tolerances()
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A cell as a person measured it: the drawstring's ``anchor_mm`` and ``length_offset_mm``, the
+    gauge ``lines`` where the setup file puts them, and how far each true edge lies from there
+    (``line_sigma_mm``, 1 sigma per axis; 0: exactly there)."""
+
+    anchor_mm: np.ndarray
+    length_offset_mm: float
+    lines: tuple[GaugeLine, ...]
+    line_sigma_mm: float = 0.0
+
+
 @dataclass
 class World:
     """The true cell. Build one with ``World.create(seed)``."""
@@ -246,16 +273,30 @@ class World:
     @classmethod
     def create(cls, seed: int = 0, n_lines: int = 3, noise: Noise | None = None) -> World:
         """A JR680 with random geometric errors, ``n_lines`` of the default gauge-block placements."""
-        rng = np.random.default_rng(seed)
         nominal = Robot.from_file(JR680_FILE)
+        cell = Placement(np.array([-800.0, 600.0, -600.0]), 200.0, DEFAULT_LINES[:n_lines], 0.0)
+        return cls.around(nominal, cell, seed, noise)
+
+    @classmethod
+    def around(
+        cls, nominal: Robot, placement: Placement, seed: int = 0, noise: Noise | None = None
+    ) -> World:
+        """Any robot and cell: the true robot drawn around ``nominal`` (``TOLERANCES``), the true
+        anchor, offset and gauge lines around the ``placement`` a person measured."""
+        rng = np.random.default_rng(seed)
+        tol = TOLERANCES
         # drawn alpha, a, d, theta: the order every seeded world so far was drawn in
-        alpha, a, d, theta = (rng.normal(0, sigma, 6) for sigma in (0.15, 0.75, 0.75, 0.15))
+        sigmas = (tol.angle_deg, tol.length_mm, tol.length_mm, tol.angle_deg)
+        alpha, a, d, theta = (rng.normal(0, s, 6) for s in sigmas)
         error = np.column_stack([theta, d, a, alpha])
         true = Robot(nominal.table_deg + error, nominal.tool.copy(), nominal.limits_deg.copy())
-        anchor = np.array([-800.0, 600.0, -600.0]) + rng.normal(0, 5.0, 3)
-        return cls(
-            nominal, true, anchor, 200.0 + rng.normal(0, 2.0), DEFAULT_LINES[:n_lines], noise or Noise()
-        )
+        anchor = placement.anchor_mm + rng.normal(0, tol.anchor_mm, 3)
+        offset = placement.length_offset_mm + rng.normal(0, tol.length_offset_mm)
+        lines = placement.lines
+        if placement.line_sigma_mm > 0:  # drawn last: a world without it shares every other draw
+            moved = rng.normal(0, placement.line_sigma_mm, (len(lines), 3))
+            lines = tuple(replace(ln, centre=ln.centre + dp) for ln, dp in zip(lines, moved, strict=True))
+        return cls(nominal, true, anchor, offset, lines, noise or Noise())
 
     def changed(self, offsets: dict[str, float]) -> World:
         """This cell after its robot changed (a bent link, a slipped encoder): ``offsets`` [mm, deg]
@@ -264,7 +305,7 @@ class World:
         for name, value in offsets.items():
             table.flat[DH_NAMES.index(name)] += value
         true = Robot(table, self.true.tool.copy(), self.true.limits_deg.copy())
-        return dataclasses.replace(self, true=true)
+        return replace(self, true=true)
 
     def rough_setup(self, rng: np.random.Generator) -> dict:
         """Setup values as a person would measure them: anchor to +-30 mm, offset to +-8 mm."""
@@ -329,6 +370,23 @@ class World:
             rel = targets[k, :3, 3] - ln.centre
             offset = rng.uniform(-1, 1) * self.noise.placement_mm
             targets[k, :3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + offset * ln.dial_axis
+        q_true, reached = self.true.ik(targets, q_plan)
+        return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
+
+    def land(self, q_plan_deg, line_ids) -> tuple[np.ndarray, np.ndarray]:
+        """Where a program commanding configurations (N, 6) [deg] really touches: the pose the true
+        robot reaches there, brought across onto its true line (the edge guides the tool across it)
+        but left off it along the dial axis by the robot's own miss, which the dial reads. Returns
+        true configurations [deg] and the line ids of those reached."""
+        by_id = {ln.id: ln for ln in self.lines}
+        q_plan = np.atleast_2d(q_plan_deg)
+        targets = np.empty((len(q_plan), 4, 4))
+        for k, (q, lid) in enumerate(zip(q_plan, line_ids, strict=True)):
+            ln = by_id[int(lid)]
+            targets[k] = self.true.pose(q)
+            rel = targets[k, :3, 3] - ln.centre
+            kept = (rel @ ln.direction) * ln.direction + (rel @ ln.dial_axis) * ln.dial_axis
+            targets[k, :3, 3] = ln.centre + kept
         q_true, reached = self.true.ik(targets, q_plan)
         return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
 

@@ -30,6 +30,7 @@ COMMANDS = (  # in the order of the workflow, as the help lists them
     "sim",
     "read",
     "plan",
+    "program",
     "sample",
     "calibrate",
     "compare",

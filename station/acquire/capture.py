@@ -169,7 +169,12 @@ def length_outside(length_mm: float, rules: Rules) -> str | None:
 def dial_outside(dial_mm: float, rules: Rules) -> str | None:
     """Why a dial reading fails its gate (None: it passes)."""
     low, high = rules.dial_range_mm
-    return None if low <= dial_mm <= high else f"{dial_mm:.3f} mm, outside its gate {low:g}..{high:g} mm"
+    if low <= dial_mm <= high:
+        return None
+    return (
+        f"{dial_mm:.3f} mm, outside its gate {low:g}..{high:g} mm: the tool is off the edge by that "
+        "much (a nominal program lands off by the robot's error: correct the target or widen the gate)"
+    )
 
 
 @dataclass(frozen=True)

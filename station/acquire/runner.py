@@ -88,6 +88,20 @@ def agree_time_scale(cfg: StationConfig, time_scale: float | None) -> tuple[Stat
     return cfg.with_time_scale(sim.time_scale), (note,)
 
 
+def agree_robot(cfg: StationConfig, robot: RobotFile, where: str) -> None:
+    """Bad input where ``station sim serve`` announces that it simulates this config's robot as
+    another model than ``robot`` (read from ``where``): the session would measure one robot with
+    another's table."""
+    sim = running_simulator(cfg.sim.plan_csv)
+    if sim is None or sim.robot != cfg.robot.endpoint() or sim.model in (None, robot.name):
+        return
+    raise InputError(
+        f"{where}: robot {robot.name!r}, but the simulated robot at {sim.robot} is a {sim.model!r} "
+        f"(`station sim serve`, process {sim.pid}); name that robot's file in [session] robot_model, "
+        f"or serve this one: `station sim serve --robot {where} --setup SETUP.toml`"
+    )
+
+
 def new_session(
     out: Path, config_path: Path, plan_path: Path | None, time_scale: float | None = None
 ) -> SessionInputs:
@@ -96,6 +110,7 @@ def new_session(
     starts leaves nothing behind."""
     cfg, notes = agree_time_scale(load_station_config(config_path), time_scale)
     robot = load_robot(resolve(cfg.session.robot_model, config_path))
+    agree_robot(cfg, robot, str(resolve(cfg.session.robot_model, config_path)))
     setup = load_setup(resolve(cfg.session.setup, config_path))
     if setup.drawstring is None:
         raise InputError(f"{resolve(cfg.session.setup, config_path)}: missing table [drawstring]")
@@ -128,6 +143,7 @@ def resume_session(
         cfg = station_config(header.station, f"{where} [station]")
     cfg, notes = agree_time_scale(cfg, time_scale)
     plan = Plan.from_rows(header.plan, str(where))
+    agree_robot(cfg, header.robot, f"{where} [robot]")
     return SessionInputs(SessionFolder.open(folder_path), cfg, plan, header.robot, header.setup, notes)
 
 

@@ -50,6 +50,21 @@ from station.formats.session_folder import SessionFolder
 SUSPENDED_POLL_S = 0.1  # re-check a suspending condition this often
 
 
+OFF_EDGE = ("dial gate", "dial out of range")
+"""Suspensions of a robot that stands where the dial reads outside its gate: no progress."""
+
+
+class OffEdge(Exception):
+    """The robot stood where the dial reads outside its gate for the target timeout."""
+
+
+OFF_EDGE_TIMEOUT = (
+    "no capture for {s:g} s: the dial reads outside its gate where the robot stands (the tool off the "
+    "edge): correct the remaining targets (station calibrate, then station compensate the plan) or "
+    "widen [session] dial_range_mm"
+)
+
+
 class State(enum.Enum):
     WAITING = "waiting"
     CAPTURING = "capturing"
@@ -126,7 +141,11 @@ class Session:
                     last_progress = self.clock()
                     self.settle.ever = False
             except Suspend as why:
-                self._suspended(why)
+                try:
+                    self._suspended(why)
+                except OffEdge:
+                    waited = self.rules.target_timeout_s * self.rules.time_scale
+                    return self._end(State.TIMED_OUT, OFF_EDGE_TIMEOUT.format(s=waited))
                 self.settle.reset()
                 self.settle.ever = False
                 last_progress = self.clock()
@@ -192,11 +211,13 @@ class Session:
     def _suspended(self, first: Suspend) -> None:
         """Stay SUSPENDED, re-checking every ``SUSPENDED_POLL_S``, until the condition clears (or a
         stop request).
-        A device silent for longer than ``unreachable_s`` ends the session (DeviceError)."""
+        A device silent for longer than ``unreachable_s`` ends the session (DeviceError); a robot
+        standing off the edge (``OFF_EDGE``) for ``target_timeout_s`` raises :class:`OffEdge`."""
         self.state = State.SUSPENDED
         self.listener.message(f"suspended: {first}")
         self._suspended_by = first
         why, silent_since = first, self.clock()
+        off_since = silent_since  # since when the present condition holds
         while not self._stop and self._finish is None:
             self.sleep(SUSPENDED_POLL_S)
             self.listener.tick()
@@ -206,7 +227,10 @@ class Session:
             except Suspend as still:
                 if still.cause != why.cause:  # another condition holds the session now: say which
                     self.listener.message(f"suspended: {still}")
+                    off_since = self.clock()
                 why = self._suspended_by = still
+                if why.cause in OFF_EDGE and self.clock() - off_since > self.rules.target_timeout_s:
+                    raise OffEdge from still
                 silent_since = silent_since if still.device else self.clock()
                 if self.clock() - silent_since > self.rules.unreachable_s:
                     raise DeviceError(

@@ -1,5 +1,11 @@
-"""``station sim serve [--config F] [--hold] [--plan P.csv] [--time-scale S]``: run the simulated
-devices until SIGINT/SIGTERM.
+"""``station sim serve [--config F] [--hold] [--plan P.csv] [--time-scale S] [--robot R --setup S]
+[--seed N]``: run the simulated devices until SIGINT/SIGTERM.
+
+Without ``--robot`` it simulates the shipped HSR-JR680 cell, whose robot program moves every
+target onto its true line; with ``--robot R --setup S`` it rehearses your own cell
+(``station.jobs.rehearsal``): that robot with random errors, that setup's drawstring and lines, the
+program commanding the plan's nominal joints, so the tool lands off the edge by the robot's error;
+joints over OPC UA: the program runs the plan once, from the station's first read of the robot.
 
 Publishes the plan its robot walks at ``[sim] plan_csv`` (where ``station sample`` looks by
 default) and announces its robot and time scale beside it (``station.formats.announcement``: a
@@ -17,10 +23,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import configs
-from errors import DeviceError
+from errors import DeviceError, InputError
+
+JR680_NAME = "HSR-JR680"
+"""The robot ``sim serve`` simulates without ``--robot``: ``configs/robots/hsr_jr680.toml``'s name."""
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from sim_fixtures.station_sim import WorldCell
+    from sim_fixtures.world import Placement, Robot
     from station.formats.plan import Plan
+    from station.formats.tables import RobotFile, SetupFile
 
 
 def register(subparsers) -> None:
@@ -45,6 +59,13 @@ def register(subparsers) -> None:
         help="simulated seconds per real second (default: the config's time_scale, 1 = real time; "
         "20: a 210-target session in about a minute); `station sample` adopts it",
     )
+    serve.add_argument(
+        "--robot", type=Path, help="rehearse your own cell: simulate this robot file (with --setup)"
+    )
+    serve.add_argument(
+        "--setup", type=Path, help="the cell's setup TOML (drawstring, [[lines]] with point_mm, direction)"
+    )
+    serve.add_argument("--seed", type=int, help="seed of the simulated truth and noise (default: [sim] seed)")
     serve.set_defaults(func=run)
 
 
@@ -55,9 +76,14 @@ def run(args) -> int:
     from station.formats.plan import Plan, load_plan
 
     cfg = load_station_config(args.config).with_time_scale(args.time_scale)
+    if args.seed is not None:
+        cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": args.seed})})
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
-    station = SimStation(cfg, hold=args.hold, plan=None if plan is None else (plan.q_deg, plan.line))
+    joints = None if plan is None else (plan.q_deg, plan.line)
+    model, cell = _rehearsal(args, cfg, joints)
+    once = cell is not None and cfg.robot.kind == "opcua"  # a program run once, started by the station
+    station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell, once=once)
     publish_plan(Path(cfg.sim.plan_csv), plan or Plan.of(station.plan_deg, station.plan_lines))
     try:
         # Children start with Ctrl-C ignored (a terminal sends it to the whole process group):
@@ -69,7 +95,7 @@ def run(args) -> int:
             raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: stop.set())
-        _announce(cfg)
+        _announce(cfg, model)
         for address in addresses:
             print(json.dumps(address), flush=True)
         while not stop.wait(0.5):
@@ -80,12 +106,29 @@ def run(args) -> int:
     return 0
 
 
-def _announce(cfg) -> None:
-    """Say beside the published plan which robot this simulator serves, at which time scale."""
+def _rehearsal(args, cfg, joints):
+    """The robot model's name and the cell to simulate: with ``--robot``/``--setup`` the user's
+    own (``station.jobs.rehearsal``), else the shipped JR680's (cell None)."""
+    if args.robot is None and args.setup is None:
+        return JR680_NAME, None
+    if args.robot is None or args.setup is None:
+        raise InputError(
+            "--robot and --setup go together: the robot file and the setup of the cell to rehearse"
+        )
+    from station.formats.tables import load_robot, load_setup
+
+    robot, setup = load_robot(args.robot), load_setup(args.setup)
+    cell = rehearsed_cell(robot, setup, str(args.setup), cfg.sim.seed, joints, cfg.sim.targets_per_line)
+    return robot.name, cell
+
+
+def _announce(cfg, model: str) -> None:
+    """Say beside the published plan which robot this simulator serves (where, and which model), at
+    which time scale."""
     from station.formats.announcement import announce
 
     try:
-        announce(cfg.sim.plan_csv, cfg.robot.endpoint(), cfg.time_scale)
+        announce(cfg.sim.plan_csv, cfg.robot.endpoint(), cfg.time_scale, model)
     except OSError as exc:
         raise DeviceError(
             f"cannot announce the simulator beside {cfg.sim.plan_csv}: {exc.strerror or exc}"
@@ -101,3 +144,72 @@ def publish_plan(path: Path, plan: Plan) -> None:
         atomic_write(path, plan.csv_text())
     except OSError as exc:
         raise DeviceError(f"cannot publish the simulated plan at {path}: {exc.strerror or exc}") from exc
+
+
+# -- your own cell rehearsed (--robot R --setup S) ----------------------------------------------
+# The robot file and setup a person wrote for a real cell become the simulator's nominal robot and
+# placement; the truth is drawn around them (``World.around``) and the program walks the plan's
+# joints as commanded, so the tool lands off the edge by the robot's error, as a real robot's does.
+LINE_PLACEMENT_MM = 0.5
+"""How far (1 sigma per axis) a true gauge edge lies from where the setup puts it: a block set
+against a scribed mark, its edge measured with a caliper."""
+
+
+def placement(setup: SetupFile, where: str) -> Placement:
+    """The cell as the setup describes it: its drawstring and every ``[[lines]]`` entry (each with
+    ``point_mm``, ``direction`` and an approach or dial axis, as ``station plan`` needs them)."""
+    import numpy as np
+
+    from sim_fixtures.world import GaugeLine, Placement
+    from station.jobs.planning import placements
+
+    if setup.drawstring is None:
+        raise InputError(f"{where}: missing table [drawstring]: the simulator needs the cable's exit point")
+    axis_default = None if setup.dial is None else setup.dial.axis
+    lines = []
+    for ln in setup.lines:
+        point, direction, length, approach = placements(setup, where)[ln.id]
+        dial = np.asarray(ln.dial_axis or axis_default or -approach, float)
+        dial = dial - (dial @ direction) * direction  # the indicator reads across the edge
+        lines.append(GaugeLine(ln.id, point, direction, length, dial / np.linalg.norm(dial), approach))
+    return Placement(
+        np.asarray(setup.drawstring.anchor_mm, float),
+        setup.drawstring.length_offset_mm,
+        tuple(lines),
+        LINE_PLACEMENT_MM,
+    )
+
+
+def nominal_robot(robot: RobotFile) -> Robot:
+    """The simulator's nominal robot: the file's table (standard D-H), TCP and joint limits."""
+    import numpy as np
+
+    from sim_fixtures.world import Robot
+
+    return Robot(robot.table_deg(), np.asarray(robot.tool_mm, float), robot.limits_deg())
+
+
+def rehearsed_cell(
+    robot: RobotFile,
+    setup: SetupFile,
+    where: str,
+    seed: int,
+    plan: tuple[np.ndarray, np.ndarray] | None,
+    targets_per_line: int,
+) -> WorldCell:
+    """The rehearsed cell of ``robot`` and ``setup`` (``where`` names the setup in messages); the
+    simulated program walks ``plan`` (configurations [deg], line ids) or, None, the nominal
+    model's contacts along each line."""
+    import numpy as np
+
+    from sim_fixtures.station_sim import rehearsal_cell
+
+    cell_placement = placement(setup, where)
+    if plan is not None:
+        unknown = sorted(set(np.asarray(plan[1]).tolist()) - {ln.id for ln in cell_placement.lines})
+        if unknown:
+            raise InputError(f"--plan: line {unknown[0]} is not among {where}'s [[lines]]")
+    try:
+        return rehearsal_cell(nominal_robot(robot), cell_placement, seed, plan, targets_per_line)
+    except RuntimeError as exc:  # a gauge line out of the nominal robot's reach
+        raise InputError(f"{where}: {exc}") from None

@@ -23,11 +23,12 @@ FILE_NAME = "simulator.toml"
 
 class Announcement(Strict):
     """A running simulator: the robot it serves (its ``[robot]`` section's ``endpoint()``), simulated
-    seconds per real second, its process id."""
+    seconds per real second, its process id, the robot model it simulates (its file's ``name``)."""
 
     robot: Annotated[str, Field(min_length=1)]
     time_scale: TimeScale
     pid: Annotated[int, Field(gt=0)]
+    model: str | None = None  # the robot model simulated (its robot file's name)
 
 
 def announcement_path(plan_csv: str | Path) -> Path:
@@ -35,11 +36,12 @@ def announcement_path(plan_csv: str | Path) -> Path:
     return Path(plan_csv).parent / FILE_NAME
 
 
-def announce(plan_csv: str | Path, robot: str, time_scale: float) -> Path:
-    """Announce this process as the simulator of ``robot`` at ``time_scale``; returns the file."""
+def announce(plan_csv: str | Path, robot: str, time_scale: float, model: str | None = None) -> Path:
+    """Announce this process as the simulator of ``robot`` (a ``model``) at ``time_scale``; returns
+    the file."""
     path = announcement_path(plan_csv)
-    found = Announcement(robot=robot, time_scale=time_scale, pid=os.getpid())
-    atomic_write(path, toml_text(found.model_dump()))
+    found = Announcement(robot=robot, time_scale=time_scale, pid=os.getpid(), model=model)
+    atomic_write(path, toml_text(found.model_dump(exclude_none=True)))
     return path
 
 

@@ -17,19 +17,37 @@ import numpy as np
 from pydantic import Field
 
 from errors import InputError
-from station.formats.base import MAX_JOINT_DEG, Id, JointAngle, Strict, id_cell, number_cell, validate
+from station.formats.base import (
+    MAX_JOINT_DEG,
+    MAX_LENGTH_MM,
+    Id,
+    JointAngle,
+    Strict,
+    id_cell,
+    number_cell,
+    validate,
+)
 from station.formats.samples import Q_COLUMNS
 
 PLAN_COLUMNS = ("target", "line", *Q_COLUMNS)
+POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg")
+"""The contact pose: TCP position and tool orientation as a rotation vector (axis times angle, as
+UR's poses), base frame."""
+APPROACH_COLUMNS = ("ax", "ay", "az")
+"""The unit direction in which the tool moves onto the edge, base frame."""
 
 
 @dataclass(frozen=True)
 class Plan:
-    """Targets: ids (M,), gauge-line ids (M,) and joint configurations (M, 6) in degrees."""
+    """Targets: ids (M,), gauge-line ids (M,) and joint configurations (M, 6) in degrees; where the
+    plan says so, each target's contact ``pose`` (M, 6: mm and rotation vector in degrees,
+    ``POSE_COLUMNS``) and ``approach`` (M, 3) unit directions (a plan written before them: None)."""
 
     target: np.ndarray
     line: np.ndarray
     q_deg: np.ndarray
+    pose: np.ndarray | None = None
+    approach: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.target)
@@ -37,9 +55,15 @@ class Plan:
     def csv_text(self) -> str:
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
-        writer.writerow(PLAN_COLUMNS)
-        for t, ln, q in zip(self.target, self.line, self.q_deg, strict=True):
-            writer.writerow([int(t), int(ln), *(f"{v:.6f}" for v in q)])
+        contact = self.pose is not None and self.approach is not None
+        writer.writerow(PLAN_COLUMNS + (POSE_COLUMNS + APPROACH_COLUMNS if contact else ()))
+        for k, (t, ln, q) in enumerate(zip(self.target, self.line, self.q_deg, strict=True)):
+            extra = (
+                [*(f"{v:.4f}" for v in self.pose[k]), *(f"{v:.6f}" for v in self.approach[k])]
+                if contact
+                else []
+            )
+            writer.writerow([int(t), int(ln), *(f"{v:.6f}" for v in q), *extra])
         return out.getvalue()
 
     def rows(self) -> list[dict]:
@@ -104,15 +128,44 @@ def load_plan(path) -> Plan:
     if missing:
         raise InputError(f"{path}: missing column {missing[0]}")
     values = np.array([[_cell(path, i, row, col) for col in PLAN_COLUMNS] for i, row in enumerate(rows)])
-    return _unique_targets(Plan(values[:, 0].astype(int), values[:, 1].astype(int), values[:, 2:]), path)
+    pose, approach = _contacts(path, rows)
+    plan = Plan(values[:, 0].astype(int), values[:, 1].astype(int), values[:, 2:], pose, approach)
+    return _unique_targets(plan, path)
+
+
+def _contacts(path: Path, rows: list[dict]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The contact poses and approach directions where the plan has their columns (all or none)."""
+    wanted = POSE_COLUMNS + APPROACH_COLUMNS
+    present = [c for c in wanted if c in rows[0]]
+    if not present:
+        return None, None
+    if len(present) < len(wanted):
+        missing = next(c for c in wanted if c not in rows[0])
+        raise InputError(
+            f"{path}: has {present[0]} but not {missing}: a contact pose needs all of {', '.join(wanted)}"
+        )
+    values = np.array([[_cell(path, i, row, col) for col in wanted] for i, row in enumerate(rows)])
+    approach = values[:, 6:]
+    norm = np.linalg.norm(approach, axis=1)
+    if np.any(np.abs(norm - 1.0) > 1e-3):
+        i = int(np.argmax(np.abs(norm - 1.0) > 1e-3))
+        raise InputError(
+            f"{path}: row {i} (line {i + 2}): ax,ay,az: not a unit direction (length {norm[i]:.4g})"
+        )
+    return values[:, :6], approach / norm[:, None]
 
 
 def _cell(path: Path, i: int, row: dict, col: str) -> float:
-    """Column ``col`` of row ``i``: a target or line id, or a joint reading [deg]."""
+    """Column ``col`` of row ``i``: a target or line id, a joint reading or angle [deg], a position
+    [mm] or a direction's component."""
     cell = (row[col] or "").strip()  # None: the row is shorter than the header
     try:
         if col in ("target", "line"):
             return id_cell(cell, f"a {col} id")
+        if col.endswith("_mm"):
+            return number_cell(cell, MAX_LENGTH_MM, "mm")
+        if col in APPROACH_COLUMNS:
+            return number_cell(cell, 1.5, "(a unit direction)")
         return number_cell(cell, MAX_JOINT_DEG, "deg")
     except ValueError as exc:
         raise InputError(f"{path}: row {i} (line {i + 2}): {col}: {exc}") from None

@@ -11,6 +11,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, NonNegativeFloat, model_validator
 
+from calib.conventions import dh_from_mdh, dh_name, mdh_name
 from calib.joint_terms import TERM_KINDS, JointTerms, LinkMasses, Term
 from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees, display_factor
 from calib.robot_model import RobotModel
@@ -67,23 +68,65 @@ class Payload(Strict):
     com_mm: Vec3 = [0.0, 0.0, 0.0]
 
 
+class Flange(Strict):
+    """A modified (``mdh``) table's flange after joint 6: what a standard table's last row holds as
+    a and alpha (a corrected table writes the calibrated values; a robot's own file leaves it out)."""
+
+    a_mm: Length = 0.0
+    alpha_deg: Angle = 0.0
+
+
 class RobotFile(Strict):
     """A robot model (contract: robot model TOML); a corrected table adds ``calibration`` and,
-    where it identified compliances, the ``payload`` they were identified with."""
+    where it identified compliances, the ``payload`` they were identified with. ``convention``
+    ``mdh``: Craig's modified D-H (``calib.conventions``), everything else computes with its
+    standard equivalent (:meth:`table_deg`)."""
 
     name: str
     serial: str | None = None  # the robot's identity in the calibration history (else its name)
-    convention: Literal["dh"] = "dh"
+    convention: Literal["dh", "mdh"] = "dh"
     tool_mm: Vec3 = [0.0, 0.0, 0.0]
     joints: Annotated[list[Joint], Field(min_length=6, max_length=6)]
+    flange: Flange | None = None
     payload: Payload | None = None
     calibration: dict | None = None
     controller_hash: str | None = None  # the controller's factory-calibration id (UR: ``hash``)
 
-    def table_deg(self) -> np.ndarray:
-        """(6, 4) table in display units, columns as ``calib.params.DH_KEYS`` (theta_deg, d_mm, a_mm,
-        alpha_deg)."""
+    @model_validator(mode="after")
+    def _convention_keys(self) -> RobotFile:
+        if self.convention == "dh":
+            if self.flange is not None:
+                raise ValueError('flange: only under convention = "mdh" (a standard table has it in joint 6)')
+            return self
+        first = self.joints[0]
+        if first.alpha_deg != 0.0 or first.a_mm != 0.0:
+            raise ValueError(
+                'joints.0: under convention = "mdh" its alpha_deg and a_mm place joint 1 in a base frame '
+                "of their own; the station's base frame is joint 1's: give 0 for both"
+            )
+        if any(j.mass_kg is not None or j.com_mm is not None for j in self.joints):
+            raise ValueError(
+                'joints: mass_kg and com_mm are given in standard D-H frames; convention = "mdh" takes none'
+            )
+        return self
+
+    def file_table_deg(self) -> np.ndarray:
+        """(6, 4) table as the file writes it (its ``convention``), display units, columns as
+        ``calib.params.DH_KEYS``."""
         return np.array([[getattr(j, key) for key in DH_KEYS] for j in self.joints])
+
+    def table_deg(self) -> np.ndarray:
+        """(6, 4) standard D-H table in display units, columns as ``calib.params.DH_KEYS`` (theta_deg,
+        d_mm, a_mm, alpha_deg): the file's own, or a modified one's standard equivalent."""
+        table = self.file_table_deg()
+        if self.convention == "dh":
+            return table
+        flange = self.flange or Flange()
+        return dh_from_mdh(table, (flange.a_mm, flange.alpha_deg))
+
+    def param_name(self, name: str) -> str:
+        """A standard table parameter's name (``J2.a_mm``) as this file's convention names it."""
+        return mdh_name(name) if self.convention == "mdh" else name
 
     def limits_deg(self) -> np.ndarray:
         return np.array([[j.q_min_deg, j.q_max_deg] for j in self.joints])
@@ -133,6 +176,8 @@ class RobotFile(Strict):
         names = (self.calibration or {}).get("covariance_parameters", list(DH_NAMES))
         if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
             raise InputError(f"{where}: calibration.covariance_parameters: expected a list of names")
+        if self.convention == "mdh":
+            names = [dh_name(name) for name in names]
         try:
             cov = np.array(data, float)
         except (TypeError, ValueError):

@@ -52,10 +52,27 @@ def _geometry(
     if fmt == "ur-yaml":
         known = robot.controller_hash or (nominal.controller_hash if nominal else None)
         return _ur_yaml(robot, source, hash_ or known)
-    nominal_table = None if nominal is None else nominal.table_deg()[:, DH_CSV_ORDER]
-    table = robot.table_deg()[:, DH_CSV_ORDER]
-    deltas = None if nominal_table is None else table - nominal_table
-    notes = [] if nominal is None else ["delta_* columns: this table minus the nominal one"]
+    return _dh_csv(robot, nominal)
+
+
+def _dh_csv(robot: RobotFile, nominal: RobotFile | None) -> Export:
+    """The table in the robot file's own convention (a modified one's rows as written, its flange
+    in a note), the deltas against ``nominal``; a nominal in another convention: both standard."""
+    own = nominal is None or nominal.convention == robot.convention
+    table = (robot.file_table_deg() if own else robot.table_deg())[:, DH_CSV_ORDER]
+    deltas = None
+    notes = []
+    if nominal is not None:
+        deltas = table - (nominal.file_table_deg() if own else nominal.table_deg())[:, DH_CSV_ORDER]
+        notes.append("delta_* columns: this table minus the nominal one")
+    if not own:
+        notes.append("the nominal robot is in another convention: both written as standard D-H")
+    elif robot.convention == "mdh":
+        flange = robot.flange.model_dump() if robot.flange else {"a_mm": 0.0, "alpha_deg": 0.0}
+        notes.append(
+            "Craig's modified D-H (convention mdh): row i holds alpha and a of the link before joint "
+            f"i; the flange after joint 6: a_mm {flange['a_mm']:.4f}, alpha_deg {flange['alpha_deg']:.5f}"
+        )
     return Export(dh_csv_text(table, deltas), notes)
 
 

@@ -154,7 +154,14 @@ def design(
         report["next"] = _next_placements(
             dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, readings=readings
         )
-    plan = Plan(np.arange(len(rows)), line_all[rows], np.degrees(q_all[rows]))
+    approach = np.array([lines[int(lid)][3] for lid in line_all[rows]])
+    plan = Plan(
+        np.arange(len(rows)),
+        line_all[rows],
+        np.degrees(q_all[rows]),
+        contact_poses(robot, q_all[rows]),
+        approach,
+    )
     return Design(plan, report)
 
 
@@ -207,6 +214,16 @@ def next_placement(
 def robot_arrays(robot: RobotFile) -> tuple[np.ndarray, np.ndarray]:
     """The nominal table (6, 4) in internal units and the TCP [mm]."""
     return dh_from_degrees(robot.table_deg()), np.asarray(robot.tool_mm, float)
+
+
+def contact_poses(robot: RobotFile, q: np.ndarray) -> np.ndarray:
+    """The nominal model's TCP poses (N, 6) at configurations ``q`` (N, 6) [rad]: position [mm] and
+    tool orientation as a rotation vector [deg] (``station.formats.plan.POSE_COLUMNS``)."""
+    from scipy.spatial.transform import Rotation
+
+    dh, tool = robot_arrays(robot)
+    p, rot = ik.tool_frames(dh, q, tool)
+    return np.column_stack([p, Rotation.from_matrix(rot).as_rotvec(degrees=True)])
 
 
 def summary(design_: Design) -> str:

@@ -10,6 +10,7 @@ from datetime import datetime, timezone
 import numpy as np
 
 from calib.calibrate import Calibration
+from calib.conventions import mdh_from_dh
 from calib.joint_terms import TERM_KINDS
 from calib.kinematics import N_DH, dh_table
 from calib.models import GROUP_PRIOR, DrawstringSetupEstimate
@@ -209,13 +210,17 @@ def corrected_table(
     ``payload`` the compliances were identified with (``CalibrationOutcome.payload``)."""
     factor = display_factor(cal.names)
     table = dh_to_degrees(dh_table(cal.x))
+    flange = None
+    if robot.convention == "mdh":
+        table, flange = mdh_from_dh(table)
     cols = DH_KEYS
     joints = []
+    named = [robot.param_name(name) for name in cal.names]
     for j, joint in enumerate(robot.joints):
         entry = joint.model_dump(exclude={"sigma", *TERM_KINDS}, exclude_none=True)
         entry.update(zip(cols, (float(v) for v in table[j]), strict=True))
         entry["sigma"] = {}
-        for k, name in enumerate(cal.names):
+        for k, name in enumerate(named):
             joint_name, _, key = name.partition(".")
             if joint_name == f"J{j + 1}" and np.isfinite(cal.sigma[k]):
                 if key in TERM_KINDS:
@@ -225,7 +230,7 @@ def corrected_table(
     out = {
         "name": robot.name,
         **({"serial": robot.serial} if robot.serial else {}),
-        "convention": "dh",
+        "convention": robot.convention,
         "tool_mm": list(robot.tool_mm),
         "calibration": {
             "method": method,
@@ -233,19 +238,21 @@ def corrected_table(
             "samples": samples.path,
             "n_samples": len(samples),
             "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "identified": [n for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
-            **_covariance(cal),
+            "identified": [robot.param_name(n) for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
+            **_covariance(cal, robot.param_name),
             **_noise_scale(cal, samples.kind),
         },
         **({"controller_hash": robot.controller_hash} if robot.controller_hash else {}),
         "joints": joints,
     }
+    if flange is not None:
+        out["flange"] = {"a_mm": float(flange[0]), "alpha_deg": float(flange[1])}
     if payload is not None and any(key in TERM_KINDS for j in joints for key in j):
         out["payload"] = payload.model_dump()
     return out
 
 
-def _covariance(cal: Calibration) -> dict:
+def _covariance(cal: Calibration, param_name=lambda name: name) -> dict:
     """The covariance of the table and of the terms the file carries (the identified ones; a held
     term is 0 and stays out), display units (deg, mm, urad/(N m)), held parameters considered;
     a fitted TCP (a tracker's probe) is the setup's and stays out too."""
@@ -257,7 +264,7 @@ def _covariance(cal: Calibration) -> dict:
     index = cal.robot_index[keep]
     factor = display_factor([cal.names[k] for k in index])
     cov = cal.robot_covariance[np.ix_(keep, keep)] * np.outer(factor, factor)
-    return {"covariance_parameters": [cal.names[k] for k in index], "covariance": cov.tolist()}
+    return {"covariance_parameters": [param_name(cal.names[k]) for k in index], "covariance": cov.tolist()}
 
 
 def _noise_scale(cal: Calibration, kind: str) -> dict:

@@ -138,3 +138,16 @@ def test_bad_arguments_are_named(kw, message):
         robot(**kw)
     with pytest.raises(ValueError, match="shape"):
         SimRobot(np.zeros((3, 5)), speed_deg_s=1, accel_deg_s2=1, dwell_s=1)
+
+
+def test_a_program_run_once_stands_at_its_first_target_after_the_cycle():
+    from sim_fixtures.robot_program import SimRobot
+
+    targets = [[0.0] * 6, [10.0] * 6]
+    robot = SimRobot(targets, speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0, once=True)
+    assert robot.state(robot.cycle_s * 0.4).target_index == 1  # going round the first time
+    for t in (robot.cycle_s + 0.01, 3 * robot.cycle_s + 0.5):
+        state = robot.state(t)
+        assert state.target_index == 0 and state.dwelling and not state.qd_deg_s.any()
+    again = SimRobot(targets, speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0)
+    assert again.state(robot.cycle_s * 1.4).target_index == 1  # round and round

@@ -79,3 +79,20 @@ def test_a_time_scale_out_of_range_names_the_flag(cfg, value, message):
     with pytest.raises(InputError, match=message) as refused:
         agree_time_scale(cfg, value)
     assert str(refused.value).startswith("--time-scale ")
+
+
+def test_a_session_on_another_robot_model_than_the_simulated_one_is_refused_by_name(cfg):
+    import configs
+    from station.acquire.runner import agree_robot
+    from station.formats.tables import load_robot
+
+    jr680 = load_robot(configs.path("robots/hsr_jr680.toml"))
+    announce(cfg.sim.plan_csv, cfg.robot.endpoint(), 1.0, "UR10")
+    with pytest.raises(InputError) as refused:
+        agree_robot(cfg, jr680, "jr680.toml")
+    text = str(refused.value)
+    assert text.startswith("jr680.toml: robot 'HSR-JR680', but the simulated robot at")
+    assert "is a 'UR10'" in text and "--robot jr680.toml" in text
+    agree_robot(cfg, load_robot(configs.path("robots/ur10.toml")), "ur10.toml")  # the same model: fine
+    announce(cfg.sim.plan_csv, "rtde 127.0.0.99:30004", 1.0, "UR10")  # another robot's simulator
+    agree_robot(cfg, jr680, "jr680.toml")

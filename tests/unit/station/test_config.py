@@ -65,7 +65,7 @@ def test_ascii_drawstring_and_mitutoyo_dial(tmp_path):
     [
         (("address = 40", "address = -1"), r"drawstring\.registers\.address: Input should be greater"),
         (('encoding = "float32_mm"', 'encoding = "int16"'), r"drawstring\.registers\.encoding: "),
-        (('kind = "rtde"', 'kind = "ros"'), r"robot: Input tag 'ros' found using 'kind' does not"),
+        (('kind = "rtde"', 'kind = "ethercat"'), r"robot: Input tag 'ethercat' found using 'kind' does not"),
         (("device_id = 7", "device_id = 7\nbaud = 9600"), r"drawstring\.baud: Extra inputs"),
         (('[robot]\nkind = "rtde"', ""), r": robot: Field required"),
         # values the session cannot work with (issue 15)

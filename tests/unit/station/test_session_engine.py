@@ -475,3 +475,16 @@ def test_a_robot_parked_at_a_finished_target_still_times_out(tmp_path, clock):
     parked = Cell(tmp_path, clock, robot, SessionFolder.open(tmp_path / "sess"))
     assert parked.run() is State.TIMED_OUT
     assert "settled only at finished targets or away from the plan" in parked.messages[-1]
+
+
+def test_a_robot_standing_off_the_edge_times_out_saying_so(tmp_path, clock):
+    """The program ends at a target where the dial reads outside its gate (a nominal program on a
+    real robot): the session does not wait for ever, and says why nothing is captured."""
+    q = PLAN.q_deg
+    cell = Cell(tmp_path, clock, timeline(*walk(q[:2]), (1e9, still(q[2]))))
+    cell.dial.script = lambda t: {"dial_mm": 0.25 if t < 5.0 else -3.5}
+    assert cell.run() is State.TIMED_OUT
+    assert cell.targets() == [0, 1]
+    assert cell.said("suspended: dial reads -3.500 mm, outside its gate")
+    assert cell.messages[-1].startswith("timed out: no capture for 10 s: the dial reads outside its gate")
+    assert clock() < 5.0 + RULES.target_timeout_s + 5.0

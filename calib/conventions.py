@@ -1,0 +1,64 @@
+"""Craig's modified D-H (``mdh``) as the standard D-H table the maths computes with.
+
+Modified, row i: ``Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i + q_i) Tz(d_i)``: row i holds alpha and
+a of the link before joint i. Regrouped, with row 1's alpha and a zero (joint 1 in the base frame),
+
+    T = prod_i Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i + q_i) Tz(d_i)
+      = prod_{i<6} [Rz(theta_i + q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)] * Rz(theta_6 + q_6) Tz(d_6),
+
+(``Rx`` and ``Tx`` commute), which is the standard table with row i's theta and d and row i+1's a
+and alpha; the standard last row's a and alpha (an offset of the flange after joint 6, which the
+modified table has no row for) is the ``flange`` pair. Both tables give the same flange frame
+and TCP at every reading. Tables are (6, 4) in ``calib.params.DH_KEYS`` order (theta, d, a, alpha),
+in any consistent units.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib.kinematics import ALPHA, N_JOINTS, A
+
+LINK = [A, ALPHA]
+"""The columns a modified row takes from the link before its joint."""
+
+
+def dh_from_mdh(mdh: np.ndarray, flange=(0.0, 0.0)) -> np.ndarray:
+    """The standard table (6, 4) of a modified one (6, 4) whose row 1 has alpha = a = 0, with the
+    ``flange`` (a, alpha) after joint 6."""
+    dh = np.array(mdh, float)
+    dh[:-1, LINK] = mdh[1:, LINK]
+    dh[-1, LINK] = flange
+    return dh
+
+
+def mdh_from_dh(dh: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The modified table (6, 4) (row 1's alpha and a zero) and the flange (a, alpha) of a standard
+    one: the inverse of :func:`dh_from_mdh`."""
+    mdh = np.array(dh, float)
+    mdh[1:, LINK] = dh[:-1, LINK]
+    mdh[0, LINK] = 0.0
+    return mdh, np.array(dh[-1, LINK], float)
+
+
+def mdh_name(name: str) -> str:
+    """A standard table parameter's name (``J2.a_mm``) as the modified table names it: a and alpha
+    of joint i < 6 are row i+1's (``J3.a_mm``), joint 6's the flange's (``flange.a_mm``); other
+    names are kept."""
+    joint, _, key = name.partition(".")
+    if not (joint[:1] == "J" and joint[1:].isdigit() and key.split("_")[0] in ("a", "alpha")):
+        return name
+    i = int(joint[1:])
+    return f"flange.{key}" if i == N_JOINTS else f"J{i + 1}.{key}"
+
+
+def dh_name(name: str) -> str:
+    """The inverse of :func:`mdh_name`."""
+    joint, _, key = name.partition(".")
+    if key.split("_")[0] not in ("a", "alpha"):
+        return name
+    if joint == "flange":
+        return f"J{N_JOINTS}.{key}"
+    if joint[:1] == "J" and joint[1:].isdigit() and int(joint[1:]) > 1:
+        return f"J{int(joint[1:]) - 1}.{key}"
+    return name

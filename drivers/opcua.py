@@ -1,0 +1,141 @@
+"""Robot joint angles from a controller's OPC UA server (``asyncua``'s synchronous client).
+
+A controller that follows the OPC UA Robotics companion specification (OPC 40010-1) publishes each
+axis of its motion device under ``DeviceSet/<MotionDevice>/Axes/<Axis>/ParameterSet`` with
+``ActualPosition`` (degrees for a rotary axis) and ``ActualSpeed`` (deg/s); the node ids are the
+server's own, so the config names them (six, joint 1 first). Without speed nodes the speed is the
+change of the positions between two reads over the time between them.
+
+The companion specification has no single "program running" flag, so ``robot_mode`` reads RUNNING
+(7, as over RTDE) while the server answers; a stopped controller shows as joints that stand still.
+Freshness: every read asks the server (a read, not a subscription), so a value is as old as the
+round trip; a server that stops answering raises :class:`~drivers.base.DeviceTimeout` after the
+client's ``timeout_s``, a lost connection :class:`~drivers.base.DeviceUnreachable`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections.abc import Sequence
+
+from asyncua import ua
+from asyncua.sync import Client, ThreadLoopNotRunning
+
+from drivers.base import DeviceReplyError, DeviceTimeout, DeviceUnreachable, Driver, Field, Reading
+
+logging.getLogger("asyncua").setLevel(logging.ERROR)  # its notes on unencrypted endpoints are not ours
+
+JOINTS = 6
+RUNNING = 7  # reported while the server answers (see the module notes)
+
+OPCUA_FIELDS = {
+    "q_deg": Field("deg", (JOINTS,), "axes' ActualPosition"),
+    "qd_deg_s": Field("deg/s", (JOINTS,), "axes' ActualSpeed (or the change between reads)"),
+    "robot_mode": Field("", (), "7 (RUNNING) while the server answers"),
+    "controller_time_s": Field("s", (), "the server's source timestamp of joint 1, s since the epoch"),
+}
+UNIT_TO_DEG = {"deg": 1.0, "rad": math.degrees(1.0)}
+
+
+class OpcUaJointSource(Driver):
+    """Joints from the OPC UA server at ``url`` (``opc.tcp://host:port``): ``position_nodes`` (six
+    node ids, joint 1 first) in ``unit`` (``deg`` or ``rad``), optional ``speed_nodes`` (six, the
+    same unit per second)."""
+
+    fields = OPCUA_FIELDS
+
+    def __init__(
+        self,
+        url: str,
+        position_nodes: Sequence[str],
+        speed_nodes: Sequence[str] | None = None,
+        *,
+        unit: str = "deg",
+        timeout_s: float = 1.0,
+        name: str = "robot",
+    ):
+        if len(position_nodes) != JOINTS or (speed_nodes is not None and len(speed_nodes) != JOINTS):
+            raise ValueError(f"OPC UA joints need {JOINTS} position (and speed) node ids")
+        self.name, self.url, self.unit, self.timeout_s = name, url, unit, timeout_s
+        self.node_ids = [*position_nodes, *(speed_nodes or ())]
+        self._speeds = speed_nodes is not None
+        self._client: Client | None = None
+        self._nodes = []
+        self._last: tuple[float, tuple[float, ...]] | None = None
+
+    def open(self) -> None:
+        """Connect and read every node once (a node id the server lacks: DeviceReplyError naming it)."""
+        client = Client(self.url, timeout=self.timeout_s, sync_wrapper_timeout=self.timeout_s + 1.0)
+        try:
+            client.connect()
+        except (OSError, asyncio.TimeoutError, TimeoutError, ua.UaError) as exc:
+            client.tloop.stop()
+            raise DeviceUnreachable(
+                self.name, f"cannot connect to OPC UA {self.url}: {exc or type(exc).__name__}"
+            ) from exc
+        self._client, self._last = client, None
+        self._nodes = [client.get_node(n) for n in self.node_ids]
+        self._read_values()
+
+    def close(self) -> None:
+        client, self._client = self._client, None
+        if client is None:
+            return
+        try:
+            client.disconnect()
+        except Exception:  # noqa: BLE001 - a link already gone: nothing left to close but the loop
+            client.tloop.stop()
+
+    def read(self) -> Reading:
+        if self._client is None:
+            raise DeviceUnreachable(self.name, f"OPC UA {self.url} not connected (open() first)")
+        values, stamp = self._read_values()
+        now = time.monotonic()
+        factor = UNIT_TO_DEG[self.unit]
+        q = tuple(v * factor for v in values[:JOINTS])
+        if self._speeds:
+            qd = tuple(v * factor for v in values[JOINTS:])
+        elif self._last is None or now <= self._last[0]:
+            qd = (math.inf,) * JOINTS  # unknown until a second read: not settled
+        else:
+            qd = tuple((a - b) / (now - self._last[0]) for a, b in zip(q, self._last[1], strict=True))
+        self._last = (now, q)
+        values_out = {"q_deg": q, "qd_deg_s": qd, "robot_mode": RUNNING, "controller_time_s": stamp}
+        return Reading.now(self.name, values_out, OPCUA_FIELDS)
+
+    def _read_values(self) -> tuple[list[float], float]:
+        """Every node's value (one Read request) and joint 1's source timestamp [s since epoch]."""
+        params = ua.ReadParameters()
+        for node in self._nodes:
+            rv = ua.ReadValueId()
+            rv.NodeId, rv.AttributeId = node.nodeid, ua.AttributeIds.Value
+            params.NodesToRead.append(rv)
+        try:
+            results = self._client.tloop.post(self._client.aio_obj.uaclient.read(params))
+        except (asyncio.TimeoutError, TimeoutError) as exc:
+            raise DeviceTimeout(
+                self.name, f"OPC UA {self.url} did not answer within {self.timeout_s} s"
+            ) from exc
+        except (OSError, ConnectionError, ThreadLoopNotRunning, ua.UaError) as exc:
+            raise DeviceUnreachable(self.name, f"OPC UA {self.url}: {exc or type(exc).__name__}") from exc
+        out = []
+        for node_id, result in zip(self.node_ids, results, strict=True):
+            if not result.StatusCode.is_good():
+                raise DeviceReplyError(
+                    self.name,
+                    f"OPC UA {self.url}: node {node_id}: {result.StatusCode.name}",
+                    code=result.StatusCode.name,
+                )
+            try:
+                out.append(float(result.Value.Value))
+            except (TypeError, ValueError):
+                raise DeviceReplyError(
+                    self.name,
+                    f"OPC UA {self.url}: node {node_id} holds {result.Value.Value!r}, not a number",
+                    "NOT_A_NUMBER",
+                ) from None
+        stamp = results[0].SourceTimestamp or results[0].ServerTimestamp
+        return out, stamp.timestamp() if stamp else math.nan

@@ -1,0 +1,109 @@
+"""A controller's OPC UA server (``asyncua``) publishing the simulated robot's joints.
+
+Laid out as the OPC UA Robotics companion specification (OPC 40010-1) lays out a motion device:
+``Objects/DeviceSet/Robot/Axes/Axis<i>/ParameterSet/ActualPosition`` (deg) and ``ActualSpeed``
+(deg per simulated s), each with a string node id of that path in the server's namespace 2
+(:func:`position_node`, :func:`speed_node`). Every read computes the value from the robot program at
+that instant (a value callback), stamped with the time it was read. The server runs its own
+event loop in a thread; ``start()`` returns once it listens, ``stop()`` ends it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+from datetime import datetime, timezone
+
+from asyncua import Server, ua
+
+logging.getLogger("asyncua").setLevel(logging.CRITICAL)  # its notes and tracebacks: start() reports
+
+NAMESPACE = "urn:station:sim:robot"
+AXES = 6
+
+
+def position_node(axis: int) -> str:
+    """Node id of axis ``axis``'s (1..6) ActualPosition."""
+    return f"ns=2;s=DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/ActualPosition"
+
+
+def speed_node(axis: int) -> str:
+    """Node id of axis ``axis``'s (1..6) ActualSpeed."""
+    return f"ns=2;s=DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/ActualSpeed"
+
+
+class OpcUaRobotServer:
+    """Serves ``state()`` (a callable returning joints [deg] and speeds [deg/s], (6,) each) at
+    ``opc.tcp://host:port``."""
+
+    def __init__(self, state, host: str, port: int = 4840):
+        self.state, self.host, self.port = state, host, port
+        self.url = f"opc.tcp://{host}:{port}"
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="opcua-sim", daemon=True)
+
+    def start(self) -> OpcUaRobotServer:
+        self._thread.start()
+        self._ready.wait(30.0)
+        if self._error is not None:
+            raise RuntimeError(f"OPC UA server at {self.url}: {self._error}") from self._error
+        if not self._ready.is_set():
+            raise RuntimeError(f"OPC UA server at {self.url} did not start within 30 s")
+        return self
+
+    def stop(self) -> None:
+        if self._loop is not None and self._stop is not None and self._thread.is_alive():
+            self._loop.call_soon_threadsafe(self._stop.set)
+            self._thread.join(10.0)
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._serve())
+        except BaseException as exc:  # noqa: BLE001 - reported to start() in the caller's thread
+            self._error = exc
+            self._ready.set()
+
+    async def _serve(self) -> None:
+        self._loop, self._stop = asyncio.get_running_loop(), asyncio.Event()
+        server = Server()
+        await server.init()
+        server.set_endpoint(self.url)
+        server.set_server_name("station simulated robot controller")
+        ns = await server.register_namespace(NAMESPACE)
+        folder = server.nodes.objects
+        for name in ("DeviceSet", "Robot", "Axes"):
+            folder = await folder.add_object(ua.NodeId(f"{_path(folder)}{name}", ns), name)
+        for axis in range(1, AXES + 1):
+            obj = await folder.add_object(ua.NodeId(f"DeviceSet/Robot/Axes/Axis{axis}", ns), f"Axis{axis}")
+            params = await obj.add_object(
+                ua.NodeId(f"DeviceSet/Robot/Axes/Axis{axis}/ParameterSet", ns), "ParameterSet"
+            )
+            for key, index in (("ActualPosition", 0), ("ActualSpeed", 1)):
+                node_id = ua.NodeId(f"DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/{key}", ns)
+                await params.add_variable(node_id, key, 0.0, varianttype=ua.VariantType.Double)
+                server.set_attribute_value_callback(node_id, self._reader(axis - 1, index))
+        async with server:
+            self._ready.set()
+            await self._stop.wait()
+
+    def _reader(self, joint: int, index: int):
+        """The value callback of one joint's position (index 0) or speed (1)."""
+
+        def read(node_id, attr) -> ua.DataValue:
+            value = float(self.state()[index][joint])
+            now = datetime.now(timezone.utc)
+            return ua.DataValue(
+                ua.Variant(value, ua.VariantType.Double), SourceTimestamp=now, ServerTimestamp=now
+            )
+
+        return read
+
+
+def _path(folder) -> str:
+    """The string id prefix of the objects below ``folder`` (the root: none)."""
+    ident = folder.nodeid.Identifier
+    return f"{ident}/" if isinstance(ident, str) else ""

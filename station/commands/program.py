@@ -1,0 +1,86 @@
+"""``station program PLAN.csv --robot R --format urscript|poses-csv --out F``: the measurement
+program that brings the tool onto each planned contact (``station.jobs.measurement``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+FORMATS = ("urscript", "poses-csv")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("program", help="write the measurement program for a plan (URScript or a pose list)")
+    p.add_argument("plan", type=Path, help="plan CSV (station plan): targets, joints, contact poses")
+    p.add_argument("--robot", type=Path, required=True, help="nominal robot TOML the plan was made for")
+    p.add_argument(
+        "--format", choices=FORMATS, required=True, help="urscript (UR) or poses-csv (any controller)"
+    )
+    p.add_argument("--out", type=Path, required=True, help="program file to write")
+    p.add_argument(
+        "--standoff-mm",
+        type=_positive,
+        default=20.0,
+        metavar="MM",
+        help="stand-off back along the approach (20)",
+    )
+    p.add_argument(
+        "--dwell-s",
+        type=_positive,
+        default=3.0,
+        metavar="S",
+        help="dwell at each contact, s (3: settle + capture)",
+    )
+    p.add_argument(
+        "--table",
+        type=Path,
+        help="a corrected table (station calibrate --out): the plan's joints are corrected to land the "
+        "contact poses on the edge (station compensate PLAN --table T --robot R), the stand-offs follow it",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from station.formats.base import Output, check_writable, write_outputs
+    from station.formats.plan import load_plan
+    from station.formats.tables import load_robot
+    from station.jobs import measurement
+
+    check_writable(args.out, "--out")
+    plan, robot = load_plan(args.plan), load_robot(args.robot)
+    if args.table is not None:
+        from station.formats.tables import check_same_robot, check_same_tool
+
+        table = load_robot(args.table)
+        check_same_robot(table, str(args.table), robot, str(args.robot))
+        check_same_tool(table, str(args.table), robot, str(args.robot))
+        robot = table
+    motion = measurement.Motion(standoff_mm=args.standoff_mm, dwell_s=args.dwell_s)
+    found = measurement.measurement(plan, robot, str(args.plan), motion)
+    if args.format == "urscript":
+        text = measurement.urscript(found, robot, str(args.plan), motion)
+    else:
+        text = measurement.poses_csv(found, motion)
+    write_outputs([Output.text(args.out, "--out", text)])
+    source = "the plan" if plan.pose is not None else "the nominal TCP at the plan's joints (an older plan)"
+    if found.skipped.any():
+        left = ", ".join(str(int(t)) for t in plan.target[found.skipped])
+        print(f"left out (no stand-off of even 2 mm within the joint limits): targets {left}")
+    short = int((found.distance_mm < args.standoff_mm).sum())
+    if short:
+        least = np.nanmin(found.distance_mm)
+        print(f"{short} targets near a joint limit get a shorter stand-off (down to {least:g} mm)")
+    print(f"{len(plan)} targets, contact poses from {source}; wrote {args.out}")
+    return 0
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 < value < 1e4:
+        raise argparse.ArgumentTypeError(f"{value:g} must be above 0 and below 10000")
+    return value

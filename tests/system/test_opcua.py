@@ -1,0 +1,141 @@
+"""Joints over OPC UA (``[robot] kind = "opcua"``): ``asyncua``'s client against an ``asyncua``
+server laid out as the OPC UA Robotics companion specification, fed by the simulated robot
+program; what a cell's wiring gets wrong (a node id, a server gone) is named, and ``sim serve``'s
+station reads its robot through it."""
+
+import random
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from drivers.base import RETRYABLE, DeviceReplyError
+from drivers.opcua import OpcUaJointSource
+from errors import InputError
+from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
+from sim_fixtures.robot_program import SimRobot
+from sim_fixtures.station_sim import SimStation
+from station.config import station_config
+
+POSITIONS = [position_node(i) for i in range(1, 7)]
+SPEEDS = [speed_node(i) for i in range(1, 7)]
+
+
+def _free_address() -> tuple[str, int]:
+    host = f"127.0.0.{random.SystemRandom().randint(2, 250)}"
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return host, s.getsockname()[1]
+
+
+@pytest.fixture
+def moving():
+    """A robot program between two targets (30 deg/s), its OPC UA server, the program's clock."""
+    robot = SimRobot(
+        [[0.0] * 6, [90.0, -45, 30, 10, 20, 60]], speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0
+    )
+    t0 = time.monotonic()
+
+    def state():
+        s = robot.state(time.monotonic() - t0)
+        return s.q_deg, s.qd_deg_s
+
+    server = OpcUaRobotServer(state, *_free_address()).start()
+    yield server, robot, t0
+    server.stop()
+
+
+def test_the_joints_are_the_robot_programs_at_the_instant_read(moving):
+    server, robot, t0 = moving
+    with OpcUaJointSource(server.url, POSITIONS, SPEEDS) as source:
+        for _ in range(40):
+            before = time.monotonic() - t0
+            reading = source.read()
+            after = time.monotonic() - t0
+            q = np.array(reading.values["q_deg"])
+            lo, hi = robot.state(before).q_deg, robot.state(after).q_deg
+            # between where the program was when the read left and when it came back
+            assert np.all(q >= np.minimum(lo, hi) - 1e-9) and np.all(q <= np.maximum(lo, hi) + 1e-9)
+            assert reading.values["robot_mode"] == 7
+            time.sleep(0.05)
+        assert max(abs(v) for v in reading.values["qd_deg_s"]) <= 30.0 + 1e-9
+
+
+def test_without_speed_nodes_the_speed_is_the_change_between_reads(moving):
+    server, robot, t0 = moving
+    with OpcUaJointSource(server.url, POSITIONS) as source:
+        assert np.isinf(source.read().values["qd_deg_s"]).all()  # one read: no speed yet, not settled
+        time.sleep(max(0.0, 6.6 - (time.monotonic() - t0)))  # cruising at 30 deg/s (joint 1 leads)
+        source.read()
+        time.sleep(0.2)
+        t = time.monotonic() - t0
+        qd = source.read().values["qd_deg_s"][0]
+        assert qd == pytest.approx(robot.state(t).qd_deg_s[0], rel=0.1)
+
+
+def test_a_node_the_server_lacks_is_named_and_a_server_gone_is_retryable(moving):
+    server, *_ = moving
+    wrong = [*POSITIONS[:5], "ns=2;s=DeviceSet/Robot/Axes/Axis6/ParameterSet/ActualPositon"]
+    source = OpcUaJointSource(server.url, wrong)
+    with pytest.raises(
+        DeviceReplyError, match=r"node ns=2;s=.*Axis6/ParameterSet/ActualPositon: BadNodeIdUnknown"
+    ):
+        source.open()
+    source.close()
+    source = OpcUaJointSource(server.url, POSITIONS, timeout_s=0.5)
+    source.open()
+    server.stop()
+    with pytest.raises(RETRYABLE):
+        for _ in range(50):
+            source.read()
+            time.sleep(0.05)
+    source.close()
+
+
+def test_sim_serve_publishes_its_robot_over_opcua_for_the_station(tmp_path):
+    host, port = _free_address()
+    _, ds_port = _free_address()
+    raw = {
+        "robot": {"kind": "opcua", "url": f"opc.tcp://{host}:{port}"},  # the node ids: their defaults
+        "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": ds_port},
+        "sim": {"targets_per_line": 3, "plan_csv": str(tmp_path / "plan.csv")},
+    }
+    cfg = station_config(raw, "test")
+    assert cfg.robot.endpoint() == f"opcua opc.tcp://{host}:{port}"
+    station = SimStation(cfg, hold=True)
+    try:
+        addresses = station.start()
+        assert addresses[0] == {
+            "device": "robot",
+            "protocol": "opcua",
+            "url": cfg.robot.url,
+            "time_scale": 1.0,
+        }
+        with cfg.robot.build() as source:
+            np.testing.assert_allclose(source.read().values["q_deg"], station.plan_deg[0])
+    finally:
+        station.stop()
+    other = station_config({**raw, "robot": {**raw["robot"], "position_node": "ns=3;i={axis}"}}, "test")
+    with pytest.raises(InputError, match=r"\[robot\] position_node, speed_node: the simulated OPC UA server"):
+        SimStation(other, hold=True).start()
+
+
+@pytest.mark.parametrize(
+    "robot, message",
+    [
+        ({"url": "http://x:4840"}, "robot.url: String should match pattern"),
+        (
+            {"position_node": "ns=2;s=Axis1.ActualPosition"},
+            "robot.position_node: 'ns=2;s=Axis1.ActualPosition': write {axis}",
+        ),
+        ({"unit": "grad"}, "robot.unit: Input should be 'deg' or 'rad'"),
+    ],
+)
+def test_a_wrong_opcua_section_is_one_line_naming_the_key(robot, message):
+    raw = {
+        "robot": {"kind": "opcua", **robot},
+        "drawstring": {"kind": "modbus_tcp"},
+    }
+    with pytest.raises(InputError, match=message):
+        station_config(raw, "station.toml")

@@ -1,0 +1,131 @@
+"""``station program``: plan rows carry the contact pose and approach (older plans still read), and
+the measurement program moves to a stand-off on the approach, slowly onto the contact, dwells and
+retreats, each pose where the nominal model puts it."""
+
+import re
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import configs
+from calib import ik
+from errors import InputError
+from sim_fixtures.world import GaugeLine, Robot, World
+from station.cli import main
+from station.formats.plan import Plan, load_plan
+from station.formats.tables import load_robot
+from station.jobs import measurement
+from station.jobs.planning import contact_poses, robot_arrays
+
+IRB2600 = configs.path("robots/abb_irb2600.toml")
+LINE = GaugeLine(
+    0, np.array([1000.0, 0, 300]), np.array([0, 1.0, 0]), 400.0, np.array([0, 0, 1.0]), np.array([0, 0, -1.0])
+)
+
+
+@pytest.fixture(scope="module")
+def irb_plan():
+    robot = load_robot(IRB2600)
+    nominal = Robot(robot.table_deg(), np.zeros(3), robot.limits_deg())
+    world = World(nominal, nominal, np.zeros(3), 0.0, (LINE,))
+    q, lines = world.line_configurations(8, np.random.default_rng(0), max_tilt_deg=10.0)
+    pose = contact_poses(robot, np.radians(q))
+    return robot, Plan(np.arange(8), lines, q, pose, np.tile(LINE.approach, (8, 1)))
+
+
+def test_plan_rows_carry_the_contact_pose_and_older_plans_still_read(irb_plan, tmp_path):
+    robot, plan = irb_plan
+    path = tmp_path / "plan.csv"
+    path.write_text(plan.csv_text())
+    header = path.read_text().splitlines()[0]
+    assert header.endswith("x_mm,y_mm,z_mm,rx_deg,ry_deg,rz_deg,ax,ay,az")
+    back = load_plan(path)
+    np.testing.assert_allclose(back.pose, plan.pose, atol=1e-4)
+    np.testing.assert_allclose(back.approach, plan.approach, atol=1e-6)
+    old = Plan(plan.target, plan.line, plan.q_deg)  # a plan of joints only, as before
+    path.write_text(old.csv_text())
+    assert load_plan(path).pose is None and load_plan(path).approach is None
+    text = plan.csv_text().splitlines()
+    path.write_text("\n".join([text[0].replace(",az", ""), *(r.rsplit(",", 1)[0] for r in text[1:])]) + "\n")
+    with pytest.raises(InputError, match="has x_mm but not az: a contact pose needs all of"):
+        load_plan(path)
+    path.write_text("\n".join([text[0], text[1].rsplit(",", 1)[0] + ",-2.0"]) + "\n")
+    with pytest.raises(InputError, match=r"row 0 \(line 2\): az: '-2.0' is outside -1.5 .. 1.5"):
+        load_plan(path)
+    path.write_text("\n".join([text[0], text[1].rsplit(",", 1)[0] + ",-0.5"]) + "\n")
+    with pytest.raises(InputError, match=r"row 0 \(line 2\): ax,ay,az: not a unit direction"):
+        load_plan(path)
+
+
+def _tcp(robot, q_deg):
+    dh, tool = robot_arrays(robot)
+    return ik.tool_frames(dh, np.radians(np.atleast_2d(q_deg)), tool)
+
+
+def test_the_program_backs_off_along_the_approach_and_comes_back_onto_the_contact(irb_plan):
+    robot, plan = irb_plan
+    found = measurement.measurement(plan, robot, "plan.csv")
+    p_contact, r_contact = _tcp(robot, plan.q_deg)
+    p_off, r_off = _tcp(robot, found.standoff_q_deg)
+    np.testing.assert_allclose(p_contact, plan.pose[:, :3], atol=1e-6)
+    np.testing.assert_allclose(p_off, p_contact - found.distance_mm[:, None] * plan.approach, atol=1e-4)
+    np.testing.assert_allclose(r_off, r_contact, atol=1e-6)  # the same tool orientation
+    assert (found.distance_mm == 20.0).all()
+
+    script = measurement.urscript(found, robot, "plan.csv")
+    moves = re.findall(r"^  (movej|movel|sleep)\((.*)\)$", script, re.M)
+    assert [m[0] for m in moves] == ["movej", "movel", "sleep", "movel"] * len(plan)
+    joints = [np.degrees(np.array(eval(m[1].split("]")[0] + "]"))) for m in moves if m[0] != "sleep"]  # noqa: S307
+    for k in range(len(plan)):
+        off, contact, back = joints[3 * k : 3 * k + 3]
+        np.testing.assert_allclose(off, found.standoff_q_deg[k], atol=1e-4)  # 1e-6 rad written
+        np.testing.assert_allclose(contact, plan.q_deg[k], atol=1e-4)  # 1e-6 rad written
+        np.testing.assert_allclose(back, found.standoff_q_deg[k], atol=1e-4)  # 1e-6 rad written
+    assert script.count("sleep(3)") == len(plan) and "v=0.0050" in script  # 5 mm/s onto the edge
+
+    rows = measurement.poses_csv(found).splitlines()
+    assert rows[0].split(",")[:9] == [
+        "target",
+        "line",
+        "x_mm",
+        "y_mm",
+        "z_mm",
+        "rx_deg",
+        "ry_deg",
+        "rz_deg",
+        "qw",
+    ]
+    first = np.array(rows[1].split(","), float)
+    w, x, y, z = first[8:12]
+    np.testing.assert_allclose(Rotation.from_quat([x, y, z, w]).as_matrix(), r_contact[0], atol=1e-6)
+
+
+def test_a_plan_for_another_robot_is_refused_naming_the_target(irb_plan, tmp_path, capsys):
+    robot, plan = irb_plan
+    ur10 = load_robot(configs.path("robots/ur10.toml"))
+    with pytest.raises(InputError, match=r"^plan.csv: target \d+: its contact pose lies .* from UR10"):
+        measurement.measurement(plan, ur10, "plan.csv")
+    path = tmp_path / "plan.csv"
+    path.write_text(Plan(plan.target, plan.line, plan.q_deg).csv_text())  # an older plan: the nominal TCP
+    out = tmp_path / "prog.script"
+    assert (
+        main(["program", str(path), "--robot", str(IRB2600), "--format", "urscript", "--out", str(out)]) == 0
+    )
+    assert "the nominal TCP at the plan's joints" in capsys.readouterr().out
+    assert out.read_text().count("movej(") == len(plan)
+
+
+def test_a_target_without_a_stand_off_within_the_limits_is_left_out_and_said(irb_plan):
+    robot, plan = irb_plan
+    q3 = float(plan.q_deg[0, 2])
+    joints = [j.model_copy() for j in robot.joints]
+    joints[2] = joints[2].model_copy(update={"q_min_deg": q3 - 1e-4, "q_max_deg": q3 + 1e-4})
+    pinned = robot.model_copy(update={"joints": joints})  # joint 3 cannot move from target 0's angle
+    found = measurement.measurement(plan, pinned, "plan.csv")
+    assert found.skipped[0]
+    script = measurement.urscript(found, pinned, "plan.csv")
+    assert "# target 0 left out: no stand-off within the joint limits" in script
+    assert script.count("movej(") == int((~found.skipped).sum())
+    rows = measurement.poses_csv(found).splitlines()[1:]
+    assert [int(r.split(",")[0]) for r in rows] == plan.target[~found.skipped].tolist()
