@@ -11,8 +11,10 @@ reading of a metre): the loader refuses them, naming the key.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import signal
 import sys
 import tempfile
 from collections.abc import Callable, Sequence
@@ -37,6 +39,7 @@ MAX_JOINT_DEG = 3600.0  # ten turns: joint readings and limits
 MAX_ANGLE_DEG = 360.0  # D-H table angles
 MIN_SIGMA_MM, MAX_SIGMA_MM = 1e-6, 100.0  # instrument noise: a nanometre to 100 mm
 MAX_ID = 10**9  # sample, target and line ids: whole numbers 0 .. MAX_ID
+NAME_MAX = 255  # bytes in one name of a path: the limit of Linux's file systems
 
 Length = Annotated[float, Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)]
 DialReading = Annotated[float, Field(ge=-MAX_DIAL_MM, le=MAX_DIAL_MM)]
@@ -162,8 +165,9 @@ def write_outputs(outputs: Sequence[Output]) -> None:
             temps.append(_temporary(out.path))
             out.write(temps[-1])
             os.chmod(temps[-1], 0o644)  # mkstemp makes it 0600; results are for others to read
-        for out, tmp in zip(outputs, temps, strict=True):
-            os.replace(tmp, out.path)
+        with signals_deferred():  # a SIGTERM or Ctrl-C now takes effect once every rename is done
+            for out, tmp in zip(outputs, temps, strict=True):
+                os.replace(tmp, out.path)
     except OSError as exc:
         names = ", ".join(str(o.path) for o in outputs)
         raise InputError(
@@ -172,6 +176,39 @@ def write_outputs(outputs: Sequence[Output]) -> None:
     finally:
         for tmp in temps:
             tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """SIGINT and SIGTERM held back for the block and delivered after it: a group of renames that
+    makes a command's outputs is never cut in two by a Ctrl-C or a service manager's stop."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+def printable(text: str) -> str:
+    """``text`` with the bytes a path holds that are not UTF-8 (``os.fsdecode`` keeps them as lone
+    surrogates, which no UTF-8 output takes) written ``\\xNN``."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def shown(path) -> str:
+    """A path as text that any output takes: bytes that are not UTF-8 (a folder named on another
+    system) as ``\\xNN``, names longer than 40 characters cut to their start and size."""
+    text = printable(str(path))
+    return "/".join(n if len(n) <= 40 else f"{n[:20]}...({len(n.encode())} bytes)" for n in text.split("/"))
+
+
+def check_path(path) -> None:
+    """InputError unless every name in ``path`` fits a file system (``NAME_MAX`` bytes): a name
+    too long fails here, in one line, instead of in the middle of a command's work."""
+    for name in Path(path).parts:
+        size = len(os.fsencode(name))
+        if size > NAME_MAX:
+            raise InputError(f"{shown(path)}: a name in this path is {size} bytes long; at most {NAME_MAX}")
 
 
 def check_writable(path: Path, what: str) -> Path:
@@ -193,8 +230,11 @@ def check_writable(path: Path, what: str) -> Path:
 
 
 def _temporary(path: Path) -> Path:
-    """A new empty file beside ``path``, hidden, ending like it (matplotlib picks a format by it)."""
-    fd, tmp = tempfile.mkstemp(dir=Path(path).parent, prefix=f".{Path(path).name}.", suffix=Path(path).suffix)
+    """A new empty file beside ``path``, hidden, ending like it (matplotlib picks a format by it);
+    its name is cut to fit the file system's limit on a name (a name near it stays writable)."""
+    path = Path(path)
+    stem = os.fsencode(path.name)[: NAME_MAX - len(os.fsencode(path.suffix)) - 12]
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{os.fsdecode(stem)}.", suffix=path.suffix)
     os.close(fd)
     return Path(tmp)
 
@@ -208,4 +248,16 @@ def _write_text(path: Path, text: str) -> None:
 
 
 def toml_text(data: dict) -> str:
-    return tomli_w.dumps(data)
+    """TOML of plain ``data``; text that cannot be UTF-8 (a path with bytes that are not: see
+    :func:`shown`) is written as it is shown."""
+    return tomli_w.dumps(_encodable(data))
+
+
+def _encodable(value):
+    if isinstance(value, dict):
+        return {_encodable(k): _encodable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_encodable(v) for v in value]
+    if isinstance(value, str) and not value.isascii():
+        return printable(value)
+    return value

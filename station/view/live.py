@@ -43,6 +43,8 @@ os.environ.setdefault("RUST_LOG", "warn,re_log_encoding=off,re_sdk::recording_st
 import rerun as rr  # noqa: E402
 import rerun.blueprint as rrb  # noqa: E402
 
+from station.formats.base import printable  # noqa: E402
+
 GREEN, RED, GREY = (40, 200, 80), (230, 60, 50), (150, 150, 150)
 FLUSH_TIMEOUT_S = 10.0
 BLUE, ORANGE, PURPLE = (60, 120, 230), (240, 150, 30), (170, 80, 200)
@@ -90,7 +92,8 @@ class LiveView:
 
     def __init__(self, rrd: Path, *, viewer: bool = False, web: str | None = None, resume: bool = False):
         rrd = Path(rrd)
-        self.rec = rr.RecordingStream("station", recording_id=f"session-{rrd.parent.name}")
+        # the id is text Rerun sends as UTF-8: a folder name that is not is shown with \xNN
+        self.rec = rr.RecordingStream("station", recording_id=f"session-{printable(rrd.parent.name)}")
         self.notes: list[str] = []
         self.incomplete: str | None = None
         self.web: WebViewer | None = None
