@@ -14,7 +14,7 @@ def process_command(pid: int, limit: int = 120) -> str | None:
         raw = Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return None
-    text = raw.rstrip(b"\0").replace(b"\0", b" ").decode("utf-8", "backslashreplace")
+    text = " ".join(raw.replace(b"\0", b" ").decode("utf-8", "backslashreplace").split())  # one line
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 

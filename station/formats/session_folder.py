@@ -204,10 +204,13 @@ LOCK_NAME = "session.lock"
 
 class FolderLock:
     """The one-writer lock of a session folder: an exclusive ``flock`` on ``session.lock`` in it,
-    which holds the writer's process id; released by :meth:`release` or the end of the process."""
+    which holds the writer's process id; released by :meth:`release` as often as it was taken,
+    or by the end of the process. A process holds a folder's lock once: its openings share it."""
 
-    def __init__(self, folder: Path, fh):
-        self.folder, self._fh = folder, fh
+    _held: dict[tuple[int, int], FolderLock] = {}  # by the folder's (device, inode)
+
+    def __init__(self, key: tuple[int, int], fh):
+        self._key, self._fh, self._count = key, fh, 1
 
     @classmethod
     def take(cls, folder) -> FolderLock:
@@ -215,6 +218,10 @@ class FolderLock:
         process has it, or saying why the lock file cannot be made."""
         folder = Path(folder)
         try:
+            st = os.stat(folder)
+            if (held := cls._held.get((st.st_dev, st.st_ino))) is not None:
+                held._count += 1
+                return held
             fh = open(folder / LOCK_NAME, "a+")  # noqa: SIM115 - held until release()
         except OSError as exc:
             raise InputError(f"{folder}: cannot write the session folder: {exc.strerror or exc}") from None
@@ -226,31 +233,31 @@ class FolderLock:
         fh.truncate(0)
         fh.write(f"{os.getpid()}\n")
         fh.flush()
-        return cls(folder, fh)
+        lock = cls._held[st.st_dev, st.st_ino] = cls((st.st_dev, st.st_ino), fh)
+        return lock
 
     @staticmethod
     def check(folder) -> None:
-        """InputError if a process holds ``folder``'s lock (a folder without one: nothing done)."""
+        """InputError if another process holds ``folder``'s lock (without one: nothing done)."""
         if (Path(folder) / LOCK_NAME).exists():
             FolderLock.take(folder).release()
 
     def release(self) -> None:
-        self._fh.close()
+        self._count -= 1
+        if self._count == 0:
+            del self._held[self._key]
+            self._fh.close()
 
 
-def _holder(folder: Path, wait_s: float = 0.5) -> str:
+def _holder(folder: Path, tries: int = 10) -> str:
     """Who holds ``folder``'s lock: "PID n (command line)", read from the lock file (a writer
-    that has just locked it may not have written its id yet: waits up to ``wait_s``)."""
-    deadline = time.monotonic() + wait_s
-    while True:
+    that has just locked it may not have written its id yet: ``tries`` reads 50 ms apart)."""
+    for _ in range(tries):
         try:
-            pid = int((folder / LOCK_NAME).read_text().strip())
+            return named(int((folder / LOCK_NAME).read_text().strip()))
         except (OSError, ValueError):
-            pid = None
-        if pid is not None or time.monotonic() > deadline:
-            break
-        time.sleep(0.05)
-    return "another process" if pid is None else named(pid)
+            time.sleep(0.05)
+    return "another process"
 
 
 def check_rows(rows: list[dict], plan: Plan, where: Path) -> None:
@@ -279,11 +286,12 @@ def check_session_rows(folder: Path) -> None:
     header = read_toml(folder / "session.toml")
     found = _whole_rows(folder / "samples.csv", SAMPLE_COLUMNS)
     _check_cells(folder / "samples.csv", found.rows, SAMPLE_CHECKS)
-    check_rows(found.rows, _plan_of(header, folder), folder / "samples.csv")
+    if "plan" in header:  # a folder made without one has nothing to check against
+        check_rows(found.rows, _plan_of(header, folder), folder / "samples.csv")
 
 
 def _plan_of(header: dict, folder: Path) -> Plan:
-    return Plan.from_rows(header.get("plan", []), str(folder / "session.toml"))
+    return Plan.from_rows(header["plan"], str(folder / "session.toml"))
 
 
 @dataclass
@@ -404,7 +412,8 @@ class SessionFolder:
         folder = cls(path, header, lock=lock)
         samples = _whole_rows(folder.samples_csv, SAMPLE_COLUMNS)
         _check_cells(folder.samples_csv, samples.rows, SAMPLE_CHECKS)
-        check_rows(samples.rows, _plan_of(header, path), folder.samples_csv)
+        if "plan" in header:  # resume_session has checked that it does
+            check_rows(samples.rows, _plan_of(header, path), folder.samples_csv)
         folder.rows = samples.rows
         raw = _whole_rows(folder.raw_csv, RAW_COLUMNS)
         _check_cells(folder.raw_csv, raw.rows, RAW_CHECKS)

@@ -1,9 +1,10 @@
 """A session folder reopened for ``--resume`` and a plan read back: every value is validated
 before anything is repaired, and a problem is one line naming the file, the row or key."""
 
-import os
 import re
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -31,6 +32,7 @@ def session(tmp_path):
         row = {"sample": k, "target": k, "line": 0, **q, "length_mm": 900.0 + k, "dial_mm": 0.1, "t_s": k}
         row["t_wall_s"] = 1.7e9 + k
         inputs.folder.append(row, [{"sample": k, "k": 0, **q}])
+    inputs.folder.release()  # as the session's process ended
     with (tmp_path / "sess" / "samples.csv").open("a") as fh:
         fh.write("2,2,1,1.0,2.0")
     return tmp_path / "sess"
@@ -195,15 +197,27 @@ def test_a_row_the_plan_does_not_hold_is_named_by_resume_and_calibrate(session, 
 
 
 def test_a_folder_another_process_writes_is_refused_before_anything_is_read(session):
-    from station.formats.session_folder import FolderLock
-
-    held = FolderLock.take(session)  # as another writer holds it (flock: per open file)
-    (session / "session.toml").write_text("not toml [")  # read before locking: another error
-    before = _files(session)
-    in_use = rf"sess: folder in use by PID {os.getpid()} \(.*\); nothing in it touched"
-    with pytest.raises(InputError, match=in_use):
-        runner.resume_session(session, None)
-    assert _files(session) == before
-    held.release()
+    holder = subprocess.Popen(  # another writer: holds the folder's lock until told to go
+        [sys.executable, "-c", HOLD, str(session)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout.readline() == "locked\n"
+        (session / "session.toml").write_text("not toml [")  # read before locking: another error
+        before = _files(session)
+        in_use = rf"sess: folder in use by PID {holder.pid} \(.*-c.*\); nothing in it touched"
+        with pytest.raises(InputError, match=in_use):
+            runner.resume_session(session, None)
+        assert _files(session) == before
+    finally:
+        holder.communicate("", timeout=10)
     with pytest.raises(InputError, match="session.toml: not valid TOML"):
         runner.resume_session(session, None)
+
+
+HOLD = """
+import sys
+from station.formats.session_folder import FolderLock
+lock = FolderLock.take(sys.argv[1])
+print("locked", flush=True)
+sys.stdin.read()
+"""
