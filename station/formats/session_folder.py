@@ -332,8 +332,8 @@ class SessionFolder:
         session there yet, a folder the station can create and write), so that bad input fails
         before any device is opened and a session that never starts leaves nothing behind."""
         path = Path(path)
+        FolderLock.check(path)  # a session running there: say so, rather than "resume it"
         _no_session_in(path)
-        FolderLock.check(path)
         existing = next(p for p in (path.absolute(), *path.absolute().parents) if p.exists())
         if not existing.is_dir():
             raise InputError(f"{path}: cannot write the session folder: {existing} is not a folder")
