@@ -191,7 +191,7 @@ def _calibrate(out: Path, inputs, view, seed: int) -> int:
     import numpy as np
 
     from sim_fixtures.world import World
-    from station.formats.base import atomic_write, toml_text
+    from station.formats.base import Output, toml_text, write_outputs
     from station.formats.samples import load_samples
     from station.jobs import calibration
     from station.jobs.report import corrected_table
@@ -225,12 +225,12 @@ def _calibrate(out: Path, inputs, view, seed: int) -> int:
     table = corrected_table(
         inputs.robot, main_outcome.calibration, samples, "lmlc", payload=main_outcome.payload
     )
-    atomic_write(out / "corrected.toml", toml_text(table))
-    atomic_write(out / "report.json", json.dumps(main_outcome.report.as_json(), indent=2) + "\n")
-    for method, outcome in outcomes.items():
-        if method != "lmlc":
-            report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
-            atomic_write(out / f"report-{method}.json", report)
+    outputs = [Output.text(out / "corrected.toml", "--out", toml_text(table))]
+    for method, outcome in outcomes.items():  # report.json is lmlc's; all written, or none
+        name = "report.json" if method == "lmlc" else f"report-{method}.json"
+        report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
+        outputs.append(Output.text(out / name, "--out", report))
+    write_outputs(outputs)
     print(f"calibrate: wrote {out / 'corrected.toml'} and {out / 'report.json'} (lmlc)", flush=True)
     return 0
 
