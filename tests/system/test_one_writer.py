@@ -19,6 +19,12 @@ def _station(*args) -> list[str]:
     return [sys.executable, "-m", "station.cli", *map(str, args)]
 
 
+def _new_session(config, folder) -> subprocess.Popen:
+    """``station sample --out folder`` started in the background, its output kept."""
+    command = _station("sample", "--config", config, "--out", folder)
+    return subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
 def _wait_rows(folder, n: int, proc) -> None:
     deadline = time.monotonic() + 60
     while len(_lines(folder)) < n + 1 and proc.poll() is None and time.monotonic() < deadline:
@@ -39,10 +45,7 @@ def test_two_sessions_started_together_on_one_folder_without_a_dial_one_is_refus
     config.write_text(tomli_w.dumps(raw))
     folder = tmp_path / "sess"
     with simulated(config):
-        first = subprocess.Popen(
-            _station("sample", "--config", config, "--out", folder), cwd=ROOT, stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+        first = _new_session(config, folder)
         time.sleep(0.3)
         second = subprocess.run(
             _station("sample", "--config", config, "--out", folder), cwd=ROOT, capture_output=True,
@@ -62,10 +65,7 @@ def test_a_second_writer_with_a_dial_is_refused_before_it_reads_anything(tmp_pat
     config = write_config(tmp_path, time_scale=4.0)  # slow enough to act while it runs
     folder = tmp_path / "sess"
     with simulated(config):
-        first = subprocess.Popen(
-            _station("sample", "--config", config, "--out", folder), cwd=ROOT, stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+        first = _new_session(config, folder)
         try:
             _wait_rows(folder, 2, first)
             before = {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix == ".csv"}
