@@ -17,6 +17,7 @@ import os
 import signal
 import sys
 import tempfile
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -180,13 +181,25 @@ def write_outputs(outputs: Sequence[Output]) -> None:
 
 @contextlib.contextmanager
 def signals_deferred():
-    """SIGINT and SIGTERM held back for the block and delivered after it: a group of renames that
-    makes a command's outputs is never cut in two by a Ctrl-C or a service manager's stop."""
-    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    """SIGINT and SIGTERM held back for the block and acted on after it, as they would have been:
+    a group of renames that makes a command's outputs is never cut in two by a Ctrl-C or a service
+    manager's stop. (Handlers, not a signal mask: the kernel hands a process's signal to any of its
+    threads, e.g. a BLAS worker's, which a mask on this one would not stop.) Python sets handlers
+    in the main thread only; elsewhere the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    held = {
+        s: signal.signal(s, lambda signum, _: caught.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)
+    }
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        for s, handler in held.items():
+            signal.signal(s, handler)
+        for signum in caught:
+            signal.raise_signal(signum)
 
 
 def printable(text: str) -> str:
