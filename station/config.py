@@ -32,10 +32,15 @@ UNREACHABLE_HINT = "is `station sim serve` running, or the station's wiring up?"
 
 def unreachable_hint(cfg: StationConfig, exc: Exception) -> str:
     """What to check when a device stays unreachable at the start: the process that holds its
-    serial port where one does (another session, a terminal program), else :data:`UNREACHABLE_HINT`."""
+    serial port where one does (another session, a terminal program; one this user cannot see is
+    "another process" where pyserial found the port locked), else :data:`UNREACHABLE_HINT`."""
     section = cfg.devices().get(getattr(exc, "device", None))
-    if isinstance(section, SerialLine) and (pid := file_holder(section.port)) is not None:
+    if not isinstance(section, SerialLine):
+        return UNREACHABLE_HINT
+    if (pid := file_holder(section.port)) is not None:
         return f"{section.port} is held by {named(pid)}"
+    if "exclusively lock" in str(exc):  # pyserial's words for a port another process locked
+        return f"{section.port} is held by another process"
     return UNREACHABLE_HINT
 
 
