@@ -48,7 +48,10 @@ def test_two_cells_started_at_once_on_the_same_addresses_each_serve_and_read_the
         readings = {
             name: subprocess.run(
                 [sys.executable, "-m", "station.cli", "read", "--config", str(path)],
-                cwd=ROOT, capture_output=True, text=True, timeout=60,
+                cwd=ROOT,
+                capture_output=True,
+                text=True,
+                timeout=60,
             )  # fmt: skip
             for name, path in configs.items()
         }
