@@ -15,7 +15,9 @@ the simulated true robot's pose implies at the instant they are asked:
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import fcntl
 import functools
 import itertools
 import time
@@ -33,7 +35,7 @@ from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.robot_program import RobotFault, SimRobot
 from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
-from sim_fixtures.rtde_server import RtdeServerProcess
+from sim_fixtures.rtde_server import RtdeServerProcess, start_on_free_loopback
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, SimClock
 from sim_fixtures.world import Placement, Robot, World
@@ -142,15 +144,38 @@ def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock) -> RosbridgeS
     return RosbridgeServer(state, section.host, section.port, section.topic)
 
 
-def _pty_link(port: str, section: str) -> Path:
-    """A pty link path from the config; refuses to replace anything that is not a symlink."""
+def _pty_link(port: str, section: str, elsewhere: Path | None = None) -> Path:
+    """A pty link path from the config; refuses to replace anything that is not a symlink. With
+    ``elsewhere``, a link that is live (another cell's pty) is left alone: the link goes there."""
     path = Path(port)
+    if elsewhere is not None and path.exists():
+        return elsewhere / path.name
     if path.exists() and not path.is_symlink():
         raise InputError(
             f"[{section}] port = {port!r}: exists and is not a link; "
             "sim serve only creates pty links (e.g. /tmp/station-sim/<name>)"
         )
     return path
+
+
+@contextlib.contextmanager
+def _links_claimed(cfg, elsewhere: Path | None):
+    """While held, no other cell started ``elsewhere`` looks for or makes pty links in the
+    configured links' folders (an flock on ``.links.lock`` in each): a link found free is ours."""
+    if elsewhere is None:
+        yield
+        return
+    ports = [
+        s.port
+        for s in (cfg.drawstring, cfg.dial)
+        if s is not None and isinstance(getattr(s, "port", None), str)
+    ]
+    with contextlib.ExitStack() as stack:
+        for folder in sorted({Path(p).parent for p in ports}):
+            folder.mkdir(parents=True, exist_ok=True)
+            fh = stack.enter_context(open(folder / ".links.lock", "a"))
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        yield
 
 
 class SimStation:
@@ -221,18 +246,24 @@ class SimStation:
     def measure_dial(self) -> float:
         return self._dial.measure(self.source.state(self.clock.now()).dial_mm)
 
-    def _drawstring(self):
+    def _drawstring(self, elsewhere: Path | None = None, tcp_port: int | None = None):
         ds = self.cfg.drawstring
         if isinstance(ds, DrawstringAscii):
-            link = _pty_link(ds.port, "drawstring")
+            link = _pty_link(ds.port, "drawstring", elsewhere)
             return SerialAsciiDevice(link, DIALECTS["drawstring"], self.measure_length)
         regs = ds.registers.register_map(ds.device_id)
         if isinstance(ds, DrawstringModbusTcp):
-            return ModbusDevice(regs, self.measure_length, tcp=(ds.host, ds.port))
-        link = _pty_link(ds.port, "drawstring")
+            return ModbusDevice(
+                regs, self.measure_length, tcp=(ds.host, ds.port if tcp_port is None else tcp_port)
+            )
+        link = _pty_link(ds.port, "drawstring", elsewhere)
         return ModbusDevice(regs, self.measure_length, rtu_link=link, baudrate=ds.baudrate)
 
-    def start(self) -> list[dict]:
+    def start(self, elsewhere: Path | None = None) -> list[dict]:
+        """Serve every device; the addresses served, one dict each. With ``elsewhere`` (a folder),
+        a device whose configured address another cell holds is served at a free one instead
+        (RTDE on another 127.0.0.x, Modbus TCP on a free port, a pty link in ``elsewhere``): each
+        is bound first and then announced, so cells started together never collide."""
         try:
             robot = self.cfg.robot
             if isinstance(robot, RobotOpcUa):
@@ -240,21 +271,37 @@ class SimStation:
             elif isinstance(robot, RobotRos):
                 self.devices["robot"] = ros_robot(robot, self.robot, self.clock).start()
             else:
-                self.devices["robot"] = RtdeServerProcess(
-                    self.robot, robot.host, start_monotonic=self.clock.start_monotonic
-                ).start()
-            self.devices["drawstring"] = self._drawstring()
-            self.devices["drawstring"].start()
-            if self.cfg.dial:
-                link = _pty_link(self.cfg.dial.port, "dial")
-                self.devices["dial"] = SerialAsciiDevice(
-                    link, DIALECTS[self.cfg.dial.dialect], self.measure_dial, DIAL_RANGE_MM
-                )
-                self.devices["dial"].start()
+                self.devices["robot"] = self._rtde(elsewhere is not None)
+            with _links_claimed(self.cfg, elsewhere):
+                self.devices["drawstring"] = self._drawstring(elsewhere)
+                try:
+                    self.devices["drawstring"].start()
+                except (OSError, RuntimeError):  # its TCP port taken: bind a free one
+                    if elsewhere is None or not isinstance(self.cfg.drawstring, DrawstringModbusTcp):
+                        raise
+                    self.devices["drawstring"] = self._drawstring(tcp_port=0)
+                    self.devices["drawstring"].start()
+                if self.cfg.dial:
+                    link = _pty_link(self.cfg.dial.port, "dial", elsewhere)
+                    self.devices["dial"] = SerialAsciiDevice(
+                        link, DIALECTS[self.cfg.dial.dialect], self.measure_dial, DIAL_RANGE_MM
+                    )
+                    self.devices["dial"].start()
         except BaseException:
             self.stop()
             raise
         return [self.address(name) for name in self.devices]
+
+    def _rtde(self, elsewhere: bool) -> RtdeServerProcess:
+        """The RTDE server at the configured host (port 30004 is fixed), or at a free loopback
+        address where ``elsewhere`` and the configured one is taken."""
+        started = self.clock.start_monotonic
+        try:
+            return RtdeServerProcess(self.robot, self.cfg.robot.host, start_monotonic=started).start()
+        except OSError:
+            if not elsewhere:
+                raise
+            return start_on_free_loopback(self.robot, start_monotonic=started)
 
     def address(self, name: str) -> dict:
         """Where device ``name`` is served, as printed by ``sim serve``."""

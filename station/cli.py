@@ -6,6 +6,7 @@ import argparse
 import importlib
 import signal
 import sys
+from pathlib import Path
 
 from errors import DeviceError, InputError, OutputError
 
@@ -73,10 +74,15 @@ class _Version(argparse.Action):
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    # a path with bytes that are not UTF-8 (a folder named on another system) prints as it is named
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="surrogateescape")
     # a service manager's or `kill`'s SIGTERM ends a command as Ctrl-C does: files closed, children
     # (the viewer, the refit worker) stopped, exit 130
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
+        _check_paths(args)
         return int(args.func(args) or 0)
     except InputError as exc:
         print(f"station: error: {exc}", file=sys.stderr)
@@ -92,6 +98,17 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def _check_paths(args) -> None:
+    """Every path a command was given fits a file system (InputError naming it): checked once here
+    for all commands, before any work."""
+    from station.formats.base import check_path
+
+    for value in vars(args).values():
+        for path in value if isinstance(value, list | tuple) else (value,):
+            if isinstance(path, Path):
+                check_path(path)
 
 
 def _interrupt(signum, frame) -> None:

@@ -20,13 +20,30 @@ from drivers.config import (
     Reconnect,
     RobotConfig,
     Section,
+    SerialLine,
     error_key,
 )
 from errors import InputError
 from station.formats.base import MAX_DIAL_MM, MAX_LENGTH_MM, DialReading, Length, TimeScale, read_toml
+from station.holders import file_holder, named
 
 UNREACHABLE_HINT = "is `station sim serve` running, or the station's wiring up?"
 """What a device that stays unreachable at the start of ``station read`` or ``station sample`` asks."""
+
+
+def unreachable_hint(cfg: StationConfig, exc: Exception) -> str:
+    """What to check when a device stays unreachable at the start: the process that holds its
+    serial port where one does (another session, a terminal program; one this user cannot see is
+    "another process" where pyserial found the port locked), else :data:`UNREACHABLE_HINT`."""
+    section = cfg.devices().get(getattr(exc, "device", None))
+    if not isinstance(section, SerialLine):
+        return UNREACHABLE_HINT
+    if (pid := file_holder(section.port)) is not None:
+        return f"{section.port} is held by {named(pid)}"
+    if "exclusively lock" in str(exc):  # pyserial's words for a port another process locked
+        return f"{section.port} is held by another process"
+    return UNREACHABLE_HINT
+
 
 Seconds = Annotated[float, Field(gt=0, le=86400)]  # a time of the capture rule, s: up to a day
 

@@ -19,7 +19,7 @@ from station.acquire.capture import Devices, Rules
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
-from station.config import UNREACHABLE_HINT, StationConfig, load_station_config, station_config
+from station.config import StationConfig, load_station_config, station_config, unreachable_hint
 from station.formats.announcement import announcement_path, running_simulator
 from station.formats.base import read_toml, validate
 from station.formats.plan import Plan, load_plan
@@ -133,18 +133,24 @@ def resume_session(
     folder_path: Path, config_path: Path | None, time_scale: float | None = None
 ) -> SessionInputs:
     """Reopen a session folder; its embedded config serves unless ``config_path`` is given, at the
-    time scale :func:`agree_time_scale` finds. All of ``session.toml`` is validated before the
-    folder is opened (and repaired)."""
+    time scale :func:`agree_time_scale` finds. The folder is locked first (one writer), and all
+    of ``session.toml`` is validated before the folder is opened (and repaired)."""
     where = Path(folder_path) / "session.toml"
-    header = validate(SessionHeader, read_toml(where), str(where))
-    if config_path:
-        cfg = load_station_config(config_path)
-    else:
-        cfg = station_config(header.station, f"{where} [station]")
-    cfg, notes = agree_time_scale(cfg, time_scale)
-    plan = Plan.from_rows(header.plan, str(where))
-    agree_robot(cfg, header.robot, f"{where} [robot]")
-    return SessionInputs(SessionFolder.open(folder_path), cfg, plan, header.robot, header.setup, notes)
+    lock = SessionFolder.lock_for_resume(folder_path)
+    try:
+        header = validate(SessionHeader, read_toml(where), str(where))
+        if config_path:
+            cfg = load_station_config(config_path)
+        else:
+            cfg = station_config(header.station, f"{where} [station]")
+        cfg, notes = agree_time_scale(cfg, time_scale)
+        plan = Plan.from_rows(header.plan, str(where))
+        agree_robot(cfg, header.robot, f"{where} [robot]")
+    except BaseException:
+        lock.release()
+        raise
+    folder = SessionFolder.open(folder_path, lock)
+    return SessionInputs(folder, cfg, plan, header.robot, header.setup, (*notes, *folder.notes))
 
 
 def open_devices(cfg: StationConfig) -> Devices:
@@ -163,7 +169,7 @@ def open_devices(cfg: StationConfig) -> Devices:
                 pass  # it answers (e.g. a dial off the edge, out of range): reachable
     except DriverError as exc:
         devices.close()
-        raise DeviceError(f"{exc} ({UNREACHABLE_HINT})") from exc
+        raise DeviceError(f"{exc} ({unreachable_hint(cfg, exc)})") from exc
     return devices
 
 

@@ -120,7 +120,12 @@ def load_inputs(args) -> Inputs:
     """Samples (CSV or session folder), robot, setup and hold-out from ``args``; the flags override
     what a session folder embeds, and ``notes`` say so where they differ from it."""
     from station.formats.samples import load_samples
-    from station.formats.session_folder import load_robot_and_setup, replaced_by, samples_path
+    from station.formats.session_folder import (
+        check_session_rows,
+        load_robot_and_setup,
+        replaced_by,
+        samples_path,
+    )
 
     if not args.samples.exists():
         raise InputError(f"{args.samples}: no such file or folder (a samples CSV or a session folder)")
@@ -128,6 +133,8 @@ def load_inputs(args) -> Inputs:
     if session is None and args.robot is None:
         raise InputError(f"{args.samples}: a samples CSV needs --robot")
     robot, setup, setup_where, session_samples = load_robot_and_setup(session, args.robot, args.setup)
+    if session is not None:
+        check_session_rows(session)  # each row a target of the session's plan, on its line
     samples = load_samples(session_samples or args.samples)
     holdout = load_samples(samples_path(args.holdout)) if args.holdout else None
     if holdout is not None and holdout.kind != samples.kind:

@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import random
-import socket
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -73,18 +71,19 @@ def run(args) -> int:
         raise InputError(f"{out / 'session'}: exists already; choose another --out or remove it")
     out.mkdir(parents=True, exist_ok=True)
     check_writable(out / "report.json", "--out")
-    raw, notes = demo_config(out, args.seed)
-    for note in notes:
-        print(note)
+    raw = demo_config(args.seed)
     config_path = out / "station.toml"
     atomic_write(config_path, tomli_w.dumps(raw))
     plan = _plan(out, config_path, args.plan_size)
     sim = SimStation(StationConfig.model_validate(raw), plan=(plan.q_deg, plan.line), start_delay_s=START_S)
-    try:
-        sim.start()
+    try:  # bound first (where the contract's addresses are taken: free ones), then announced
+        served = sim.start(elsewhere=out.resolve())
     except (OSError, RuntimeError) as exc:
         raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
     try:
+        for note in serve_at(raw, served):
+            print(note)
+        atomic_write(config_path, tomli_w.dumps(raw))
         inputs = runner.new_session(out / "session", config_path, out / "plan.csv")
         session = _session(inputs, args.viewer)
     finally:
@@ -156,30 +155,14 @@ def _session(inputs, viewer: bool) -> SessionRun:
     return done
 
 
-def demo_config(out: Path, seed: int) -> tuple[dict, list[str]]:
-    """The demo's station config: contract addresses where free, else free ones (with a note)."""
-    notes = []
-    rtde_host = CONTRACT["rtde"][0]
-    if not _free(*CONTRACT["rtde"]):
-        rtde_host = next(
-            h for h in (f"127.0.0.{random.randint(2, 250)}" for _ in range(50)) if _free(h, 30004)
-        )
-        notes.append(f"RTDE 127.0.0.1:30004 is taken: the simulated controller serves {rtde_host}:30004")
-    modbus_port = CONTRACT["modbus"][1]
-    if not _free(*CONTRACT["modbus"]):
-        modbus_port = _free_port()
-        notes.append(
-            f"Modbus 127.0.0.1:5020 is taken: the simulated drawstring serves 127.0.0.1:{modbus_port}"
-        )
-    dial = Path(CONTRACT["dial"])
-    if dial.exists() or dial.is_symlink():
-        dial = (out / "dial-pty").resolve()
-        notes.append(f"{CONTRACT['dial']} is in use: the simulated dial is at {dial}")
-    raw = {
+def demo_config(seed: int) -> dict:
+    """The demo's station config, on the contract's addresses (:func:`serve_at` moves a device
+    to where the simulator bound it)."""
+    return {
         "time_scale": TIME_SCALE,
-        "robot": {"kind": "rtde", "host": rtde_host},
-        "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": modbus_port},
-        "dial": {"port": str(dial)},
+        "robot": {"kind": "rtde", "host": CONTRACT["rtde"][0]},
+        "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": CONTRACT["modbus"][1]},
+        "dial": {"port": CONTRACT["dial"]},
         "session": {"target_timeout_s": 1200.0},  # over one robot cycle: a missed target comes round
         "sim": {
             "seed": seed,
@@ -188,22 +171,23 @@ def demo_config(out: Path, seed: int) -> tuple[dict, list[str]]:
             "dwell_s": 2.5,
         },
     }
-    return raw, notes
 
 
-def _free(host: str, port: int) -> bool:
-    with socket.socket() as s:
-        try:
-            s.bind((host, port))
-        except OSError:
-            return False
-    return True
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def serve_at(raw: dict, served: list[dict]) -> list[str]:
+    """Point the config ``raw`` at the addresses the simulated devices bound (``served``: what
+    ``SimStation.start`` returns); a note for each that is not the contract's."""
+    by = {a["device"]: a for a in served}
+    notes = []
+    if (host := by["robot"]["host"]) != raw["robot"]["host"]:
+        notes.append(f"RTDE 127.0.0.1:30004 is taken: the simulated controller serves {host}:30004")
+        raw["robot"]["host"] = host
+    if (port := by["drawstring"]["port"]) != raw["drawstring"]["port"]:
+        notes.append(f"Modbus 127.0.0.1:5020 is taken: the simulated drawstring serves 127.0.0.1:{port}")
+        raw["drawstring"]["port"] = port
+    if (link := by["dial"]["port"]) != raw["dial"]["port"]:
+        notes.append(f"{CONTRACT['dial']} is in use: the simulated dial is at {link}")
+        raw["dial"]["port"] = link
+    return notes
 
 
 def _calibrate(out: Path, inputs, view, seed: int) -> int:
@@ -211,7 +195,7 @@ def _calibrate(out: Path, inputs, view, seed: int) -> int:
     import numpy as np
 
     from sim_fixtures.world import World
-    from station.formats.base import atomic_write, toml_text
+    from station.formats.base import Output, toml_text, write_outputs
     from station.formats.samples import load_samples
     from station.jobs import calibration
     from station.jobs.report import corrected_table
@@ -245,12 +229,12 @@ def _calibrate(out: Path, inputs, view, seed: int) -> int:
     table = corrected_table(
         inputs.robot, main_outcome.calibration, samples, "lmlc", payload=main_outcome.payload
     )
-    atomic_write(out / "corrected.toml", toml_text(table))
-    atomic_write(out / "report.json", json.dumps(main_outcome.report.as_json(), indent=2) + "\n")
-    for method, outcome in outcomes.items():
-        if method != "lmlc":
-            report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
-            atomic_write(out / f"report-{method}.json", report)
+    outputs = [Output.text(out / "corrected.toml", "--out", toml_text(table))]
+    for method, outcome in outcomes.items():  # report.json is lmlc's; all written, or none
+        name = "report.json" if method == "lmlc" else f"report-{method}.json"
+        report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
+        outputs.append(Output.text(out / name, "--out", report))
+    write_outputs(outputs)
     print(f"calibrate: wrote {out / 'corrected.toml'} and {out / 'report.json'} (lmlc)", flush=True)
     return 0
 

@@ -50,13 +50,13 @@ def as_json(readings: dict[str, Reading]) -> dict:
 
 
 def run(args) -> int:
-    from station.config import UNREACHABLE_HINT, load_station_config
+    from station.config import load_station_config, unreachable_hint
 
     cfg = load_station_config(args.config)
     backoff = cfg.reconnect.backoff()
     try:
         readings = {name: read_once(section.build(), backoff) for name, section in cfg.devices().items()}
     except DeviceUnreachable as exc:
-        raise DeviceError(f"{exc} ({UNREACHABLE_HINT})") from exc
+        raise DeviceError(f"{exc} ({unreachable_hint(cfg, exc)})") from exc
     print(json.dumps(as_json(readings)))
     return 0

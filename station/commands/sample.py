@@ -73,6 +73,15 @@ def run(args) -> int:
     else:
         config = args.config or configs.path("station.toml")
         inputs = runner.new_session(args.out, config, args.plan, args.time_scale)
+    try:
+        return _run(args, inputs)
+    finally:
+        inputs.folder.release()  # the folder's lock: the next writer may start
+
+
+def _run(args, inputs) -> int:
+    from station.acquire import runner
+
     until_mm = args.until_mm or inputs.folder.header.get("until_mm")
     if args.until_mm:
         inputs.folder.update_header(until_mm=args.until_mm)

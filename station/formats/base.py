@@ -11,10 +11,13 @@ reading of a metre): the loader refuses them, naming the key.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +47,7 @@ RADIANS_AS_DEG = 2 * math.pi + 1e-6
 MIN_JOINT_RANGE_DEG = 7.0
 MAX_TWIST_RAD = math.pi / 2 + 1e-6
 METRES_AS_MM = 10.0
+NAME_MAX = 255  # bytes in one name of a path: the limit of Linux's file systems
 
 Length = Annotated[float, Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)]
 DialReading = Annotated[float, Field(ge=-MAX_DIAL_MM, le=MAX_DIAL_MM)]
@@ -177,8 +181,9 @@ def write_outputs(outputs: Sequence[Output]) -> None:
             temps.append(_temporary(out.path))
             out.write(temps[-1])
             os.chmod(temps[-1], 0o644)  # mkstemp makes it 0600; results are for others to read
-        for out, tmp in zip(outputs, temps, strict=True):
-            os.replace(tmp, out.path)
+        with signals_deferred():  # a SIGTERM or Ctrl-C now takes effect once every rename is done
+            for out, tmp in zip(outputs, temps, strict=True):
+                os.replace(tmp, out.path)
     except OSError as exc:
         names = ", ".join(str(o.path) for o in outputs)
         raise InputError(
@@ -187,6 +192,51 @@ def write_outputs(outputs: Sequence[Output]) -> None:
     finally:
         for tmp in temps:
             tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """SIGINT and SIGTERM held back for the block and acted on after it, as they would have been:
+    a group of renames that makes a command's outputs is never cut in two by a Ctrl-C or a service
+    manager's stop. (Handlers, not a signal mask: the kernel hands a process's signal to any of its
+    threads, e.g. a BLAS worker's, which a mask on this one would not stop.) Python sets handlers
+    in the main thread only; elsewhere the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    held = {
+        s: signal.signal(s, lambda signum, _: caught.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield
+    finally:
+        for s, handler in held.items():
+            signal.signal(s, handler)
+        for signum in caught:
+            signal.raise_signal(signum)
+
+
+def printable(text: str) -> str:
+    """``text`` with the bytes a path holds that are not UTF-8 (``os.fsdecode`` keeps them as lone
+    surrogates, which no UTF-8 output takes) written ``\\xNN``."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def shown(path) -> str:
+    """A path as text that any output takes: bytes that are not UTF-8 (a folder named on another
+    system) as ``\\xNN``, names longer than 40 characters cut to their start and size."""
+    text = printable(str(path))
+    return "/".join(n if len(n) <= 40 else f"{n[:20]}...({len(n.encode())} bytes)" for n in text.split("/"))
+
+
+def check_path(path) -> None:
+    """InputError unless every name in ``path`` fits a file system (``NAME_MAX`` bytes): a name
+    too long fails here, in one line, instead of in the middle of a command's work."""
+    for name in Path(path).parts:
+        size = len(os.fsencode(name))
+        if size > NAME_MAX:
+            raise InputError(f"{shown(path)}: a name in this path is {size} bytes long; at most {NAME_MAX}")
 
 
 def check_writable(path: Path, what: str) -> Path:
@@ -208,8 +258,11 @@ def check_writable(path: Path, what: str) -> Path:
 
 
 def _temporary(path: Path) -> Path:
-    """A new empty file beside ``path``, hidden, ending like it (matplotlib picks a format by it)."""
-    fd, tmp = tempfile.mkstemp(dir=Path(path).parent, prefix=f".{Path(path).name}.", suffix=Path(path).suffix)
+    """A new empty file beside ``path``, hidden, ending like it (matplotlib picks a format by it);
+    its name is cut to fit the file system's limit on a name (a name near it stays writable)."""
+    path = Path(path)
+    stem = os.fsencode(path.name)[: NAME_MAX - len(os.fsencode(path.suffix)) - 12]
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{os.fsdecode(stem)}.", suffix=path.suffix)
     os.close(fd)
     return Path(tmp)
 
@@ -223,4 +276,16 @@ def _write_text(path: Path, text: str) -> None:
 
 
 def toml_text(data: dict) -> str:
-    return tomli_w.dumps(data)
+    """TOML of plain ``data``; text that cannot be UTF-8 (a path with bytes that are not: see
+    :func:`shown`) is written as it is shown."""
+    return tomli_w.dumps(_encodable(data))
+
+
+def _encodable(value):
+    if isinstance(value, dict):
+        return {_encodable(k): _encodable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_encodable(v) for v in value]
+    if isinstance(value, str) and not value.isascii():
+        return printable(value)
+    return value

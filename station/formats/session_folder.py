@@ -9,15 +9,26 @@ it), so a resumed session continues at the next sample id without duplicates. An
 ``--resume`` once there is space. ``session.toml`` is rewritten atomically or not at all.
 
 A reopened folder is validated before anything in it is repaired: ``session.toml``'s tables, the
-plan, and every whole row of ``samples.csv`` and ``raw.csv`` (a problem names file, row, column).
+plan, and every whole row of ``samples.csv`` and ``raw.csv`` (a problem names file, row, column),
+each row against the embedded plan (a target it holds, the line that target is on, ids once). A
+last row without its newline is kept when it is whole (every field, the last one as written);
+only a torn one is dropped, and said.
+
+One writer: a session that writes a folder holds an exclusive lock (``flock``) on its
+``session.lock``, which holds the writer's process id, from before anything in it is read or
+repaired to its end (the system releases it when the process ends, however). A second one is
+refused: "folder in use by PID ...", nothing touched.
 """
 
 from __future__ import annotations
 
 import csv
+import fcntl
 import io
 import os
+import re
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated
@@ -36,8 +47,10 @@ from station.formats.base import (
     toml_text,
     validate,
 )
+from station.formats.plan import Plan
 from station.formats.samples import Q_COLUMNS
 from station.formats.tables import RobotFile, SetupFile, load_robot, load_setup
+from station.holders import named
 
 SAMPLE_COLUMNS = (
     "sample", "target", "line", *Q_COLUMNS, "length_mm", "dial_mm", "t_s",
@@ -88,9 +101,25 @@ def _cell(v) -> str:
     return f"{v:.6f}" if isinstance(v, float) else str(v)
 
 
-def _whole_rows(path: Path, columns: tuple[str, ...]) -> tuple[list[dict], int]:
-    """The rows of a session CSV up to its last newline (a row torn by a crash is left out), and
-    the length in bytes they take; InputError unless the header is ``columns``."""
+LAST_CELL = re.compile(r"-?\d+\.\d{6}")
+"""The last column of both files as :func:`_cell` writes it (a float, 6 decimals): a last row that
+ends so, with every field, is whole although its newline is missing."""
+
+
+@dataclass
+class _Rows:
+    """A session CSV read back: its whole ``rows``, the bytes they take (``end``), and the last
+    row's state: ``"kept"`` (whole, without its newline), ``"torn"`` (dropped) or None."""
+
+    rows: list[dict]
+    end: int
+    tail: str | None = None
+    torn: bytes = b""
+
+
+def _whole_rows(path: Path, columns: tuple[str, ...]) -> _Rows:
+    """The rows of a session CSV up to its last newline, and a last row after it if whole (a row
+    torn by a crash is left out); InputError unless the header is ``columns``."""
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -98,10 +127,11 @@ def _whole_rows(path: Path, columns: tuple[str, ...]) -> tuple[list[dict], int]:
     except OSError as exc:
         raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     keep = data.rfind(b"\n") + 1
+    tail = _whole_tail(data[keep:], columns) if keep and data[keep:] else None
     try:
         reader = csv.reader(io.StringIO(data[:keep].decode()))
         header = next(reader, [])
-        rows = list(reader)
+        rows = list(reader) + ([tail] if tail else [])
     except (UnicodeDecodeError, csv.Error):
         raise InputError(f"{path}: not a session CSV file") from None
     if tuple(header) != columns:
@@ -111,7 +141,20 @@ def _whole_rows(path: Path, columns: tuple[str, ...]) -> tuple[list[dict], int]:
             raise InputError(
                 f"{path}: row {i} (line {i + 2}): {len(row)} fields, the header has {len(columns)}"
             )
-    return [dict(zip(columns, row, strict=True)) for row in rows], keep
+    found = _Rows([dict(zip(columns, row, strict=True)) for row in rows], keep)
+    if keep < len(data):
+        found.tail, found.torn = ("kept", b"") if tail else ("torn", data[keep:])
+        found.end = len(data) if tail else keep
+    return found
+
+
+def _whole_tail(data: bytes, columns: tuple[str, ...]) -> list[str] | None:
+    """The cells of a last row without its newline if it is whole, else None."""
+    try:
+        cells = next(csv.reader([data.decode()]), [])
+    except (UnicodeDecodeError, csv.Error):
+        return None
+    return cells if len(cells) == len(columns) and LAST_CELL.fullmatch(cells[-1]) else None
 
 
 def _check_cells(path: Path, rows: list[dict], checks: dict) -> None:
@@ -156,6 +199,101 @@ SAMPLE_CHECKS = {
 RAW_CHECKS = {"sample": lambda c: id_cell(c, "a sample id")}
 
 
+LOCK_NAME = "session.lock"
+
+
+class FolderLock:
+    """The one-writer lock of a session folder: an exclusive ``flock`` on ``session.lock`` in it,
+    which holds the writer's process id; released by :meth:`release` as often as it was taken,
+    or by the end of the process. A process holds a folder's lock once: its openings share it."""
+
+    _held: dict[tuple[int, int], FolderLock] = {}  # by the folder's (device, inode)
+
+    def __init__(self, key: tuple[int, int], fh):
+        self._key, self._fh, self._count = key, fh, 1
+
+    @classmethod
+    def take(cls, folder) -> FolderLock:
+        """Lock ``folder`` (it exists) for this process; InputError naming the holder if another
+        process has it, or saying why the lock file cannot be made."""
+        folder = Path(folder)
+        try:
+            st = os.stat(folder)
+            if (held := cls._held.get((st.st_dev, st.st_ino))) is not None:
+                held._count += 1
+                return held
+            fh = open(folder / LOCK_NAME, "a+")  # noqa: SIM115 - held until release()
+        except OSError as exc:
+            raise InputError(f"{folder}: cannot write the session folder: {exc.strerror or exc}") from None
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            raise InputError(f"{folder}: folder in use by {_holder(folder)}; nothing in it touched") from None
+        fh.truncate(0)
+        fh.write(f"{os.getpid()}\n")
+        fh.flush()
+        lock = cls._held[st.st_dev, st.st_ino] = cls((st.st_dev, st.st_ino), fh)
+        return lock
+
+    @staticmethod
+    def check(folder) -> None:
+        """InputError if another process holds ``folder``'s lock (without one: nothing done)."""
+        if (Path(folder) / LOCK_NAME).exists():
+            FolderLock.take(folder).release()
+
+    def release(self) -> None:
+        self._count -= 1
+        if self._count == 0:
+            del self._held[self._key]
+            self._fh.close()
+
+
+def _holder(folder: Path, tries: int = 10) -> str:
+    """Who holds ``folder``'s lock: "PID n (command line)", read from the lock file (a writer
+    that has just locked it may not have written its id yet: ``tries`` reads 50 ms apart)."""
+    for _ in range(tries):
+        try:
+            return named(int((folder / LOCK_NAME).read_text().strip()))
+        except (OSError, ValueError):
+            time.sleep(0.05)
+    return "another process"
+
+
+def check_rows(rows: list[dict], plan: Plan, where: Path) -> None:
+    """Every row (validated cells) names a target of the embedded ``plan`` and the line that
+    target is on, each sample id and target once; InputError naming the row."""
+    lines = dict(zip(plan.target.tolist(), plan.line.tolist(), strict=True))
+    samples: dict[int, int] = {}
+    targets: dict[int, int] = {}
+    for i, row in enumerate(rows):
+        sample, target, line = int(row["sample"]), int(row["target"]), int(row["line"])
+        at = f"{where}: row {i} (line {i + 2})"
+        if target not in lines:
+            raise InputError(f"{at}: target {target} is not in the session's plan ({len(lines)} targets)")
+        if line != lines[target]:
+            raise InputError(f"{at}: line {line}, but target {target} is on line {lines[target]} in the plan")
+        if sample in samples:
+            raise InputError(f"{at}: sample id {sample} again (row {samples[sample]})")
+        if target in targets:
+            raise InputError(f"{at}: target {target} measured again (row {targets[target]})")
+        samples[sample], targets[target] = i, i
+
+
+def check_session_rows(folder: Path) -> None:
+    """Validate a session folder's ``samples.csv`` rows against its embedded plan (calibrate)."""
+    folder = Path(folder)
+    header = read_toml(folder / "session.toml")
+    found = _whole_rows(folder / "samples.csv", SAMPLE_COLUMNS)
+    _check_cells(folder / "samples.csv", found.rows, SAMPLE_CHECKS)
+    if "plan" in header:  # a folder made without one has nothing to check against
+        check_rows(found.rows, _plan_of(header, folder), folder / "samples.csv")
+
+
+def _plan_of(header: dict, folder: Path) -> Plan:
+    return Plan.from_rows(header["plan"], str(folder / "session.toml"))
+
+
 @dataclass
 class SessionFolder:
     """An open session folder: its header (``session.toml`` content), the samples taken so far; a
@@ -165,6 +303,8 @@ class SessionFolder:
     header: dict
     rows: list[dict] = field(default_factory=list)
     made: bool = True  # False from :meth:`new` until :meth:`make` wrote it
+    lock: FolderLock | None = None  # held while this process writes the folder
+    notes: list[str] = field(default_factory=list)  # what reopening repaired, for the session's log
 
     @property
     def samples_csv(self) -> Path:
@@ -192,8 +332,8 @@ class SessionFolder:
         session there yet, a folder the station can create and write), so that bad input fails
         before any device is opened and a session that never starts leaves nothing behind."""
         path = Path(path)
-        if (path / "session.toml").exists():
-            raise InputError(f"{path}: already holds a session; continue it with --resume {path}")
+        FolderLock.check(path)  # a session running there: say so, rather than "resume it"
+        _no_session_in(path)
         existing = next(p for p in (path.absolute(), *path.absolute().parents) if p.exists())
         if not existing.is_dir():
             raise InputError(f"{path}: cannot write the session folder: {existing} is not a folder")
@@ -206,17 +346,33 @@ class SessionFolder:
         return cls(path, header, made=False)
 
     def make(self) -> None:
-        """Create the folder (and missing parents) with ``session.toml`` and the CSV headers.
-        Everything is written once here, so an unwritable or full disk fails before the first
-        sample (InputError)."""
+        """Create the folder (and missing parents), lock it, and write the CSV headers and then
+        ``session.toml`` (a folder without it is no session). Everything is written once here, so
+        an unwritable or full disk fails before the first sample (InputError); so does a session
+        that another process started there meanwhile."""
         try:
             self.path.mkdir(parents=True, exist_ok=True)
-            atomic_write(self.path / "session.toml", toml_text(self.header))
-            for name, columns in (("samples.csv", SAMPLE_COLUMNS), ("raw.csv", RAW_COLUMNS)):
-                atomic_write(self.path / name, ",".join(columns) + "\n")
         except OSError as exc:
             raise InputError(f"{self.path}: cannot write the session folder: {exc.strerror or exc}") from None
+        self.lock = FolderLock.take(self.path)
+        try:
+            _no_session_in(self.path)
+            for name, columns in (("samples.csv", SAMPLE_COLUMNS), ("raw.csv", RAW_COLUMNS)):
+                atomic_write(self.path / name, ",".join(columns) + "\n")
+            atomic_write(self.path / "session.toml", toml_text(self.header))
+        except OSError as exc:
+            self.release()
+            raise InputError(f"{self.path}: cannot write the session folder: {exc.strerror or exc}") from None
+        except BaseException:
+            self.release()
+            raise
         self.made = True
+
+    def release(self) -> None:
+        """Let another process write the folder (the end of this process does it as well)."""
+        if self.lock is not None:
+            self.lock.release()
+            self.lock = None
 
     @classmethod
     def create(cls, path, header: dict) -> SessionFolder:
@@ -225,23 +381,46 @@ class SessionFolder:
         folder.make()
         return folder
 
-    @classmethod
-    def open(cls, path) -> SessionFolder:
-        """An existing session, validated, then repaired after a crash: torn last lines cut, raw
-        rows of a sample whose row never made it dropped. InputError names what is wrong."""
+    @staticmethod
+    def lock_for_resume(path) -> FolderLock:
+        """The lock of an existing session folder, taken before anything in it is read (a folder
+        without ``session.toml`` fails as reading it does; one that cannot be written says so)."""
         path = Path(path)
-        header = read_toml(path / "session.toml")
-        folder = cls(path, header)
+        if not (path / "session.toml").is_file():
+            read_toml(path / "session.toml")  # the one-line error of a missing or odd file
         if not os.access(path, os.W_OK):
             raise InputError(f"{path}: folder is not writable, cannot resume there")
-        folder.rows, samples_end = _whole_rows(folder.samples_csv, SAMPLE_COLUMNS)
-        _check_cells(folder.samples_csv, folder.rows, SAMPLE_CHECKS)
-        raw, raw_end = _whole_rows(folder.raw_csv, RAW_COLUMNS)
-        _check_cells(folder.raw_csv, raw, RAW_CHECKS)
-        for f, end in ((folder.samples_csv, samples_end), (folder.raw_csv, raw_end)):
-            os.truncate(f, end)
-        keep = [r for r in raw if int(r["sample"]) < folder.next_sample]
-        if len(keep) != len(raw):
+        return FolderLock.take(path)
+
+    @classmethod
+    def open(cls, path, lock: FolderLock | None = None) -> SessionFolder:
+        """An existing session, locked (``lock``: already taken by the caller), validated (its
+        rows against its plan too), then repaired after a crash: a torn last line cut, a whole one
+        without its newline completed, raw rows of a sample whose row never made it dropped.
+        InputError names what is wrong; ``notes`` say what was repaired."""
+        path = Path(path)
+        lock = lock or cls.lock_for_resume(path)
+        try:
+            return cls._open(path, lock)
+        except BaseException:
+            lock.release()
+            raise
+
+    @classmethod
+    def _open(cls, path: Path, lock: FolderLock) -> SessionFolder:
+        header = read_toml(path / "session.toml")
+        folder = cls(path, header, lock=lock)
+        samples = _whole_rows(folder.samples_csv, SAMPLE_COLUMNS)
+        _check_cells(folder.samples_csv, samples.rows, SAMPLE_CHECKS)
+        if "plan" in header:  # resume_session has checked that it does
+            check_rows(samples.rows, _plan_of(header, path), folder.samples_csv)
+        folder.rows = samples.rows
+        raw = _whole_rows(folder.raw_csv, RAW_COLUMNS)
+        _check_cells(folder.raw_csv, raw.rows, RAW_CHECKS)
+        for f, found in ((folder.samples_csv, samples), (folder.raw_csv, raw)):
+            folder.notes += _repair_tail(f, found)
+        keep = [r for r in raw.rows if int(r["sample"]) < folder.next_sample]
+        if len(keep) != len(raw.rows):
             lines = [",".join(RAW_COLUMNS) + "\n"] + [_csv_line(RAW_COLUMNS, r) for r in keep]
             atomic_write(folder.raw_csv, "".join(lines))
         return folder
@@ -280,6 +459,24 @@ class SessionFolder:
                 f"one is kept, with the {len(self.rows)} samples in {self.samples_csv}"
             ) from None
         self.header = header
+
+
+def _no_session_in(path: Path) -> None:
+    if (path / "session.toml").exists():
+        raise InputError(f"{path}: already holds a session; continue it with --resume {path}")
+
+
+def _repair_tail(path: Path, found: _Rows) -> list[str]:
+    """Cut a torn last row, or end a whole one with its newline; a note saying which."""
+    if found.tail == "kept":
+        _append(path, ["\n"])
+        return [f"{path}: its last row had no newline at the end; the row is whole and kept"]
+    os.truncate(path, found.end)
+    if found.tail == "torn":
+        cut = found.torn.decode("utf-8", "replace")
+        cut = cut if len(cut) <= 40 else cut[:37] + "..."
+        return [f"{path}: a torn last row was dropped (a crash mid-write): {cut!r}"]
+    return []
 
 
 def load_robot_and_setup(session: Path | None, robot: Path | None, setup: Path | None):

@@ -32,6 +32,7 @@ import socket
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 from urllib.parse import quote
 
@@ -42,6 +43,9 @@ import numpy as np
 os.environ.setdefault("RUST_LOG", "warn,re_log_encoding=off,re_sdk::recording_stream=off")
 import rerun as rr  # noqa: E402
 import rerun.blueprint as rrb  # noqa: E402
+from rerun.chunk import RrdReader  # noqa: E402
+
+from station.formats.base import printable  # noqa: E402
 
 GREEN, RED, GREY = (40, 200, 80), (230, 60, 50), (150, 150, 150)
 FLUSH_TIMEOUT_S = 10.0
@@ -90,13 +94,14 @@ class LiveView:
 
     def __init__(self, rrd: Path, *, viewer: bool = False, web: str | None = None, resume: bool = False):
         rrd = Path(rrd)
-        self.rec = rr.RecordingStream("station", recording_id=f"session-{rrd.parent.name}")
+        # the id is text Rerun sends as UTF-8: a folder name that is not is shown with \xNN
+        self.rec = rr.RecordingStream("station", recording_id=f"session-{printable(rrd.parent.name)}")
         self.notes: list[str] = []
         self.incomplete: str | None = None
         self.web: WebViewer | None = None
         self._previous = rrd.with_name(rrd.stem + ".previous.rrd")  # loaders go by extension
-        if resume and rrd.exists():
-            os.replace(rrd, self._previous)  # the new sink truncates rrd: keep what it held
+        if resume:  # the new sink truncates rrd: keep what it held
+            self.notes.append(hand_over(rrd, self._previous))
         sinks = [rr.FileSink(str(rrd)), *self._live_sinks(viewer, web)]
         try:
             self.rec.set_sinks(*sinks)
@@ -225,6 +230,44 @@ class LiveView:
             self._previous.unlink(missing_ok=True)  # now inside the new recording
         if self.web is not None:
             self.web.close()
+
+
+def hand_over(rrd: Path, previous: Path) -> str:
+    """Move a resumed session's recording ``rrd`` aside to ``previous``, which the new recording
+    loads first and :meth:`LiveView.close` deletes once it holds it all; what it holds, said. A
+    kill can cut this short at any step, leaving both: then the one holding more samples is kept,
+    so the earlier recording is never replaced by a shorter one."""
+    if rrd.exists() and previous.exists():
+        new, old = recorded_samples(rrd), recorded_samples(previous)
+        if (new or 0) > (old or 0):
+            os.replace(rrd, previous)
+            new, old = old, new
+        else:
+            rrd.unlink()
+        return (
+            f"recording: an earlier resume was cut short; of its two recordings the longer is kept "
+            f"({old or 0} samples; the other: {'unreadable' if new is None else f'{new} samples'})"
+        )
+    if rrd.exists():
+        os.replace(rrd, previous)
+    if not previous.exists():
+        return f"recording: no earlier recording in {rrd.parent}; {rrd.name} holds the samples from here on"
+    held = recorded_samples(previous)
+    if held is None:
+        return "recording: the earlier one was cut short by a crash; what of it can be read is loaded"
+    return f"recording: {rrd.name} continues the earlier one ({held} samples)"
+
+
+def recorded_samples(rrd: Path) -> int | None:
+    """The samples a recording holds (rows of ``live/length/reading``); None if it cannot be read
+    (cut short by a crash: Rerun reads a file whole or not at all)."""
+    try:
+        with warnings.catch_warnings():  # a recording cut short has no footer: Rerun warns
+            warnings.simplefilter("ignore")
+            chunks = list(RrdReader(rrd).stream())
+    except (RuntimeError, OSError):
+        return None
+    return sum(c.num_rows for c in chunks if c.entity_path == "/live/length/reading" and not c.is_static)
 
 
 class WebViewer:

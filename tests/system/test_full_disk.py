@@ -139,4 +139,5 @@ def test_a_session_toml_update_that_fails_keeps_the_previous_one_whole(tmp_path)
     message = _in_child(_grow_header, path)
     assert message.startswith(f"OutputError: {path / 'session.toml'}: cannot update (File too large); ")
     assert (path / "session.toml").read_text() == before
-    assert sorted(p.name for p in path.iterdir()) == ["raw.csv", "samples.csv", "session.toml"]  # no temp
+    names = sorted(p.name for p in path.iterdir())
+    assert names == ["raw.csv", "samples.csv", "session.lock", "session.toml"]  # no temporary file

@@ -58,3 +58,16 @@ def test_a_write_failing_after_the_work_leaves_no_output(command, cell, tmp_path
     assert list(out.iterdir()) == []
     assert subprocess.run(cmd, cwd=ROOT, capture_output=True, timeout=300).returncode == 0  # room again
     assert sorted(p.name for p in out.iterdir()) == sorted(p.rsplit("/", 1)[1] for p in outputs[1::2])
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_stop_signal_between_the_renames_leaves_every_output_or_none(sig, cell, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    head, outputs = _commands(cell, out)["calibrate"]
+    # the signal arrives right after the table is renamed into place, before the report and plot
+    inject = [sys.executable, "-m", "tests.system.inject", sig, "after", "os:replace", "t.toml", "--"]
+    proc = subprocess.run([*inject, *head, *outputs], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.splitlines()[-1] == "station: interrupted"
+    assert sorted(p.name for p in out.iterdir()) == ["p.png", "r.json", "t.toml"]  # all, no temporary

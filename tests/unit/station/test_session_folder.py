@@ -3,6 +3,8 @@ before anything is repaired, and a problem is one line naming the file, the row 
 
 import re
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -28,7 +30,9 @@ def session(tmp_path):
     for k in range(2):
         q = {f"q{i + 1}_deg": float(v) for i, v in enumerate(PLAN.q_deg[k])}
         row = {"sample": k, "target": k, "line": 0, **q, "length_mm": 900.0 + k, "dial_mm": 0.1, "t_s": k}
+        row["t_wall_s"] = 1.7e9 + k
         inputs.folder.append(row, [{"sample": k, "k": 0, **q}])
+    inputs.folder.release()  # as the session's process ended
     with (tmp_path / "sess" / "samples.csv").open("a") as fh:
         fh.write("2,2,1,1.0,2.0")
     return tmp_path / "sess"
@@ -151,3 +155,69 @@ def test_a_new_session_folder_is_written_only_when_made(tmp_path):
     (tmp_path / "file").write_text("")
     with pytest.raises(InputError, match=r"cannot write the session folder: .*file is not a folder"):
         SessionFolder.new(tmp_path / "file" / "run1", {})
+
+
+def test_a_whole_last_row_without_its_newline_is_kept_and_a_torn_one_dropped_and_said(session):
+    samples = session / "samples.csv"
+    text = samples.read_text()
+    whole = text[: text.rindex("\n")]  # the torn row gone, and the newline of the last whole row
+    samples.write_text(whole)
+    inputs = runner.resume_session(session, None)
+    assert [r["sample"] for r in inputs.folder.rows] == ["0", "1"]
+    assert inputs.folder.next_sample == 2 and samples.read_text() == whole + "\n"
+    assert any("last row had no newline at the end; the row is whole and kept" in n for n in inputs.notes)
+    inputs.folder.release()
+    samples.write_text(whole[:-3])  # the last row torn inside its last cell: all fields, cut short
+    inputs = runner.resume_session(session, None)
+    assert [r["sample"] for r in inputs.folder.rows] == ["0"]
+    assert any("a torn last row was dropped" in n for n in inputs.notes)
+
+
+@pytest.mark.parametrize(
+    "row, column, value, message",
+    [
+        (1, "target", "7", "samples.csv: row 1 (line 3): target 7 is not in the session's plan (3 targets)"),
+        (1, "line", "1", "samples.csv: row 1 (line 3): line 1, but target 1 is on line 0 in the plan"),
+        (1, "sample", "0", "samples.csv: row 1 (line 3): sample id 0 again (row 0)"),
+        (1, "target", "0", "samples.csv: row 1 (line 3): target 0 measured again (row 0)"),
+    ],
+)
+def test_a_row_the_plan_does_not_hold_is_named_by_resume_and_calibrate(session, row, column, value, message):
+    from station.cli import build_parser
+    from station.commands.calibrate import load_inputs
+
+    _edit_rows(session / "samples.csv", row, column, value)
+    before = _files(session)
+    with pytest.raises(InputError, match=re.escape(message)):
+        runner.resume_session(session, None)
+    assert _files(session) == before
+    args = build_parser().parse_args(["calibrate", str(session), "--out", str(session.parent / "t.toml")])
+    with pytest.raises(InputError, match=re.escape(message)):
+        load_inputs(args)
+
+
+def test_a_folder_another_process_writes_is_refused_before_anything_is_read(session):
+    holder = subprocess.Popen(  # another writer: holds the folder's lock until told to go
+        [sys.executable, "-c", HOLD, str(session)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout.readline() == "locked\n"
+        (session / "session.toml").write_text("not toml [")  # read before locking: another error
+        before = _files(session)
+        in_use = rf"sess: folder in use by PID {holder.pid} \(.*-c.*\); nothing in it touched"
+        with pytest.raises(InputError, match=in_use):
+            runner.resume_session(session, None)
+        assert _files(session) == before
+    finally:
+        holder.communicate("", timeout=10)
+    with pytest.raises(InputError, match="session.toml: not valid TOML"):
+        runner.resume_session(session, None)
+
+
+HOLD = """
+import sys
+from station.formats.session_folder import FolderLock
+lock = FolderLock.take(sys.argv[1])
+print("locked", flush=True)
+sys.stdin.read()
+"""
