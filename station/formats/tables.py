@@ -71,6 +71,7 @@ class RobotFile(Strict):
     where it identified compliances, the ``payload`` they were identified with."""
 
     name: str
+    serial: str | None = None  # this robot's serial number: which robot a calibration is of
     convention: Literal["dh"] = "dh"
     tool_mm: Vec3 = [0.0, 0.0, 0.0]
     joints: Annotated[list[Joint], Field(min_length=6, max_length=6)]
