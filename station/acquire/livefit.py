@@ -287,7 +287,8 @@ class RunningCalibration:
                 self._said_undetermined = True
                 self.listener.message(
                     f"running calibration: live errors and the predicted workspace error start once "
-                    f"the samples determine the model ({fit.n} of {fit.needed} so far)"
+                    f"the samples determine the model ({fit.n} of {fit.needed} so far; the number needed "
+                    "grows while the first samples let the fit see more of the robot's parameters)"
                 )
             return
         if not self.history:
