@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
-from calib.baselines import BaselineOptions, run_method
 from calib.calibrate import (
     Calibration,
     CalibrationOptions,
@@ -359,6 +358,8 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
     and identified parameters; its uncertainty from the Jacobian at its own solution, with the
     noise LMLC fitted. Nothing is down-weighted: these methods have no robust loss. Also returns
     LMLC's solution, the optimum it is judged against."""
+    from calib.baselines import BaselineOptions, run_method  # scipy.optimize: only the baselines need it
+
     start = calibrate(model, CalibrationOptions())
     found = run_method(method, model, start.before.x, start.identified, BaselineOptions())
     prior = WithPrior(model, model.x0)
