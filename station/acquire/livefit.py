@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.kinematics import tcp_position
+from calib.kinematics import base_from_frames, tcp_position, tool_point
 from calib.params import dh_from_degrees
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.planning import NextPlacement, next_placement
@@ -219,6 +219,13 @@ class RunningCalibration:
     def nominal_tcp_mm(self, q_deg) -> np.ndarray:
         """Nominal TCPs (N, 3) [mm] of configurations (N, 6) [deg]."""
         return tcp_position(self.dh, np.radians(np.atleast_2d(q_deg)), self.tool)
+
+    def nominal_chain_mm(self, q_deg) -> tuple[np.ndarray, np.ndarray]:
+        """The nominal robot at ``q_deg`` (6,) [deg]: its D-H frame origins, base to flange, and
+        the TCP (8, 3) [mm], and the tool's approach (the flange's z axis, unit, base frame)."""
+        frames = base_from_frames(self.dh, np.radians(np.atleast_2d(q_deg)))[0]
+        tcp = tool_point(frames[None, -1], self.tool)[0]
+        return np.vstack([frames[:, :3, 3], tcp]), frames[-1, :3, 2]
 
     def live_error(self, q_deg, length_mm: float) -> LiveError:
         """The sample against the latest refit (before it joins one), once a refit is judged."""

@@ -224,9 +224,11 @@ class Live:
 
     def sample(self, row: dict, cap) -> None:
         live = self.running.live_error(cap.q_deg, cap.length_mm)
-        tcp = self.running.nominal_tcp_mm(cap.q_deg)[0]
-        self.view.sample(row["sample"], row["t_s"], tcp, cap.length_mm, cap.dial_mm, live)
+        chain, approach = self.running.nominal_chain_mm(cap.q_deg)
+        tcp = chain[-1]
+        self.view.sample(row["sample"], row["t_s"], tcp, cap.length_mm, cap.dial_mm, live, chain, approach)
         self.progress.sample(row, live)
+        self.view.progress(self.progress.done, self.progress.total, int(row["line"]))
         if live.error_mm is not None:
             self.worst_mm = max(abs(live.error_mm), self.worst_mm or 0.0)
         if live.suspect:

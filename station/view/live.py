@@ -50,16 +50,33 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 WARN_WORDS = ("suspended", "rejected", "retrying", "failed", "timed out", "check the cable")
 
 
-def blueprint() -> rrb.Blueprint:
+RECENT_SAMPLES = 40
+"""The live error's plot shows this many recent samples, at their own scale: the first samples of a
+line, millimetres off, would flatten the hundredths that follow."""
+ROBOT, TOOL = (90, 100, 120), (240, 150, 30)
+
+
+def blueprint(eye: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
+    """The layout: the cell (seen from ``eye``) left, the live plots right, the log across the
+    bottom (its rows whole)."""
+    recent = rrb.VisibleTimeRange(
+        "sample",
+        start=rrb.TimeRangeBoundary.cursor_relative(seq=-RECENT_SAMPLES),
+        end=rrb.TimeRangeBoundary.cursor_relative(),
+    )
     live = rrb.Vertical(
-        rrb.TimeSeriesView(name="live error: reading - running calibration (mm)", origin="/live/error"),
+        rrb.TextDocumentView(name="progress", origin="/progress"),
+        rrb.TimeSeriesView(
+            name=f"live error, last {RECENT_SAMPLES} samples: reading - running calibration (mm)",
+            origin="/live/error",
+            time_ranges=[recent],
+        ),
         rrb.TimeSeriesView(
             name="predicted workspace error (mm)",
             origin="/live",
             contents=["$origin/predicted_workspace_mm", "$origin/predicted_workspace_95_mm"],
         ),
-        rrb.TextLogView(name="session log", origin="/log"),
-        row_shares=[3, 2, 2],
+        row_shares=[1, 4, 3],
         name="live",
     )
     readings = rrb.Vertical(
@@ -72,14 +89,45 @@ def blueprint() -> rrb.Blueprint:
         rrb.TimeSeriesView(name="solver cost per iteration", origin="/calibration/cost"),
         name="calibration",
     )
+    log = rrb.TextLogView(
+        name="session log",
+        origin="/log",
+        columns=rrb.TextLogColumns(
+            text_log_columns=[
+                rrb.components.TextLogColumn("EntityPath", visible=False),
+                rrb.components.TextLogColumn("LogLevel"),
+                rrb.components.TextLogColumn("Body"),
+            ]
+        ),
+    )
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(name="cell (base frame, mm)", origin="/cell"),
-            rrb.Tabs(live, readings, calibration),
-            column_shares=[2, 3],
+        rrb.Vertical(
+            rrb.Horizontal(
+                rrb.Spatial3DView(name="cell (base frame, mm)", origin="/cell", eye_controls=eye),
+                rrb.Tabs(live, readings, calibration),
+                column_shares=[2, 3],
+            ),
+            log,
+            row_shares=[3, 1],
         ),
         rrb.TimePanel(timeline="sample", state="collapsed"),
         collapse_panels=True,
+    )
+
+
+def framing(points_mm: np.ndarray) -> rrb.EyeControls3D:
+    """An eye that frames ``points_mm`` (N, 3) (the robot's base, the anchor, the gauge lines):
+    from the front-left and above their centre, far enough to see them all, z up."""
+    points = np.vstack([np.zeros(3), np.asarray(points_mm, float)])
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    centre, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+    away = np.array([-0.55, -0.7, 0.45])
+    away /= np.linalg.norm(away)
+    return rrb.EyeControls3D(
+        kind=rrb.Eye3DKind.Orbital,
+        position=(centre + 1.1 * size * away).tolist(),
+        look_target=centre.tolist(),
+        eye_up=[0.0, 0.0, 1.0],
     )
 
 
@@ -90,6 +138,7 @@ class LiveView:
 
     def __init__(self, rrd: Path, *, viewer: bool = False, web: str | None = None, resume: bool = False):
         rrd = Path(rrd)
+        self.rrd = rrd
         self.rec = rr.RecordingStream("station", recording_id=f"session-{rrd.parent.name}")
         self.notes: list[str] = []
         self.incomplete: str | None = None
@@ -136,8 +185,14 @@ class LiveView:
         return sinks
 
     def cell(self, anchor_mm, lines: dict[int, np.ndarray]) -> None:
-        """Static scene: the anchor and each gauge line as a segment (2, 3) in mm; series styles."""
+        """Static scene: the anchor and each gauge line as a segment (2, 3) in mm, the robot's base,
+        the view framed on them; series styles."""
         self._anchor = np.asarray(anchor_mm, float)
+        self.rec.send_blueprint(blueprint(framing(np.vstack([self._anchor, *lines.values()]))))
+        self.rec.log(
+            "cell/base", rr.Points3D([[0.0, 0.0, 0.0]], radii=25.0, colors=[ROBOT], labels=["robot base"]),
+            static=True,
+        )
         self.rec.log(
             "cell/anchor",
             rr.Points3D([self._anchor], radii=8.0, colors=[GREY], labels=["drawstring anchor"]),
@@ -145,7 +200,7 @@ class LiveView:
         )
         for lid, seg in lines.items():
             self.rec.log(
-                f"cell/lines/{lid}", rr.LineStrips3D([seg], radii=2.0, labels=[f"line {lid}"]), static=True
+                f"cell/lines/{lid}", rr.LineStrips3D([seg], radii=4.0, labels=[f"line {lid}"]), static=True
             )
         styles = {
             "live/length/reading": rr.SeriesLines(names="reading", colors=[BLUE]),
@@ -160,10 +215,21 @@ class LiveView:
         for path, style in styles.items():
             self.rec.log(path, style, static=True)
 
-    def sample(self, index: int, t_s: float, tcp_mm, length_mm: float, dial_mm: float, live) -> None:
+    def sample(
+        self,
+        index: int,
+        t_s: float,
+        tcp_mm,
+        length_mm: float,
+        dial_mm: float,
+        live,
+        chain_mm=None,
+        approach=None,
+    ) -> None:
         """One stored sample: where the nominal model puts the TCP, and ``live`` (``model_mm``,
         ``error_mm``, ``limit_mm``, ``suspect``; None until the running calibration is judged)
-        against the running calibration."""
+        against the running calibration; ``chain_mm`` (K, 3), the robot drawn through its joints to
+        the TCP, and the tool's ``approach`` (unit, base frame) where given."""
         self.rec.set_time("sample", sequence=index)
         self.rec.set_time("session_time", duration=t_s)
         tcp = np.asarray(tcp_mm, float)
@@ -175,6 +241,8 @@ class LiveView:
         self.rec.log(
             "cell/cable", rr.LineStrips3D([np.array([self._anchor, tcp])], radii=1.0, colors=[color])
         )
+        if chain_mm is not None:
+            self._robot(np.asarray(chain_mm, float), tcp, approach)
         self.rec.log("live/length/reading", rr.Scalars(length_mm))
         if np.isfinite(dial_mm):
             self.rec.log("live/dial", rr.Scalars(dial_mm))
@@ -186,6 +254,29 @@ class LiveView:
         self.rec.log("live/error/limit/lower", rr.Scalars(-live.limit_mm))
         if live.suspect:
             self.rec.log("live/error/suspect", rr.Scalars(live.error_mm))
+
+    def _robot(self, chain: np.ndarray, tcp: np.ndarray, approach) -> None:
+        """The robot as it stands: links through its joints, the joints, and the tool pointing
+        along ``approach`` onto the TCP."""
+        self.rec.log("cell/robot/links", rr.LineStrips3D([chain], radii=12.0, colors=[ROBOT]))
+        self.rec.log("cell/robot/joints", rr.Points3D(chain[:-1], radii=18.0, colors=[ROBOT]))
+        if approach is not None:
+            tool = 150.0 * np.asarray(approach, float)
+            self.rec.log(
+                "cell/robot/tool",
+                rr.Arrows3D(origins=[tcp - tool], vectors=[tool], radii=6.0, colors=[TOOL], labels=["tool"]),
+            )
+
+    def progress(self, done: int, total: int, line: int) -> None:
+        """How far the session is: ``done`` of ``total`` samples, the last on gauge ``line``."""
+        share = 100.0 * done / max(total, 1)
+        self.rec.log(
+            "progress",
+            rr.TextDocument(
+                f"**{done} of {total} samples** ({share:.0f} %), the last on line {line}",
+                media_type=rr.MediaType.MARKDOWN,
+            ),
+        )
 
     def refit(self, index: int, predicted_mm: float, bound_95_mm: float) -> None:
         """The running calibration's predicted workspace error [mm] and its 95 % bound after a refit
@@ -214,7 +305,9 @@ class LiveView:
 
     def close(self) -> None:
         """Flush and close the recording. One that could not be written whole (disk full) keeps
-        what it has; ``incomplete`` says why (None: complete)."""
+        what it has; ``incomplete`` says why (None: complete). The log's last line says where to
+        see it again once this view is gone."""
+        self.message(f"session over: this view closes; replay the whole session with `rerun {self.rrd}`")
         try:
             self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
         except RuntimeError as exc:
