@@ -269,7 +269,9 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     it. A resumed session's samples are refitted first, so its next capture is judged at once."""
     view, progress, worker, plan = live.view, live.progress, live.running.worker, inputs.plan
     view.cell(
-        inputs.setup.drawstring.anchor_mm, line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line)
+        inputs.setup.drawstring.anchor_mm,
+        line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line),
+        [live.running.nominal_chain_mm(q)[0] for q in plan.q_deg],
     )
     for note in (*view.notes, *inputs.notes):
         progress.message(note)

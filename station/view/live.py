@@ -31,6 +31,7 @@ import signal
 import socket
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 from urllib.parse import quote
@@ -50,6 +51,8 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 WARN_WORDS = ("suspended", "rejected", "retrying", "failed", "timed out", "check the cable")
 
 
+LOG_WIDTH = 150
+"""Characters per session-log row: the log spans the window, about 190 characters at 1400 px."""
 RECENT_SAMPLES = 40
 """The live error's plot shows this many recent samples, at their own scale: the first samples of a
 line, millimetres off, would flatten the hundredths that follow."""
@@ -125,7 +128,7 @@ def framing(points_mm: np.ndarray) -> rrb.EyeControls3D:
     away /= np.linalg.norm(away)
     return rrb.EyeControls3D(
         kind=rrb.Eye3DKind.Orbital,
-        position=(centre + 1.1 * size * away).tolist(),
+        position=(centre + 1.5 * size * away).tolist(),
         look_target=centre.tolist(),
         eye_up=[0.0, 0.0, 1.0],
     )
@@ -184,11 +187,14 @@ class LiveView:
                 )
         return sinks
 
-    def cell(self, anchor_mm, lines: dict[int, np.ndarray]) -> None:
+    def cell(self, anchor_mm, lines: dict[int, np.ndarray], robot_mm=None) -> None:
         """Static scene: the anchor and each gauge line as a segment (2, 3) in mm, the robot's base,
-        the view framed on them; series styles."""
+        the view framed on them and on ``robot_mm`` (K, 3), where the robot's joints will go;
+        series styles."""
         self._anchor = np.asarray(anchor_mm, float)
-        self.rec.send_blueprint(blueprint(framing(np.vstack([self._anchor, *lines.values()]))))
+        scene = [self._anchor[None], *lines.values()]
+        scene += [] if robot_mm is None else [np.asarray(robot_mm, float).reshape(-1, 3)]
+        self.rec.send_blueprint(blueprint(framing(np.vstack(scene))))
         self.rec.log(
             "cell/base", rr.Points3D([[0.0, 0.0, 0.0]], radii=25.0, colors=[ROBOT], labels=["robot base"]),
             static=True,
@@ -287,7 +293,11 @@ class LiveView:
         self.rec.log("live/predicted_workspace_95_mm", rr.Scalars(bound_95_mm))
 
     def message(self, text: str) -> None:
-        self.rec.log("log", rr.TextLog(text, level=log_level(text)))
+        """A session-log line; a long one in rows of ``LOG_WIDTH`` characters (the view cuts a row
+        at its right edge), the rows after the first indented."""
+        level = log_level(text)
+        for row in (textwrap.wrap(text, LOG_WIDTH, subsequent_indent="    ") or [""]):
+            self.rec.log("log", rr.TextLog(row, level=level))
 
     def calibration(self, method: str, before_mm, after_mm, cost_per_iteration) -> None:
         """Per-sample drawstring residuals (mm) before and after, and the solver's cost history."""
@@ -307,7 +317,7 @@ class LiveView:
         """Flush and close the recording. One that could not be written whole (disk full) keeps
         what it has; ``incomplete`` says why (None: complete). The log's last line says where to
         see it again once this view is gone."""
-        self.message(f"session over: this view closes; replay the whole session with `rerun {self.rrd}`")
+        self.message(f"session over; replay it with: rerun {self.rrd}")
         try:
             self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
         except RuntimeError as exc:

@@ -198,10 +198,31 @@ def test_rrd_holds_the_live_view_entities(finished):
         "/live/error",
         "/live/dial",
         "/log",
+        "/cell/base",
+        "/cell/robot/links",
+        "/cell/robot/joints",
+        "/cell/robot/tool",
+        "/progress",
     ):
         assert path in entities
     rows = sum(c.num_rows for c in chunks if c.entity_path == "/live/error" and not c.is_static)
     assert rows == 0  # 9 samples cannot determine the running calibration's 26 unknowns: no live error
+    # the view counts the samples, and its log's last line names the recording to replay
+    assert _texts(chunks, "/progress")[-1].startswith(f"**{N_TARGETS} of {N_TARGETS} samples** (100 %)")
+    rrd = folder / "session.rrd"
+    assert _texts(chunks, "/log")[-1] == f"session over; replay it with: rerun {rrd}"
+
+
+def _texts(chunks, entity: str) -> list[str]:
+    """The texts logged to ``entity`` (TextLog or TextDocument), in the order logged."""
+    out = []
+    for chunk in chunks:
+        if chunk.entity_path != entity or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        column = next(n for n in batch.schema.names if n.endswith(":text"))
+        out += [v[0] for v in batch.column(batch.schema.names.index(column)).to_pylist()]
+    return out
 
 
 def test_sigkill_mid_session_then_resume_without_torn_or_duplicate_rows(tmp_path):
