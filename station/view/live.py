@@ -9,9 +9,12 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
 
 - ``cell/anchor``, ``cell/lines/<id>`` (static): the drawstring's cable exit and the gauge lines
   (fitted to the plan's nominal TCPs);
+- ``cell/base`` (static): the robot's base;
 - ``cell/path`` (nominal TCPs of the samples so far), ``cell/sample`` (the current one: grey
-  before the running calibration is judged, green within its limit, red when suspect) and
-  ``cell/cable`` (anchor -> TCP);
+  before the running calibration is judged, green within its limit, red when suspect),
+  ``cell/cable`` (anchor -> TCP) and the nominal robot as it stands: ``cell/robot/links``,
+  ``cell/robot/joints``, ``cell/robot/tool`` (the tool's approach onto the TCP);
+- ``progress``: samples taken of the plan's;
 - ``live/error`` (reading - the running calibration's prediction, made before the sample joins a
   fit), ``live/error/limit/upper|lower`` (what the prediction's uncertainty and the noise explain)
   and ``live/error/suspect`` (readings beyond it); ``live/predicted_workspace_mm`` and
@@ -20,8 +23,10 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
 - after a calibration: ``calibration/residual/<method>/before|after`` per sample and
   ``calibration/cost/<method>`` per solver iteration (timeline ``iteration``).
 
-The layout (blueprint) is declared once in :func:`blueprint`: the cell on the left; on the right
-the live error largest, the predicted workspace error under it, then the log.
+The layout (blueprint) is declared once in :func:`blueprint`: the cell on the left, seen from an
+eye that frames it (:func:`framing`); on the right the progress, the live error over its last
+``RECENT_SAMPLES`` samples (at their own scale), the predicted workspace error; the log across the
+bottom. The log's last line names the recording to replay once the view is gone.
 """
 
 from __future__ import annotations
@@ -53,10 +58,10 @@ WARN_WORDS = ("suspended", "rejected", "retrying", "failed", "timed out", "check
 
 LOG_WIDTH = 150
 """Characters per session-log row: the log spans the window, about 190 characters at 1400 px."""
-RECENT_SAMPLES = 40
+RECENT_SAMPLES = 20
 """The live error's plot shows this many recent samples, at their own scale: the first samples of a
 line, millimetres off, would flatten the hundredths that follow."""
-ROBOT, TOOL = (90, 100, 120), (240, 150, 30)
+ROBOT, TOOL = (40, 120, 140), (240, 150, 30)
 
 
 def blueprint(eye: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
@@ -128,7 +133,7 @@ def framing(points_mm: np.ndarray) -> rrb.EyeControls3D:
     away /= np.linalg.norm(away)
     return rrb.EyeControls3D(
         kind=rrb.Eye3DKind.Orbital,
-        position=(centre + 1.5 * size * away).tolist(),
+        position=(centre + 1.0 * size * away).tolist(),
         look_target=centre.tolist(),
         eye_up=[0.0, 0.0, 1.0],
     )
@@ -270,7 +275,7 @@ class LiveView:
             tool = 150.0 * np.asarray(approach, float)
             self.rec.log(
                 "cell/robot/tool",
-                rr.Arrows3D(origins=[tcp - tool], vectors=[tool], radii=6.0, colors=[TOOL], labels=["tool"]),
+                rr.Arrows3D(origins=[tcp - tool], vectors=[tool], radii=6.0, colors=[TOOL]),
             )
 
     def progress(self, done: int, total: int, line: int) -> None:
