@@ -131,3 +131,49 @@ def wild_rows(errors: np.ndarray, factor: float) -> np.ndarray:
     """
     size = np.abs(np.asarray(errors, float))
     return np.flatnonzero(size >= factor * np.median(size))
+
+
+@dataclass(frozen=True)
+class DialGain:
+    """How one gauge line's dial readings move the fitted TCP (``dial_gain``).
+
+    Attributes
+    ----------
+    gain : ndarray, shape (3,)
+        The TCP's offset from the line per mm of dial reading [mm/mm], base frame, across the line:
+        the stated dial axis' component across the line where the axis is right, minus it where its
+        sign is flipped, near zero where the dial does not read the tool's distance from this edge.
+    sigma : float
+        Its standard error (all three components together) [mm/mm].
+    """
+
+    gain: np.ndarray
+    sigma: float
+
+
+def dial_gain(tcp: np.ndarray, point: np.ndarray, direction: np.ndarray, dial: np.ndarray) -> DialGain:
+    """Regress a line's TCP offsets across it on the dial readings (with a constant and a term along
+    the line, which a line's own fit absorbs).
+
+    Parameters
+    ----------
+    tcp : ndarray, shape (n, 3)
+        Fitted TCPs of the line's rows [mm], from a fit that did not use the dial readings.
+    point, direction : ndarray, shape (3,)
+        The fitted line [mm] and its unit direction.
+    dial : ndarray, shape (n,)
+        The rows' dial readings [mm].
+
+    Returns
+    -------
+    DialGain
+    """
+    rel = tcp - point
+    along = rel @ direction
+    offset = rel - along[:, None] * direction
+    design = np.column_stack([np.ones(len(dial)), along, dial])
+    coef = np.linalg.lstsq(design, offset, rcond=None)[0]
+    dof = max(len(dial) - 3, 1)
+    residual = float(np.sum((offset - design @ coef) ** 2)) / dof
+    var = np.linalg.pinv(design.T @ design)[2, 2]
+    return DialGain(coef[2], float(np.sqrt(residual * var)))

@@ -171,6 +171,10 @@ class DrawstringSetup:
         Per line id, the dial's unit axis in the base frame.
     default_dial_axis : ndarray, shape (3,), optional
         The axis on lines without their own; with neither, the dial only gates captures.
+    sigma_contact : float
+        How far the tool may sit off the edge where no dial reading measures it [mm, 1 sigma]: a row
+        without a reading (NaN) on a line with a dial axis, or any row on a line without one (then
+        across the edge in both directions).
     rho : float
         Weight of the line terms.
     anchor_tolerance, offset_tolerance : float
@@ -183,6 +187,7 @@ class DrawstringSetup:
     sigma_line: float = 0.01
     dial_axis: dict[int, np.ndarray] = field(default_factory=dict)
     default_dial_axis: np.ndarray | None = None
+    sigma_contact: float = 0.2
     rho: float = 1.0
     anchor_tolerance: float = 50.0
     offset_tolerance: float = 10.0
@@ -461,18 +466,31 @@ class DrawstringLineModel:
             j[:, N_DH : N_DH + 3] = -n @ self.frame.anchor_basis
             j[:, N_DH + 3] = -1.0
             jparts.append(j / st.sigma_length)
-        w_line = np.sqrt(st.rho) / st.sigma_line
         for lid in self.line_ids:
             rows = self._on_line[lid]
+            w_line = np.sqrt(st.rho) / self.line_sigma(lid)
             pc = p[rows] - self._dial_shift(rows, lid)
             r, dr_dp, dr_dl = line_residual(self.frame.lines[lid], x[self._line_cols[lid]], pc)
-            parts.append(w_line * r.ravel())
+            parts.append((w_line * r).ravel())
             if jacobian:
                 j = np.einsum("nik,nkj->nij", dr_dp, dp[rows])
                 j[:, :, self._line_cols[lid]] = dr_dl
-                jparts.append(w_line * j.reshape(2 * rows.size, x.size))
+                jparts.append((w_line[:, :, None] * j).reshape(2 * rows.size, x.size))
         r = np.concatenate(parts)
         return (r, np.concatenate(jparts)) if jacobian else (r, None)
+
+    def line_sigma(self, lid: int) -> np.ndarray:
+        """Each row's stated noise on line ``lid`` along (e1, e2) [mm], (rows, 2): ``sigma_line``
+        where the dial measures the tool's offset from the edge, with ``sigma_contact`` added in
+        quadrature where nothing does (``DrawstringSetup.sigma_contact``)."""
+        st, rows = self.setup_values, self._on_line[lid]
+        sigma = np.full((rows.size, 2), st.sigma_line)
+        contact = np.hypot(st.sigma_line, st.sigma_contact)
+        if st.dial_axis_of(lid) is None:
+            sigma[:] = contact
+        else:
+            sigma[np.isnan(self.samples.dial[rows]), 0] = contact
+        return sigma
 
     def _dial_shift(self, rows: np.ndarray, lid: int) -> np.ndarray:
         axis = self.setup_values.dial_axis_of(lid)

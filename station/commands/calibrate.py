@@ -117,14 +117,16 @@ def load_inputs(args) -> Inputs:
     """Samples (CSV or session folder), robot, setup and hold-out from ``args``; the flags override
     what a session folder embeds, and ``notes`` say so where they differ from it."""
     from station.formats.samples import load_samples
-    from station.formats.session_folder import load_robot_and_setup, replaced_by
+    from station.formats.session_folder import load_robot_and_setup, replaced_by, samples_path
 
+    if not args.samples.exists():
+        raise InputError(f"{args.samples}: no such file or folder (a samples CSV or a session folder)")
     session = args.samples if args.samples.is_dir() else None
     if session is None and args.robot is None:
         raise InputError(f"{args.samples}: a samples CSV needs --robot")
     robot, setup, setup_where, session_samples = load_robot_and_setup(session, args.robot, args.setup)
     samples = load_samples(session_samples or args.samples)
-    holdout = load_samples(args.holdout) if args.holdout else None
+    holdout = load_samples(samples_path(args.holdout)) if args.holdout else None
     if holdout is not None and holdout.kind != samples.kind:
         raise InputError(f"{args.holdout}: a {holdout.kind} set cannot hold out for a {samples.kind} set")
     notes = ()
@@ -162,6 +164,9 @@ def summary(report: CalibrationReport) -> str:
         f"predicted workspace error: {ws.predicted_rmse_mm:.3f} mm RMS "
         f"(95 %: below {ws.predicted_rmse_95_mm:.3f} mm)"
     )
+    mode = report.fit_check.dial_mode if report.fit_check else None
+    if mode and not any(mode in w for w in report.warnings):
+        lines.append(f"dial-less: {mode}")
     lines += [f"warning: {w}" for w in report.warnings]
     lines.append(f"note: {HOLDOUT_SCOPES[report.holdout_scope]}")
     lines.append(f"next: {report.next}")

@@ -37,6 +37,13 @@ MAX_JOINT_DEG = 3600.0  # ten turns: joint readings and limits
 MAX_ANGLE_DEG = 360.0  # D-H table angles
 MIN_SIGMA_MM, MAX_SIGMA_MM = 1e-6, 100.0  # instrument noise: a nanometre to 100 mm
 MAX_ID = 10**9  # sample, target and line ids: whole numbers 0 .. MAX_ID
+# Unit mistakes recognisable over a whole file (``station.formats.units``): joint readings all
+# within +-2 pi in a degrees column, a joint's range narrower than 2 pi rad, twists all within
+# +-pi/2 in a degrees field, every gauge-line point within this many mm of the base (metres).
+RADIANS_AS_DEG = 2 * math.pi + 1e-6
+MIN_JOINT_RANGE_DEG = 7.0
+MAX_TWIST_RAD = math.pi / 2 + 1e-6
+METRES_AS_MM = 10.0
 
 Length = Annotated[float, Field(ge=-MAX_LENGTH_MM, le=MAX_LENGTH_MM)]
 DialReading = Annotated[float, Field(ge=-MAX_DIAL_MM, le=MAX_DIAL_MM)]
@@ -74,7 +81,7 @@ def read_toml(path: Path) -> dict:
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, expected a TOML file") from None
+        raise InputError(f"{path}: {folder_kind(path)}, expected a TOML file") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
@@ -83,6 +90,14 @@ def read_toml(path: Path) -> dict:
         raise InputError(f"{path}: not valid TOML: not UTF-8 text") from None
     except RecursionError:
         raise InputError(f"{path}: not valid TOML: nested too deeply") from None
+
+
+def folder_kind(path: Path) -> str:
+    """What a folder given for a file is, for a message: a session folder (``session.toml`` inside,
+    whose files are named) or any directory."""
+    if (Path(path) / "session.toml").is_file():
+        return f"a session folder (its files: {Path(path) / 'session.toml'}, {Path(path) / 'samples.csv'})"
+    return "is a directory"
 
 
 def validate(schema: type[BaseModel], data: dict, where: str):

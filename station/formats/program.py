@@ -13,6 +13,7 @@ import numpy as np
 
 from errors import InputError
 from station.formats.samples import Q_COLUMNS, parse_numbers, read_csv
+from station.formats.units import check_joints_in_degrees
 
 ADDED_COLUMNS = ("shift_mm", "status")
 
@@ -70,4 +71,5 @@ def load_program(path) -> Program:
             )
     rows = [row + [""] * (len(header) - len(row)) for row in body]
     q = parse_numbers(path, rows, [header.index(c) for c in Q_COLUMNS], Q_COLUMNS)
+    check_joints_in_degrees(str(path), q, "program rows")
     return Program(str(path), header, rows, q)

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from errors import InputError
-from station.formats.base import MAX_DIAL_MM, MAX_JOINT_DEG, MAX_LENGTH_MM, id_cell, number_cell
+from station.formats.base import MAX_DIAL_MM, MAX_JOINT_DEG, MAX_LENGTH_MM, folder_kind, id_cell, number_cell
+from station.formats.units import check_joints_in_degrees
 
 Q_COLUMNS = tuple(f"q{i}_deg" for i in range(1, 7))
 XYZ_COLUMNS = ("x_mm", "y_mm", "z_mm")
@@ -56,6 +57,7 @@ def load_samples(path) -> Samples:
         else None
     )
     line = _line_ids(path, body, col.get("line"))
+    check_joints_in_degrees(str(path), q, "rows")
     n = len(body)
     return Samples(str(path), kind, q, measured, np.full(n, np.nan) if dial is None else dial, line)
 
@@ -68,7 +70,7 @@ def read_csv(path: Path, what: str) -> tuple[list[str], list[list[str]]]:
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, expected a CSV file") from None
+        raise InputError(f"{path}: {folder_kind(path)}, expected a CSV file") from None
     except (UnicodeDecodeError, csv.Error):
         raise InputError(f"{path}: not a text CSV file") from None
     except OSError as exc:

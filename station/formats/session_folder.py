@@ -327,9 +327,27 @@ def first_difference(a, b, key: str = "") -> str | None:
     return next((d for x, y, k in pairs if (d := first_difference(x, y, k))), None)
 
 
+def check_session_folder(folder: Path) -> Path:
+    """Bad input naming what ``folder`` is unless it is a session folder (holds ``session.toml``)."""
+    folder = Path(folder)
+    if not folder.exists():
+        raise InputError(f"{folder}: no such file or folder")
+    if not folder.is_dir():
+        raise InputError(f"{folder}: a file, expected a session folder (station sample --out DIR)")
+    if not (folder / "session.toml").is_file():
+        raise InputError(f"{folder}: a folder without session.toml, not a session folder")
+    return folder
+
+
+def samples_path(path: Path) -> Path:
+    """The samples CSV that ``path`` names: the file itself, or a session folder's samples.csv."""
+    path = Path(path)
+    return check_session_folder(path) / "samples.csv" if path.is_dir() else path
+
+
 def load_session(folder: Path) -> tuple[RobotFile, SetupFile, Path]:
     """Robot table, setup and samples path embedded in a session folder's ``session.toml``."""
-    folder = Path(folder)
+    folder = check_session_folder(folder)
     where = folder / "session.toml"
     data = read_toml(where)
     for key in ("robot", "setup"):

@@ -29,6 +29,7 @@ from station.formats.base import (
     read_toml,
     validate,
 )
+from station.formats.units import check_positions_in_mm, check_robot_units
 
 Mass = Annotated[float, Field(ge=0, le=1e4)]  # kg: a link or a payload, up to 10 t
 Compliance = Annotated[float, Field(ge=-1e6, le=1e6)]  # urad/(N m)
@@ -219,7 +220,9 @@ class SetupCell(Strict):
 
 class SetupFile(Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
-    tool sits on the gauge edge (joint-reading noise at the TCP included); ``rho``: line-term weight;
+    tool sits on the gauge edge (joint-reading noise at the TCP included); ``contact_sigma_mm``: how
+    far off the edge it may sit where no dial reading measures it (a dial-less cell, a row without a
+    reading, a line without a ``dial_axis``); ``rho``: line-term weight;
     ``payload``: what the flange carried while measuring (for the gravity torques)."""
 
     drawstring: SetupDrawstring | None = None
@@ -228,6 +231,7 @@ class SetupFile(Strict):
     lines: list[SetupLine] = []
     cell: SetupCell | None = None
     line_sigma_mm: Sigma = 0.01
+    contact_sigma_mm: Sigma = 0.2
     rho: Annotated[float, Field(ge=1e-6, le=1e6)] = 1.0
 
     @model_validator(mode="after")
@@ -268,6 +272,7 @@ def check_same_tool(table: RobotFile, table_where: str, nominal: RobotFile, nomi
 
 def load_robot(path) -> RobotFile:
     robot = validate(RobotFile, read_toml(path), str(path))
+    check_robot_units(str(path), robot.table_deg(), robot.limits_deg())
     compliant = [j for j, joint in enumerate(robot.joints) if joint.compliance_urad_per_Nm is not None]
     if compliant and robot.link_masses() is None:
         raise InputError(
@@ -277,4 +282,7 @@ def load_robot(path) -> RobotFile:
 
 
 def load_setup(path) -> SetupFile:
-    return validate(SetupFile, read_toml(path), str(path))
+    setup = validate(SetupFile, read_toml(path), str(path))
+    points = {f"lines.{k}.point_mm": ln.point_mm for k, ln in enumerate(setup.lines) if ln.point_mm}
+    check_positions_in_mm(str(path), points)
+    return setup

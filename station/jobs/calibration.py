@@ -45,6 +45,7 @@ from calib.selection import TermSelection
 from errors import InputError, ParameterError
 from station.formats.samples import Samples
 from station.formats.tables import Payload, RobotFile, SetupFile
+from station.jobs import absorbed
 from station.jobs.report import (
     CalibrationReport,
     CrossValidation,
@@ -214,6 +215,7 @@ def drawstring_setup(setup: SetupFile, where: str) -> DrawstringSetup:
         length_offset=setup.drawstring.length_offset_mm,
         sigma_length=setup.drawstring.sigma_mm,
         sigma_line=setup.line_sigma_mm,
+        sigma_contact=setup.contact_sigma_mm,
         dial_axis={ln.id: _unit(ln.dial_axis) for ln in setup.lines if ln.dial_axis is not None},
         default_dial_axis=None if default_axis is None else _unit(default_axis),
         rho=setup.rho,
@@ -395,7 +397,7 @@ def _report(
     model, cal = choice.model, fit.calibration
     after = metrics(model, hold_model, cal.x)
     workspace = predicted_workspace(robot, cal, model)
-    check, doubts = fit_check(model, cal, after.train, robot, notes, lm=fit.lm)
+    check, doubts = fit_check(model, cal, after.train, robot, notes, lm=fit.lm, workspace=workspace)
     messages = [*notes, *doubts]
     messages += [choice.warning] if choice.warning else []
     messages += workspace_warnings(model, cal.x, after.train, workspace)
@@ -425,7 +427,7 @@ def _report(
         line_errors=line_errors(model, cal.x),
         provenance=origin,
         holdout_scope=scope,
-        next=next_step(model, cal, check, after.train, workspace, method if short else None),
+        next=next_step(model, cal, check, after.train, workspace, method if short else None, doubts),
     )
 
 
@@ -475,6 +477,10 @@ NEXT = {
         "add a placement: {next_measurement}; the predicted workspace error {predicted:.2f} mm "
         "(95 %: {bound:.2f} mm) is far above the fit's {fit:.3f} mm"
     ),
+    "doubtful": (
+        "check what the fit check's {n} warning{s} name (the rows, the dial, the files) before "
+        "accepting; re-measure what they point at"
+    ),
     "accept": "accept: predicted workspace error {predicted:.3f} mm RMS (95 %: below {bound:.3f} mm){rows}",
 }
 """The report's ``next``: what to do now, one sentence, starting with the action."""
@@ -501,10 +507,12 @@ def next_step(
     fit: ErrorMetrics,
     workspace: WorkspacePrediction,
     short_of: str | None,
+    doubts: list[str] = (),
 ) -> str:
     """What to do now, in one sentence (``NEXT``): re-measure wild rows or noisy instruments, check
     the files a parameter ran away from, mind the solver, add a placement where the workspace is not
-    yet determined, else accept. ``short_of``: the method that stopped short of the optimum."""
+    yet determined, check any other doubt of the fit check (``doubts``, its warnings), else accept.
+    ``short_of``: the method that stopped short of the optimum."""
     before = np.abs(model.row_error_mm(cal.before.x))
     wild = wild_rows(before, WILD_FACTOR)
     if wild.size:
@@ -526,6 +534,8 @@ def next_step(
         return NEXT["workspace"].format(
             next_measurement=advice.next_measurement, predicted=predicted, bound=bound, fit=fit.rmse_mm
         )
+    if doubts:
+        return NEXT["doubtful"].format(n=len(doubts), s="" if len(doubts) == 1 else "s")
     n = len(cal.downweighted)
     rows = f"; {n} rows down-weighted as gross readings" if n else ""
     return NEXT["accept"].format(predicted=predicted, bound=bound, rows=rows)
@@ -563,8 +573,7 @@ def _errors(model: MeasurementModel, x: np.ndarray) -> ErrorMetrics:
 def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementModel) -> WorkspacePrediction:
     """Expected RMS error [mm] of the measured point (the model's TCP) over random configurations
     within the joint limits, and the RMS one calibration stays below with 95 % probability."""
-    limits = np.radians(robot.limits_deg())
-    q = np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
+    q = workspace_configurations(robot)
     dh = dh_table(cal.x)
     modes = workspace_error_modes(
         dh, model.tcp_in_flange(cal.x), q, cal.robot_covariance, model.terms, model.tool_mask.any()
@@ -572,6 +581,13 @@ def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementMo
     return WorkspacePrediction(
         predicted_workspace_rmse(modes), workspace_rmse_bound(modes, 0.95), WORKSPACE_POSES
     )
+
+
+def workspace_configurations(robot: RobotFile) -> np.ndarray:
+    """The random configurations [rad] (``WORKSPACE_POSES``, 6) within the joint limits over which
+    a workspace error is predicted."""
+    limits = np.radians(robot.limits_deg())
+    return np.random.default_rng(0).uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
 
 
 def workspace_warnings(
@@ -615,6 +631,7 @@ def fit_check(
     notes: tuple[str, ...],
     *,
     lm: bool = True,
+    workspace: WorkspacePrediction | None = None,
 ) -> tuple[FitCheck, list[str]]:
     """How the fit agrees with the stated noise and tolerances, and the warnings it calls for: a
     residual beyond the noise (chi-square), the iteration cap, a parameter far beyond its prior.
@@ -623,17 +640,22 @@ def fit_check(
     ``refusal`` naming the likely cause (the first of ``notes``, else a wild reading, else what the
     evidence points at). Judged at ``cal.x`` on every row of ``model`` (the training set, whatever
     subset the solver saw), weighted by LMLC's robust loss where ``lm`` (else every row counts, and
-    there is no iteration cap)."""
+    there is no iteration cap). The mistakes of ``station.jobs.absorbed`` (a dial axis its readings
+    contradict, many rows down-weighted) add their warnings and refusal, and a ``workspace``
+    prediction whose 95 % bound does not beat the nominal table's expected error is refused."""
     r = model.residuals(cal.x)
     options = CalibrationOptions() if lm else CalibrationOptions(loss="linear")
     weights = robust_weights(r, model.groups, cal.scale, options)
+    found = absorbed.findings(model, cal, weights)
+    nominal = workspace and absorbed.nominal_rmse(model, cal, workspace_configurations(robot))
     test = noise_test(r, weights, int(cal.identified.sum()))
     capped = bool(lm and cal.after.status == 0)
     z = excursions(cal.x, model.x0, model.prior_sigma(), cal.identified)
     wild = _wild(model, cal)
     messages = [wild] if wild else []
-    messages += _doubts(model, cal, test, z, fit, capped)
+    messages += [*found.warnings, *_doubts(model, cal, test, z, fit, capped)]
     refusal = _refusal(model, cal, test, z, fit, robot, (*notes, *([wild] if wild else [])))
+    refusal = refusal or _absorbed_refusal(found, workspace, nominal)
     verdict = "inconsistent" if refusal else "doubtful" if messages else "consistent"
     top = int(np.argmax(z))
     check = FitCheck(
@@ -646,8 +668,29 @@ def fit_check(
         iteration_cap=capped,
         verdict=verdict,
         refusal=refusal,
+        dial_lines=found.dials,
+        dial_mode=absorbed.dial_mode(found, model),
+        nominal_rmse_mm=nominal,
     )
     return check, messages
+
+
+def _absorbed_refusal(
+    found: absorbed.Findings, workspace: WorkspacePrediction | None, nominal: float | None
+) -> str | None:
+    """A mistake ``station.jobs.absorbed`` names with its fix, or a calibration on lines read
+    without a dial predicted to keep more than ``absorbed.NOMINAL_SHARE`` of the nominal table's
+    expected error; None if neither."""
+    if found.refusal:
+        return f"{found.refusal}; nothing else in the fit can be trusted until it is"
+    weak = workspace and nominal and workspace.predicted_rmse_mm >= absorbed.NOMINAL_SHARE * nominal
+    if found.unread and weak:
+        return (
+            f"its predicted workspace error {workspace.predicted_rmse_mm:.2f} mm is over a third of the "
+            f"nominal table's expected {nominal:.2f} mm (both from the tolerances): the samples cannot be "
+            "trusted to improve on the nominal table; measure more rows, on more lines, or with a dial"
+        )
+    return None
 
 
 def _doubts(

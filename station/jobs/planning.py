@@ -108,9 +108,10 @@ def design(
         progress(f"candidates on line {lid}")
         q, ok = line_candidates(dh, tool, limits, line, per_line, rng)
         if ok.sum() < 4:
+            cause = unreachable_cause(dh, tool, limits, line, rng)
             raise InputError(
                 f"{where}: [[lines]] id {lid}: only {int(ok.sum())} of {per_line} points reachable "
-                "within the joint limits away from singularities; move the gauge block"
+                f"within the joint limits away from singularities; {cause}"
             )
         q_line[lid] = q[ok]
     q_all = np.concatenate(list(q_line.values()))
@@ -153,6 +154,26 @@ def design(
         )
     plan = Plan(np.arange(len(rows)), line_all[rows], np.degrees(q_all[rows]))
     return Design(plan, report)
+
+
+def unreachable_cause(dh: np.ndarray, tool: np.ndarray, limits: np.ndarray, line: Line, rng) -> str:
+    """The likely cause of a gauge line the arm cannot touch: beyond its reach (a wrong point_mm or
+    robot file), an approach pointing the wrong way (reachable when flipped), else its placement."""
+    point, direction, length, approach = line
+    reach = float(np.abs(dh[:, 1:3]).sum() + np.linalg.norm(tool))
+    if np.linalg.norm(point) - length / 2 > reach:
+        return (
+            f"point_mm lies {np.linalg.norm(point):.0f} mm from the base, beyond the arm's reach "
+            f"({reach:.0f} mm by the robot file): a wrong point_mm or robot file"
+        )
+    _, flipped = line_candidates(dh, tool, limits, (point, direction, length, -approach), 20, rng)
+    if flipped.sum() >= 4:
+        a = vector_text(0.0 - approach, 2)
+        return (
+            f"with approach = {a} {int(flipped.sum())} of 20 points are reachable: the approach likely "
+            "points the wrong way (it is the way the tool points as it meets the edge)"
+        )
+    return "move the gauge block"
 
 
 def next_placement(

@@ -17,6 +17,7 @@ from calib.params import DH_KEYS, DH_NAMES, dh_to_degrees, display_factor
 from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
 from station.formats.tables import Payload, RobotFile
+from station.jobs.absorbed import LineDial
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,10 @@ class FitCheck:
     prior (a table parameter's tolerance, the setup's stated uncertainty; ``excursion_sigmas`` in the
     JSON is the same number under its first name); whether LMLC's solver stopped at its
     ``iteration_cap`` (never for a baseline); the ``verdict``: ``consistent``, ``doubtful`` (the
-    report warns) or ``inconsistent`` (``station calibrate`` refuses the result with ``refusal``)."""
+    report warns) or ``inconsistent`` (``station calibrate`` refuses the result with ``refusal``);
+    each gauge line's dial judged against its rows (``dial_lines``, ``station.jobs.absorbed``), what
+    rows read without a dial lose (``dial_mode``) and the nominal table's expected workspace error
+    (``nominal_rmse_mm``), which the calibration's 95 % bound must beat."""
 
     noise_ratio: float
     chi2: float
@@ -89,6 +93,9 @@ class FitCheck:
     iteration_cap: bool
     verdict: str
     refusal: str | None = None
+    dial_lines: tuple[LineDial, ...] = ()
+    dial_mode: str | None = None
+    nominal_rmse_mm: float | None = None
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ noise, and how far each parameter moved in its prior sigmas."""
 import numpy as np
 from scipy.special import erfc
 
-from calib.consistency import chi_square_sf, excursions, noise_test, wild_rows
+from calib.consistency import chi_square_sf, dial_gain, excursions, noise_test, wild_rows
 
 
 def test_chi_square_tail_matches_its_closed_forms():
@@ -48,3 +48,17 @@ def test_a_row_a_hundred_median_errors_off_is_wild():
     errors = np.array([0.3, -0.2, 0.5, 99000.0, 0.4, -2.0])
     assert wild_rows(errors, 100.0).tolist() == [3]
     assert wild_rows(errors, 4.0).tolist() == [3, 5]  # the median is 0.45 mm
+
+
+def test_dial_gain_recovers_the_dial_axis_and_its_sign():
+    rng = np.random.default_rng(5)
+    point, direction = np.array([100.0, -50.0, 300.0]), np.array([0.0, 1.0, 0.0])
+    axis = np.array([0.0, 0.6, 0.8])  # partly along the line: only its part across it shows
+    dial = rng.uniform(-0.3, 0.3, 40)
+    along = rng.uniform(-200, 200, 40)
+    noise = 0.005
+    tcp = point + along[:, None] * direction + dial[:, None] * axis + rng.normal(0, noise, (40, 3))
+    for sign in (1.0, -1.0):
+        found = dial_gain(tcp, point, direction, sign * dial)
+        np.testing.assert_allclose(found.gain, sign * np.array([0.0, 0.0, 0.8]), atol=5 * found.sigma)
+        assert 0.2 * noise / np.std(dial) / np.sqrt(40) < found.sigma < 5 * noise / np.std(dial) / np.sqrt(40)

@@ -1,0 +1,217 @@
+"""Mistakes a fit can absorb, caught and named: a gauge line's dial axis that its readings
+contradict (flipped, another axis, no dial on that edge), many rows down-weighted (and by what),
+the lines read without a dial (what is lost), and a calibration no better than the nominal table.
+
+Each check returns the warnings it calls for and, where the evidence leaves no doubt, a refusal
+naming the likely cause and its fix; ``station.jobs.calibration.fit_check`` adds them to its own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.accuracy import predicted_workspace_rmse, workspace_error_modes
+from calib.calibrate import DOWNWEIGHTED_BELOW, Calibration, CalibrationOptions, calibrate
+from calib.consistency import DialGain, dial_gain
+from calib.kinematics import dh_table
+from calib.models import GROUP_LENGTH, MeasurementModel
+
+DIAL_GAIN_TOLERANCE, DIAL_GAIN_SIGMAS = 0.3, 4.0
+"""How far (mm per mm of reading) a line's dial gain may lie from its stated axis before it
+disagrees: this much, or this many of the gain's standard errors where it is known less well (few
+rows, readings that hardly spread)."""
+DIAL_GAIN_FOLLOWS = 0.5
+"""A gain shorter than this: the dial does not read the tool's distance from the edge at all."""
+DOWNWEIGHTED_FINDING = 0.05
+"""Down-weighted rows beyond this fraction of all, or most rows of one line, are a finding."""
+
+
+@dataclass(frozen=True)
+class LineDial:
+    """One gauge line's dial judged against its rows: ``line`` id, stated unit ``axis``, the
+    ``gain`` its readings show (``calib.consistency.dial_gain``: the stated axis across the line
+    where right) with its ``sigma``, and the ``verdict`` (``agrees``, ``flipped``, ``other axis``,
+    ``does not follow``, or ``inconclusive`` for an axis nearly along the line)."""
+
+    line: int
+    axis: tuple[float, float, float]
+    gain: tuple[float, float, float]
+    sigma: float
+    verdict: str
+
+
+@dataclass(frozen=True)
+class Findings:
+    """What the checks found: ``warnings`` for the report, a ``refusal`` (None: none), each line's
+    ``dials`` and the ``unread`` lines (no dial reading measured the tool's offset there)."""
+
+    warnings: tuple[str, ...] = ()
+    refusal: str | None = None
+    dials: tuple[LineDial, ...] = ()
+    unread: tuple[int, ...] = ()
+
+
+def findings(model: MeasurementModel, cal: Calibration, weights: np.ndarray) -> Findings:
+    """All checks of this module on a finished fit; ``weights`` are the robust loss's per residual
+    row (``calib.calibrate.robust_weights``). Rows without dial readings on a line whose dial axis
+    the setup states are a lost channel (a warning); lines without an axis are a dial-less mode."""
+    warnings = downweighted(model, cal, weights)
+    if model.kind != "drawstring":
+        return Findings(tuple(warnings))
+    dials = line_dials(model)
+    refusal = next((_dial_text(d) for d in dials if d.verdict not in ("agrees", "inconclusive")), None)
+    unread = unread_lines(model)
+    lost = [lid for lid in unread if model.setup_values.dial_axis_of(lid) is not None]
+    if lost:
+        warnings.insert(0, _unread_text(model, lost, "the setup states a dial_axis, but "))
+    return Findings(tuple(warnings), refusal, tuple(dials), tuple(unread))
+
+
+def dial_mode(found: Findings, model: MeasurementModel) -> str | None:
+    """The line saying what a session read without a dial loses; None where every line has one."""
+    return _unread_text(model, list(found.unread), "") if found.unread else None
+
+
+# -- the dial ------------------------------------------------------------------------------------
+def line_dials(model) -> list[LineDial]:
+    """Each line with a stated dial axis and readings, judged by the gain its readings show on
+    the TCPs of a fit that does not use them (the dial-free refit)."""
+    axis_of = model.setup_values.dial_axis_of
+    judged = [lid for lid in model.line_ids if _read(model, lid).any() and axis_of(lid) is not None]
+    if not judged:
+        return []
+    samples = model.samples
+    free = model.with_samples(dataclasses.replace(samples, dial=np.full(len(samples), np.nan)))
+    x = calibrate(free, CalibrationOptions()).x
+    tcp = model.tcp(x)
+    out = []
+    for lid in judged:
+        rows = np.flatnonzero((model.placement_ids() == lid) & ~np.isnan(samples.dial))
+        point, direction = model.line(x, lid)
+        axis = np.asarray(model.setup_values.dial_axis_of(lid), float)
+        found = dial_gain(tcp[rows], point, direction, samples.dial[rows])
+        out.append(LineDial(lid, _t(axis), _t(found.gain), found.sigma, _verdict(found, axis, direction)))
+    return out
+
+
+def _verdict(found: DialGain, axis: np.ndarray, direction: np.ndarray) -> str:
+    across = axis - (axis @ direction) * direction
+    if np.linalg.norm(across) < 0.3:
+        return "inconclusive"  # an axis nearly along the line: its readings barely move the TCP across it
+    slack = max(DIAL_GAIN_TOLERANCE, DIAL_GAIN_SIGMAS * found.sigma)
+    if np.linalg.norm(found.gain - across) <= slack:
+        return "agrees"
+    if np.linalg.norm(found.gain + across) <= slack:
+        return "flipped"
+    if np.linalg.norm(found.gain) <= max(DIAL_GAIN_FOLLOWS, DIAL_GAIN_SIGMAS * found.sigma):
+        return "does not follow"
+    return "other axis"
+
+
+def _dial_text(d: LineDial) -> str:
+    axis, gain = np.array(d.axis), np.array(d.gain)
+    if d.verdict == "flipped":
+        return (
+            f"line {d.line}'s dial readings run against its dial_axis {_v(axis)}: flip it "
+            f"(dial_axis = {_v(-axis)} on [[lines]] id {d.line})"
+        )
+    if d.verdict == "other axis":
+        seen = _v(gain / np.linalg.norm(gain))
+        return (
+            f"line {d.line}'s dial readings move the tool along {seen}, not along its dial_axis {_v(axis)}: "
+            f"set dial_axis = {seen} on [[lines]] id {d.line} (the way the indicator reads positive)"
+        )
+    return (
+        f"line {d.line}'s dial readings do not follow the tool's distance from the edge (gain "
+        f"{np.linalg.norm(gain):.2f} mm/mm, 1 expected): the dial is on another edge, or the rows carry "
+        "the wrong line id"
+    )
+
+
+def unread_lines(model) -> list[int]:
+    """The lines where no dial reading measures the tool's offset from the edge: no readings, or
+    no dial axis to read them along."""
+    return [
+        lid
+        for lid in model.line_ids
+        if model.setup_values.dial_axis_of(lid) is None or not _read(model, lid).all()
+    ]
+
+
+def _read(model, lid: int) -> np.ndarray:
+    return ~np.isnan(model.samples.dial[model.placement_ids() == lid])
+
+
+def _unread_text(model, unread: list[int], lead: str) -> str:
+    st = model.setup_values
+    some = len(unread) < len(model.line_ids)
+    which = "line " + ", ".join(str(lid) for lid in unread) if some else "any line"
+    return (
+        f"{lead}no dial reading measures the tool's offset from the edge on {which} (no dial_mm readings "
+        f"or no dial_axis): those line rows hold the TCP to contact_sigma_mm {st.sigma_contact:g} mm "
+        f"instead of line_sigma_mm {st.sigma_line:g}, and the predicted workspace error counts it"
+    )
+
+
+# -- down-weighted rows --------------------------------------------------------------------------
+def downweighted(model: MeasurementModel, cal: Calibration, weights: np.ndarray) -> list[str]:
+    """A warning where the robust loss down-weighted more than ``DOWNWEIGHTED_FINDING`` of the rows
+    or most rows of one line, naming by what (the drawstring or the line contacts) and the likely
+    cause."""
+    n, k = len(model.samples), len(cal.downweighted)
+    if k == 0:
+        return []
+    cut = weights[: model.rows.size] ** 2 < DOWNWEIGHTED_BELOW
+    by_length = np.unique(model.rows[cut & (model.groups == GROUP_LENGTH)])
+    by_line = np.unique(model.rows[cut & (model.groups != GROUP_LENGTH)])
+    place = model.placement_ids()
+    most = [
+        (int(lid), int(np.isin(np.flatnonzero(place == lid), by_line).sum()), int((place == lid).sum()))
+        for lid in np.unique(place[place >= 0])
+    ]
+    most = [m for m in most if m[1] > m[2] / 2]
+    if k <= DOWNWEIGHTED_FINDING * n and not most:
+        return []
+    if most:
+        lid, cut_rows, rows = most[0]
+        return [
+            f"most rows of line {lid} ({cut_rows} of {rows}) are down-weighted by their line contact: "
+            "its dial_axis or dial readings are wrong, the rows carry another line's id, or the gauge block "
+            "moved while measuring; the fit rests on the other lines"
+        ]
+    cause = (
+        "by their drawstring readings: the cable slipped or snagged, or the anchor moved while measuring"
+        if by_length.size >= by_line.size
+        else "by their line contacts: the tool left the edge, or a dial_axis or line id is wrong"
+    )
+    return [f"{k} of {n} rows ({100 * k / n:.0f} %) are down-weighted, {cause}"]
+
+
+# -- better than the nominal table? ---------------------------------------------------------------
+NOMINAL_SHARE = 1 / 3
+"""A calibration whose predicted workspace error exceeds this share of the nominal table's expected
+error, both predicted from the same tolerances (so an overstated tolerance cancels), cannot be
+trusted to improve on the table: on simulated cells fits above it were as often worse than the
+nominal table as better, those below it better (``benchmarks/mistakes.py``)."""
+
+
+def nominal_rmse(model: MeasurementModel, cal: Calibration, q: np.ndarray) -> float:
+    """The nominal table's expected workspace error [mm] as the parameters' priors (the
+    manufacturing tolerance) predict it over configurations ``q`` [rad], as a calibration's is."""
+    sigma = model.prior_sigma()[cal.robot_index]
+    cov = np.diag(np.where(np.isfinite(sigma), sigma, 0.0) ** 2)
+    modes = workspace_error_modes(
+        dh_table(model.x0), model.tcp_in_flange(model.x0), q, cov, model.terms, model.tool_mask.any()
+    )
+    return predicted_workspace_rmse(modes)
+
+
+def _t(v) -> tuple[float, float, float]:
+    return tuple(round(float(c), 4) for c in v)
+
+
+def _v(v) -> str:
+    return "[" + ", ".join(f"{c + 0.0:.2f}" for c in np.round(v, 2)) + "]"
