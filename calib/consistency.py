@@ -14,9 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import gammaincc
 
 from calib.calibrate import DOWNWEIGHTED_BELOW
+from calib.special import gammaincc
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ class NoiseTest:
 def chi_square_sf(chi2: float, dof: int) -> float:
     """``P(X >= chi2)`` for ``X`` chi-square with ``dof`` degrees of freedom: ``Q(dof/2, chi2/2)``,
     the regularised upper incomplete gamma function."""
-    return float(gammaincc(dof / 2.0, chi2 / 2.0))
+    return gammaincc(dof / 2.0, float(chi2) / 2.0)
 
 
 def noise_test(residuals: np.ndarray, weights: np.ndarray, n_free: int) -> NoiseTest:

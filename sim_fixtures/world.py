@@ -101,7 +101,7 @@ DEFAULT_LINES = (
         np.array([-1000.0, 450.0, 600.0]),
         _unit([0.2, 0, 1]),
         400.0,
-        _unit([-1, 0, 0.2]),
+        _unit([1, 0, -0.2]),  # the dial reads positive against the approach, as on lines 0 and 1
         _unit([-1, 0, 0.2]),
     ),
 )

@@ -9,8 +9,7 @@ import sys
 from pathlib import Path
 
 from errors import DeviceError, InputError, OutputError
-
-DISTRIBUTION = "calibration-station"  # pyproject.toml's [project] name
+from station import DISTRIBUTION  # noqa: F401  (the distribution's name, imported from here by tests)
 
 # One module per command; each exposes ``register(subparsers)``, which adds its parser with
 # ``func`` set to the module's one entry ``run(args)`` (returns the exit code). A command module
@@ -61,13 +60,9 @@ class _Version(argparse.Action):
         super().__init__(option_strings, dest, nargs=0, help="print the station's version and exit")
 
     def __call__(self, parser, namespace, values, option_string=None):
-        from importlib.metadata import PackageNotFoundError, version
+        from station import installed_version
 
-        try:
-            found = version(DISTRIBUTION)
-        except PackageNotFoundError:
-            found = "unknown (not installed: pip install -e .)"
-        print(f"station {found}")
+        print(f"station {installed_version()}")
         parser.exit()
 
 

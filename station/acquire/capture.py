@@ -234,7 +234,10 @@ def _check(rules: Rules, window, q, qd, length, dial) -> None:
     if window > rules.window_s:
         broken.append(f"readings took {window * 1e3:.1f} ms, over the {rules.window_s * 1e3:.1f} ms window")
     if span(q) > rules.still_deg or qd >= rules.settle_speed_deg_s:
-        broken.append(f"robot moved (joints spread {span(q):.4f} deg, speed up to {qd:.3f} deg/s)")
+        broken.append(
+            "the robot left before the capture finished, so it will be taken again "
+            f"(joints spread {span(q):.4f} deg, speed up to {qd:.3f} deg/s)"
+        )
     # the gates hold for every reading: a cable that slackens after the gate check is not a sample
     for value, outside, what in ((length, length_outside, "drawstring"), (dial, dial_outside, "dial")):
         why = next((w for v in value if np.isfinite(v) and (w := outside(float(v), rules))), None)

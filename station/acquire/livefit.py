@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.kinematics import tcp_position
+from calib.kinematics import base_from_frames, tcp_position, tool_point
 from calib.params import dh_from_degrees
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.planning import NextPlacement, next_placement
@@ -220,6 +220,13 @@ class RunningCalibration:
         """Nominal TCPs (N, 3) [mm] of configurations (N, 6) [deg]."""
         return tcp_position(self.dh, np.radians(np.atleast_2d(q_deg)), self.tool)
 
+    def nominal_chain_mm(self, q_deg) -> tuple[np.ndarray, np.ndarray]:
+        """The nominal robot at ``q_deg`` (6,) [deg]: its D-H frame origins, base to flange, and
+        the TCP (8, 3) [mm], and the tool's approach (the flange's z axis, unit, base frame)."""
+        frames = base_from_frames(self.dh, np.radians(np.atleast_2d(q_deg)))[0]
+        tcp = tool_point(frames[None, -1], self.tool)[0]
+        return np.vstack([frames[:, :3, 3], tcp]), frames[-1, :3, 2]
+
     def live_error(self, q_deg, length_mm: float) -> LiveError:
         """The sample against the latest refit (before it joins one), once a refit is judged."""
         fit = self.latest
@@ -287,7 +294,8 @@ class RunningCalibration:
                 self._said_undetermined = True
                 self.listener.message(
                     f"running calibration: live errors and the predicted workspace error start once "
-                    f"the samples determine the model ({fit.n} of {fit.needed} so far)"
+                    f"the samples determine the model ({fit.n} of {fit.needed} so far; the number needed "
+                    "grows while the first samples let the fit see more of the robot's parameters)"
                 )
             return
         if not self.history:

@@ -91,5 +91,10 @@ def _error_text(live) -> str:
     if live.error_mm is not None:
         return f"error {live.error_mm:+.3f} mm (limit {live.limit_mm:.3f})"
     if live.needed is None:
-        return "error: no model yet"
-    return f"error: none until the model is determined ({live.fitted} of {live.needed} samples)"
+        return f"{UNDETERMINED} (first fit under way)"
+    return f"{UNDETERMINED} ({live.fitted} of {live.needed} samples)"
+
+
+UNDETERMINED = "error: none until the model is determined"
+"""What the progress shows before the live error starts, one phrase for every step of it."""
+

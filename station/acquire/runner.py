@@ -246,9 +246,11 @@ class Live:
 
     def sample(self, row: dict, cap) -> None:
         live = self.running.live_error(cap.q_deg, cap.length_mm)
-        tcp = self.running.nominal_tcp_mm(cap.q_deg)[0]
-        self.view.sample(row["sample"], row["t_s"], tcp, cap.length_mm, cap.dial_mm, live)
+        chain, approach = self.running.nominal_chain_mm(cap.q_deg)
+        tcp = chain[-1]
+        self.view.sample(row["sample"], row["t_s"], tcp, cap.length_mm, cap.dial_mm, live, chain, approach)
         self.progress.sample(row, live)
+        self.view.progress(self.progress.done, self.progress.total, int(row["line"]))
         if live.error_mm is not None:
             self.worst_mm = max(abs(live.error_mm), self.worst_mm or 0.0)
         if live.suspect:
@@ -289,7 +291,9 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     it. A resumed session's samples are refitted first, so its next capture is judged at once."""
     view, progress, worker, plan = live.view, live.progress, live.running.worker, inputs.plan
     view.cell(
-        inputs.setup.drawstring.anchor_mm, line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line)
+        inputs.setup.drawstring.anchor_mm,
+        line_segments(live.running.nominal_tcp_mm(plan.q_deg), plan.line),
+        [live.running.nominal_chain_mm(q)[0] for q in plan.q_deg],
     )
     for note in (*view.notes, *inputs.notes):
         progress.message(note)

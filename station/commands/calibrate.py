@@ -150,7 +150,7 @@ def summary(report: CalibrationReport) -> str:
     """A short human summary: before -> after on training and hold-out, time, what was held."""
     lines = [
         f"{report.kind} calibration, method {report.method}: "
-        f"{report.iterations} iterations, {report.time_s:.3f} s",
+        f"{report.iterations} solver iteration{'' if report.iterations == 1 else 's'}, {report.time_s:.3f} s",
         f"{'':18}{'RMSE':>8}{'MEAN':>8}{'MAX':>8}  mm",
     ]
     parts = (("train", report.before.train, report.after.train),)
@@ -160,10 +160,11 @@ def summary(report: CalibrationReport) -> str:
             if m is not None:
                 lines.append(f"{part + ' ' + when:18}{m.rmse_mm:8.3f}{m.mean_mm:8.3f}{m.max_mm:8.3f}")
     from calib.joint_terms import TERM_KINDS
+    from station.jobs.calibration import HOLDOUT_SCOPES
 
     terms_held = sum(1 for h in report.held if h.param.partition(".")[2] in TERM_KINDS)
     held = ", ".join(h.param for h in report.held if h.param.partition(".")[2] not in TERM_KINDS)
-    held += f"; {terms_held} joint-space terms (reasons in the report)" if terms_held else ""
+    held += f"; also held: {terms_held} joint-space terms (why: the report's held)" if terms_held else ""
     lines.append(f"identified {len(report.identified)} table parameters; held: {held}")
     lines += terms_summary(report)
     if report.downweighted:
@@ -177,6 +178,8 @@ def summary(report: CalibrationReport) -> str:
     if mode and not any(mode in w for w in report.warnings):
         lines.append(f"dial-less: {mode}")
     lines += [f"warning: {w}" for w in report.warnings]
+    lines.append(f"note: {HOLDOUT_SCOPES[report.holdout_scope]}")
+    lines.append(f"next: {report.next}")
     return "\n".join(lines)
 
 

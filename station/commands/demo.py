@@ -148,7 +148,7 @@ def _session(inputs, viewer: bool) -> SessionRun:
     )
     worst = "" if done.worst_error_mm is None else f", worst live error {done.worst_error_mm:.2f} mm"
     print(
-        f"session:   {done.state.value}, {n}/{len(inputs.plan)} samples in {time.perf_counter() - t0:.1f} s, "
+        f"session:   {n}/{len(inputs.plan)} samples in {time.perf_counter() - t0:.1f} s, "
         f"{running}{worst} -> {inputs.folder.path}",
         flush=True,
     )

@@ -49,5 +49,7 @@ def run(args) -> int:
     write_outputs([Output.text(args.out, "--out", result.text)])
     for note in result.notes:
         print(f"note: {note}")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
     print(f"wrote {args.out} ({args.fmt})")
     return 0

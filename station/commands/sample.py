@@ -69,7 +69,7 @@ def run(args) -> int:
         if args.plan:
             raise InputError("--plan: a resumed session keeps the plan embedded in its session.toml")
         inputs = runner.resume_session(args.resume, args.config, args.time_scale)
-        print(f"resuming {args.resume}: {len(inputs.folder.rows)} of {len(inputs.plan)} targets measured")
+        print(resuming_text(args.resume, inputs, args.until_mm))
     else:
         config = args.config or configs.path("station.toml")
         inputs = runner.new_session(args.out, config, args.plan, args.time_scale)
@@ -82,7 +82,7 @@ def run(args) -> int:
 def _run(args, inputs) -> int:
     from station.acquire import runner
 
-    until_mm = args.until_mm or inputs.folder.header.get("until_mm")
+    until_mm = args.until_mm
     if args.until_mm:
         inputs.folder.update_header(until_mm=args.until_mm)
     web = (args.web_bind or "127.0.0.1") if args.web or args.web_bind else None
@@ -96,10 +96,25 @@ def _run(args, inputs) -> int:
             f"{len(folder.rows)} samples in {folder.samples_csv} are whole"
         )
     print(
-        f"{state.value}: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "
-        f"recording {folder.rrd}"
+        f"saved: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "
+        f"replay the recording with: rerun {folder.rrd}"
     )
     return EXIT[state.value]
+
+
+def resuming_text(folder, inputs, until_mm: float | None) -> str:
+    """What a resume goes on to do: ``--until-mm`` again stops at that goal; without it the rest of
+    the plan is measured, whatever goal the session had (it may have been reached already)."""
+    text = f"resuming {folder}: {len(inputs.folder.rows)} of {len(inputs.plan)} targets measured"
+    earlier = inputs.folder.header.get("until_mm")
+    if until_mm is not None:
+        return f"{text}; until the 95 % workspace bound is at or below {until_mm:g} mm"
+    if earlier is not None:
+        return (
+            f"{text}; measuring the rest of the plan (the session's earlier --until-mm {earlier:g} is "
+            "not carried over: give --until-mm again to stop at a goal)"
+        )
+    return f"{text}; measuring the rest of the plan"
 
 
 def _positive_mm(text: str) -> float:

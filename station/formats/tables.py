@@ -233,6 +233,36 @@ class SetupLine(Strict):
     approach: Direction | None = None
 
 
+class Box(Strict):
+    """An axis-aligned box in the base frame: its ``min_mm`` and ``max_mm`` corners [mm]."""
+
+    min_mm: Vec3
+    max_mm: Vec3
+
+    @model_validator(mode="after")
+    def _corners_ordered(self) -> Box:
+        if not all(lo < hi for lo, hi in zip(self.min_mm, self.max_mm, strict=True)):
+            lo, hi = list(self.min_mm), list(self.max_mm)
+            raise ValueError(f"min_mm {lo} must lie below max_mm {hi} on each axis")
+        return self
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """Which of ``points`` (N, 3) [mm] lie inside (N,)."""
+        p = np.atleast_2d(points)
+        return np.all((p >= self.min_mm) & (p <= self.max_mm), axis=1)
+
+
+class SetupCell(Strict):
+    """Where a suggested gauge-line placement may go (``station plan``'s next placements, the
+    running calibration's): wholly inside the ``reach`` box, its line and the tool coming onto it
+    clear of every ``keep_out`` box, the tool at most ``max_tilt_from_down_deg`` from pointing
+    straight down (None: any way)."""
+
+    reach: Box | None = None
+    keep_out: list[Box] = []
+    max_tilt_from_down_deg: Annotated[float, Field(ge=0, le=180)] | None = None
+
+
 class SetupFile(Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
     tool sits on the gauge edge (joint-reading noise at the TCP included); ``contact_sigma_mm``: how
@@ -244,6 +274,7 @@ class SetupFile(Strict):
     dial: SetupDial | None = None
     payload: Payload | None = None
     lines: list[SetupLine] = []
+    cell: SetupCell | None = None
     line_sigma_mm: Sigma = 0.01
     contact_sigma_mm: Sigma = 0.2
     rho: Annotated[float, Field(ge=1e-6, le=1e6)] = 1.0

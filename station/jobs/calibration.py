@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
-from calib.baselines import BaselineOptions, run_method
 from calib.calibrate import (
     Calibration,
     CalibrationOptions,
@@ -56,8 +55,10 @@ from station.jobs.report import (
     FitCheck,
     FitMetrics,
     HeldParameter,
+    Provenance,
     Selection,
     WorkspacePrediction,
+    now_utc,
 )
 from station.jobs.terms import MODELS, TermChoice, choose_terms
 
@@ -184,8 +185,18 @@ def calibrate_samples(
     choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
     fit = SOLVERS[method](choice, method, select)
     elapsed = time.perf_counter() - t0
-    report = _report(choice, holdout_model(choice.model, holdout), robot, method, fit, elapsed, terms, notes)
+    origin = provenance(samples, robot, setup_where if setup is not None else None)
+    hold_model = holdout_model(choice.model, holdout)
+    report = _report(choice, hold_model, robot, method, fit, elapsed, terms, notes, origin)
     return CalibrationOutcome(report, fit.calibration, choice.model, payload)
+
+
+def provenance(samples: Samples, robot: RobotFile, setup: str | None) -> Provenance:
+    """What a report is of: the robot, the samples' path, the setup (where it came from), now and
+    the station's version."""
+    from station import installed_version
+
+    return Provenance(robot.name, robot.serial, str(samples.path), setup, now_utc(), installed_version())
 
 
 def payload_of(robot: RobotFile, setup: SetupFile | None) -> Payload | None:
@@ -349,6 +360,8 @@ def baseline(model: MeasurementModel, method: str) -> tuple[Calibration, np.ndar
     and identified parameters; its uncertainty from the Jacobian at its own solution, with the
     noise LMLC fitted. Nothing is down-weighted: these methods have no robust loss. Also returns
     LMLC's solution, the optimum it is judged against."""
+    from calib.baselines import BaselineOptions, run_method  # scipy.optimize: only the baselines need it
+
     start = calibrate(model, CalibrationOptions())
     found = run_method(method, model, start.before.x, start.identified, BaselineOptions())
     prior = WithPrior(model, model.x0)
@@ -379,6 +392,7 @@ def _report(
     elapsed: float,
     terms: str,
     notes: tuple[str, ...],
+    origin: Provenance | None = None,
 ) -> CalibrationReport:
     model, cal = choice.model, fit.calibration
     after = metrics(model, hold_model, cal.x)
@@ -387,8 +401,10 @@ def _report(
     messages = [*notes, *doubts]
     messages += [choice.warning] if choice.warning else []
     messages += workspace_warnings(model, cal.x, after.train, workspace)
-    messages += short_of_optimum(model, cal.x, fit.optimum, method)
+    short = short_of_optimum(model, cal.x, fit.optimum, method)
+    messages += short
     held = {**choice.held, **cal.held}
+    scope = holdout_scope(model, hold_model)
     return CalibrationReport(
         kind=model.kind,
         method=method,
@@ -397,18 +413,132 @@ def _report(
         setup=model.setup_estimate(cal.x),
         identified=tuple(robot.param_name(n) for k, n in enumerate(DH_NAMES) if cal.identified[k]),
         held=tuple(HeldParameter(robot.param_name(p), r) for p, r in held.items()),
-        parameters={robot.param_name(n): e for n, e in _parameters(cal, DH_NAMES).items()},
+        parameters={robot.param_name(n): e for n, e in _parameters(cal, DH_NAMES, model.x0).items()},
         downweighted=tuple(int(r) for r in cal.downweighted),
         workspace=workspace,
         warnings=tuple(messages),
-        iterations=int(cal.after.nit),
+        iterations=solver_iterations(cal, fit.lm),
         time_s=round(elapsed, 4),
         selection=None if fit.selection is None else _selection(fit.selection),
         model=terms,
-        terms=_parameters(cal, model.terms.names),
+        terms=_parameters(cal, model.terms.names, model.x0),
         cross_validation=None if choice.selection is None else _cross_validation(choice.selection),
         fit_check=check,
+        line_errors=line_errors(model, cal.x),
+        provenance=origin,
+        holdout_scope=scope,
+        next=next_step(model, cal, check, after.train, workspace, method if short else None, doubts),
     )
+
+
+def solver_iterations(cal: Calibration, lm: bool) -> int:
+    """The solver's iterations: LMLC's accepted steps over its linear and robust rounds (the last
+    round alone, often 1, undercounts), a baseline's own count."""
+    steps = sum(1 for it in cal.after.history if it.accepted) if lm else 0
+    return max(steps, int(cal.after.nit))
+
+
+HOLDOUT_SCOPES = {
+    "none": (
+        "no --holdout: every figure but the predicted workspace error comes from the training rows' "
+        "gauge lines (the cross-validation too) and says nothing about the rest of the workspace"
+    ),
+    "same lines": (
+        "the hold-out lies on the training's gauge lines: it shows how the table repeats there and "
+        "says nothing about the rest of the workspace (the predicted workspace error does; `station "
+        "verify` on a placement the calibration never saw checks it)"
+    ),
+    "poses": "the hold-out poses were never fitted: their error is the table's on those poses",
+}
+"""What the hold-out figure can speak for (the report's ``holdout_scope``), in one sentence each."""
+
+NEXT = {
+    "wild": (
+        "re-measure {rows} (error before calibration up to {ratio:.0f} times the median row's: check "
+        "the cable and the gauge contact), then calibrate again"
+    ),
+    "noise": (
+        "re-measure after checking the instruments and the setup's sigma_mm: the fit leaves "
+        "{ratio:.1f} times the stated noise, so the table and its predicted workspace error are not "
+        "to be trusted yet"
+    ),
+    "excursion": (
+        "check the {files} ({name} moved {z:.0f} times its tolerance), then calibrate again; "
+        "re-measure if they are right"
+    ),
+    "iteration_cap": (
+        "do not use the table yet: the solver stopped at its iteration cap; check the warnings and "
+        "re-measure the rows they name"
+    ),
+    "short_of_optimum": (
+        "calibrate again with --method lmlc: {method} stopped short of the least-squares optimum"
+    ),
+    "workspace": (
+        "add a placement: {next_measurement}; the predicted workspace error {predicted:.2f} mm "
+        "(95 %: {bound:.2f} mm) is far above the fit's {fit:.3f} mm"
+    ),
+    "doubtful": (
+        "check what the fit check's {n} warning{s} name (the rows, the dial, the files) before "
+        "accepting; re-measure what they point at"
+    ),
+    "accept": "accept: predicted workspace error {predicted:.3f} mm RMS (95 %: below {bound:.3f} mm){rows}",
+}
+"""The report's ``next``: what to do now, one sentence, starting with the action."""
+
+
+def holdout_scope(model: MeasurementModel, hold_model: MeasurementModel | None) -> str:
+    """What the hold-out figure can speak for (a key of ``HOLDOUT_SCOPES``): a drawstring hold-out
+    shares the training's gauge lines (their fitted lines judge it), a tracker's poses are new."""
+    if hold_model is None:
+        return "none"
+    return "same lines" if model.kind == "drawstring" else "poses"
+
+
+def line_errors(model: MeasurementModel, x: np.ndarray) -> dict[int, ErrorMetrics]:
+    """Each placement's (gauge line's) row errors at ``x`` [mm]."""
+    errors, ids = model.row_error_mm(x), model.placement_ids()
+    return {int(i): ErrorMetrics(**error_metrics(errors[ids == i])) for i in np.unique(ids)}
+
+
+def next_step(
+    model: MeasurementModel,
+    cal: Calibration,
+    check: FitCheck,
+    fit: ErrorMetrics,
+    workspace: WorkspacePrediction,
+    short_of: str | None,
+    doubts: list[str] = (),
+) -> str:
+    """What to do now, in one sentence (``NEXT``): re-measure wild rows or noisy instruments, check
+    the files a parameter ran away from, mind the solver, add a placement where the workspace is not
+    yet determined, check any other doubt of the fit check (``doubts``, its warnings), else accept.
+    ``short_of``: the method that stopped short of the optimum."""
+    before = np.abs(model.row_error_mm(cal.before.x))
+    wild = wild_rows(before, WILD_FACTOR)
+    if wild.size:
+        rows = ("row " if wild.size == 1 else "rows ") + ", ".join(str(r) for r in wild[:10])
+        return NEXT["wild"].format(rows=rows, ratio=before[wild].max() / np.median(before))
+    if check.noise_ratio >= NOISE_DOUBT_RATIO and check.p_value < NOISE_DOUBT_P:
+        return NEXT["noise"].format(ratio=check.noise_ratio)
+    if check.excursion is not None and check.excursion_sigmas >= EXCURSION_DOUBT:
+        k = model.names.index(check.excursion)
+        files = "setup" if model.setup_mask[k] else "robot file"
+        return NEXT["excursion"].format(files=files, name=check.excursion, z=check.excursion_sigmas)
+    if check.iteration_cap:
+        return NEXT["iteration_cap"]
+    if short_of is not None:
+        return NEXT["short_of_optimum"].format(method=short_of)
+    predicted, bound = workspace.predicted_rmse_mm, workspace.predicted_rmse_95_mm
+    if predicted > max(WORKSPACE_WARNING_RATIO * fit.rmse_mm, WORKSPACE_WARNING_FLOOR_MM):
+        advice = model.measurement_advice(cal.x)
+        return NEXT["workspace"].format(
+            next_measurement=advice.next_measurement, predicted=predicted, bound=bound, fit=fit.rmse_mm
+        )
+    if doubts:
+        return NEXT["doubtful"].format(n=len(doubts), s="" if len(doubts) == 1 else "s")
+    n = len(cal.downweighted)
+    rows = f"; {n} rows down-weighted as gross readings" if n else ""
+    return NEXT["accept"].format(predicted=predicted, bound=bound, rows=rows)
 
 
 def residual_rows(outcome: CalibrationOutcome) -> dict:
@@ -664,11 +794,17 @@ def _selection(mcs: MCSResult) -> Selection:
     return Selection(rows, int(mcs.n_select), "O1", mcs.selection.value)
 
 
-def _parameters(cal: Calibration, names) -> dict[str, Estimate]:
-    """The identified parameters of ``names`` in display units, with their sigmas."""
+def _parameters(cal: Calibration, names, nominal: np.ndarray) -> dict[str, Estimate]:
+    """The identified parameters of ``names`` in display units, with their sigmas and the
+    ``nominal`` values (internal units, as ``cal.x``) they started from."""
     factor = display_factor(cal.names)
     return {
-        name: Estimate(float(cal.x[k] * factor[k]), float(cal.sigma[k] * factor[k]))
+        name: Estimate(
+            float(cal.x[k] * factor[k]),
+            float(cal.sigma[k] * factor[k]),
+            float(nominal[k] * factor[k]),
+            float((cal.x[k] - nominal[k]) * factor[k]),
+        )
         for k, name in enumerate(cal.names)
         if name in names and cal.identified[k]
     }

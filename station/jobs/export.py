@@ -3,7 +3,8 @@ know about it (notes, printed and, where the format has comments, written in the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -18,10 +19,12 @@ DH_CSV_ORDER = [3, 2, 1, 0]  # RobotFile.table_deg's theta, d, a, alpha -> alpha
 
 @dataclass(frozen=True)
 class Export:
-    """The file's ``text`` and the ``notes`` to print."""
+    """The file's ``text``, the ``notes`` to print and the ``warnings`` (a file that may not be
+    what the user wants)."""
 
     text: str
     notes: list[str]
+    warnings: list[str] = field(default_factory=list)
 
 
 def export(
@@ -35,7 +38,17 @@ def export(
     if not terms:
         return done
     note = TERMS_LEFT_OUT.format(fmt=fmt, terms=", ".join(terms))
-    return Export(done.text, [*done.notes, note])
+    return Export(done.text, [*done.notes, note], done.warnings)
+
+
+UNIVERSAL_ROBOT = re.compile(r"^\s*(ur\s?-?\d|universal robots)", re.IGNORECASE)
+"""A robot name Universal Robots' kinematics file is meant for: UR3, UR10e, UR-16, Universal Robots ..."""
+
+NOT_A_UR = (
+    "{name} is not a Universal Robots arm by its name: ur-yaml is the kinematics file of UR's "
+    "controllers and ROS driver, which expect a UR's joint layout; for this robot use --format urdf "
+    "or dh-csv (name it UR... in the robot file if it is a UR)"
+)
 
 
 TERMS_LEFT_OUT = (
@@ -51,7 +64,10 @@ def _geometry(
         return _urdf(robot, source)
     if fmt == "ur-yaml":
         known = robot.controller_hash or (nominal.controller_hash if nominal else None)
-        return _ur_yaml(robot, source, hash_ or known)
+        done = _ur_yaml(robot, source, hash_ or known)
+        if UNIVERSAL_ROBOT.match(robot.name):
+            return done
+        return Export(done.text, done.notes, [NOT_A_UR.format(name=robot.name)])
     return _dh_csv(robot, nominal)
 
 

@@ -24,7 +24,7 @@ from calib.params import dh_from_degrees
 from calib.verification import sensitive_rows
 from errors import InputError, ParameterError
 from station.formats.plan import Plan
-from station.formats.tables import RobotFile, SetupFile
+from station.formats.tables import RobotFile, SetupCell, SetupFile
 from station.jobs.calibration import WORKSPACE_POSES, drawstring_setup, select_measurements, unknowns
 
 NEXT_CONFIGURATIONS = 12
@@ -152,7 +152,8 @@ def design(
     if suggest:
         progress("trying further gauge-line placements")
         report["next"] = _next_placements(
-            dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, readings=readings
+            dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, readings=readings,
+            cell=setup.cell,
         )
     approach = np.array([lines[int(lid)][3] for lid in line_all[rows]])
     plan = Plan(
@@ -199,7 +200,9 @@ def next_placement(
     q, line = np.radians(np.asarray(q_deg, float)[on_line]), np.asarray(line)[on_line]
     ds_setup = drawstring_setup(setup, "setup")
     lines = placements(setup, "setup")
-    found = _next_placements(dh, tool, limits, lines, q, line, ds_setup, workspace_q, rng, keep=1)
+    found = _next_placements(
+        dh, tool, limits, lines, q, line, ds_setup, workspace_q, rng, keep=1, cell=setup.cell
+    )
     if not found:
         return None
     present = _promise(expected_modes(design_model(dh, tool, ds_setup, q, line), workspace_q))
@@ -274,12 +277,24 @@ def _subsets(ids: list[int], most: int = 7) -> list[tuple[int, ...]]:
 
 
 def _next_placements(
-    dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, keep: int = 3, readings: int = 1
+    dh,
+    tool,
+    limits,
+    lines,
+    q_all,
+    line_all,
+    ds_setup,
+    workspace_q,
+    rng,
+    keep: int = 3,
+    readings: int = 1,
+    cell: SetupCell | None = None,
 ):
     """Candidate further lines ranked by the predicted workspace error of all lines together:
     through the TCP of random well-conditioned poses in the present lines' working area (their
     height range, +-300 mm; their distance from the base axis, +-300 mm), along each base axis
-    across the tool, the tool meeting the edge as in that pose."""
+    across the tool, the tool meeting the edge as in that pose; only those the setup's ``cell``
+    allows (:func:`allowed`)."""
     new_id = max(lines) + 1
     centres = np.array([p for p, *_ in lines.values()])
     z_range = centres[:, 2].min() - 300.0, centres[:, 2].max() + 300.0
@@ -295,13 +310,21 @@ def _next_placements(
         & (r <= r_range[1])
         & (ik.conditioning(dh, q, tool) > 0.1)
     )
-    found = []
-    for i in np.flatnonzero(ok)[:NEXT_CONFIGURATIONS]:
+    found, seeds = [], 0
+    for i in np.flatnonzero(ok):
         approach = rot[i, :, 2]
-        for direction in np.eye(3):
-            if abs(direction @ approach) > 0.7:
-                continue
-            line = (p[i], direction, 400.0, approach)
+        across = [
+            (p[i], direction, 400.0, approach)
+            for direction in np.eye(3)
+            if abs(direction @ approach) <= 0.7 and allowed(cell, p[i], direction, 400.0, approach)
+        ]
+        if not across:
+            continue
+        seeds += 1
+        if seeds > NEXT_CONFIGURATIONS:
+            break
+        for line in across:
+            direction = line[1]
             q_new, reached = line_candidates(dh, tool, limits, line, 30, rng)
             if reached.sum() < 20:
                 continue
@@ -326,6 +349,30 @@ def _next_placements(
                 }
             )
     return sorted(found, key=lambda f: f["predicted_rmse_mm"])[:keep]
+
+
+TOOL_MM = 150.0
+"""How far back along its approach the tool is kept clear of the keep-out boxes [mm]."""
+
+
+def allowed(cell: SetupCell | None, point, direction, length_mm: float, approach) -> bool:
+    """Whether a line placement (``point`` its centre [mm], unit ``direction``, ``length_mm``, the
+    tool's unit ``approach``) fits the ``cell``: the whole edge inside its reach box, the edge and
+    the last ``TOOL_MM`` of the tool coming onto any point of it outside every keep-out box, the
+    approach within the tilt allowed from straight down."""
+    if cell is None:
+        return True
+    point, direction, approach = (np.asarray(v, float) for v in (point, direction, approach))
+    edge = point + np.linspace(-0.5, 0.5, 21)[:, None] * length_mm * direction
+    if cell.reach is not None and not cell.reach.contains(edge).all():
+        return False
+    tool = (edge[:, None, :] - np.linspace(0.0, TOOL_MM, 7)[None, :, None] * approach).reshape(-1, 3)
+    if any(box.contains(tool).any() for box in cell.keep_out):
+        return False
+    if cell.max_tilt_from_down_deg is not None:
+        tilt = np.degrees(np.arccos(np.clip(-approach[2], -1.0, 1.0)))
+        return bool(tilt <= cell.max_tilt_from_down_deg)
+    return True
 
 
 def _fmt(promise: dict) -> str:

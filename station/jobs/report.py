@@ -52,10 +52,13 @@ class HeldParameter:
 
 @dataclass(frozen=True)
 class Estimate:
-    """An identified table parameter in display units (deg, mm) and its standard deviation."""
+    """An identified parameter in display units (deg, mm) and its standard deviation; ``nominal``
+    is the robot file's value it started from and ``delta`` = ``value - nominal``."""
 
     value: float
     sigma: float
+    nominal: float | None = None
+    delta: float | None = None
 
 
 @dataclass(frozen=True)
@@ -73,13 +76,14 @@ class FitCheck:
     """Does the fit agree with what was stated before measuring (``calib.consistency``)?
     ``noise_ratio``: the residual of the training rows the robust loss kept (a baseline: all), in
     stated noises, with its chi-square (``chi2`` on ``dof`` degrees of freedom, ``p_value``);
-    ``excursion``: the parameter that moved most from its start, by ``excursion_sigmas`` of its prior
-    (tolerance); whether LMLC's solver stopped at its ``iteration_cap`` (never for a baseline); the
-    ``verdict``: ``consistent``, ``doubtful`` (the report warns) or ``inconsistent`` (``station
-    calibrate`` refuses the result with ``refusal``); each gauge line's dial judged against its rows
-    (``dial_lines``, ``station.jobs.absorbed``), what rows read without a dial lose (``dial_mode``)
-    and the nominal table's expected workspace error (``nominal_rmse_mm``), which the calibration's
-    95 % bound must beat."""
+    ``excursion``: the parameter that moved most from its start, by ``excursion_tolerances`` of its
+    prior (a table parameter's tolerance, the setup's stated uncertainty; ``excursion_sigmas`` in the
+    JSON is the same number under its first name); whether LMLC's solver stopped at its
+    ``iteration_cap`` (never for a baseline); the ``verdict``: ``consistent``, ``doubtful`` (the
+    report warns) or ``inconsistent`` (``station calibrate`` refuses the result with ``refusal``);
+    each gauge line's dial judged against its rows (``dial_lines``, ``station.jobs.absorbed``), what
+    rows read without a dial lose (``dial_mode``) and the nominal table's expected workspace error
+    (``nominal_rmse_mm``), which the calibration's 95 % bound must beat."""
 
     noise_ratio: float
     chi2: float
@@ -130,13 +134,44 @@ class CrossValidation:
 
 
 @dataclass(frozen=True)
+class Provenance:
+    """What a report is of, so that it stands alone: the robot (``robot_name``, its ``serial`` or
+    None), the ``samples`` file, the ``setup`` (a file, or the setup a session folder embeds; None
+    where none was used), when (``created_utc``, ISO 8601) and by which ``station_version``."""
+
+    robot_name: str
+    robot_serial: str | None
+    samples: str
+    setup: str | None
+    created_utc: str
+    station_version: str
+
+    def as_json(self) -> dict:
+        return {
+            "robot": {"name": self.robot_name, "serial": self.robot_serial},
+            "samples": self.samples,
+            "setup": self.setup,
+            "created_utc": self.created_utc,
+            "station_version": self.station_version,
+        }
+
+
+def now_utc() -> str:
+    """The time now, UTC, ISO 8601 to the second."""
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+@dataclass(frozen=True)
 class CalibrationReport:
     """What a calibration found (the contract's "The report"); ``setup`` is the model's setup
     estimate (``calib.models.DrawstringSetupEstimate`` or ``calib.position.TrackerSetupEstimate``),
     whose fields the JSON spreads at the top level. Beyond the contract's keys: ``model`` (the
     ``--model``), ``terms`` (the identified joint-space terms, as ``parameters``) and, for
     ``--model auto``, ``cross_validation``; ``fit_check``, how the fit agrees with the stated
-    noise and tolerances."""
+    noise and tolerances; ``line_errors``, each gauge line's residual after the fit (merged into
+    the JSON's ``lines``); ``provenance`` (robot, samples, setup, date, version); ``holdout_scope``
+    (``none``, ``same lines``, ``new lines``, ``poses``: what the hold-out figure can speak for);
+    ``next``, what to do now in one sentence (docs/report.md lists every key)."""
 
     kind: str
     method: str
@@ -156,6 +191,10 @@ class CalibrationReport:
     terms: dict[str, Estimate] = dataclasses.field(default_factory=dict)
     cross_validation: CrossValidation | None = None
     fit_check: FitCheck | None = None
+    line_errors: dict[int, ErrorMetrics] = dataclasses.field(default_factory=dict)
+    provenance: Provenance | None = None
+    holdout_scope: str = "none"
+    next: str = ""
 
     def as_json(self) -> dict:
         """The contract's REPORT.json object (keys in the contract's order, plain JSON values)."""
@@ -181,7 +220,15 @@ class CalibrationReport:
         if self.cross_validation is not None:
             out["cross_validation"] = _plain(dataclasses.asdict(self.cross_validation))
         if self.fit_check is not None:
-            out["fit_check"] = dataclasses.asdict(self.fit_check)
+            check = dataclasses.asdict(self.fit_check)
+            out["fit_check"] = {**check, "excursion_tolerances": check["excursion_sigmas"]}
+        if self.line_errors and "lines" in out:
+            for line in out["lines"]:
+                line.update(dataclasses.asdict(self.line_errors[line["id"]]))
+        if self.provenance is not None:
+            out.update(self.provenance.as_json())
+        out["holdout_scope"] = self.holdout_scope
+        out["next"] = self.next
         return out
 
 
@@ -237,7 +284,7 @@ def corrected_table(
             "model": model,
             "samples": samples.path,
             "n_samples": len(samples),
-            "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "date_utc": now_utc(),
             "identified": [robot.param_name(n) for n in DH_NAMES if cal.identified[DH_NAMES.index(n)]],
             **_covariance(cal, robot.param_name),
             **_noise_scale(cal, samples.kind),

@@ -9,9 +9,12 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
 
 - ``cell/anchor``, ``cell/lines/<id>`` (static): the drawstring's cable exit and the gauge lines
   (fitted to the plan's nominal TCPs);
+- ``cell/base`` (static): the robot's base;
 - ``cell/path`` (nominal TCPs of the samples so far), ``cell/sample`` (the current one: grey
-  before the running calibration is judged, green within its limit, red when suspect) and
-  ``cell/cable`` (anchor -> TCP);
+  before the running calibration is judged, green within its limit, red when suspect),
+  ``cell/cable`` (anchor -> TCP) and the nominal robot as it stands: ``cell/robot/links``,
+  ``cell/robot/joints``, ``cell/robot/tool`` (the tool's approach onto the TCP);
+- ``progress``: samples taken of the plan's;
 - ``live/error`` (reading - the running calibration's prediction, made before the sample joins a
   fit), ``live/error/limit/upper|lower`` (what the prediction's uncertainty and the noise explain)
   and ``live/error/suspect`` (readings beyond it); ``live/predicted_workspace_mm`` and
@@ -20,8 +23,10 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
 - after a calibration: ``calibration/residual/<method>/before|after`` per sample and
   ``calibration/cost/<method>`` per solver iteration (timeline ``iteration``).
 
-The layout (blueprint) is declared once in :func:`blueprint`: the cell on the left; on the right
-the live error largest, the predicted workspace error under it, then the log.
+The layout (blueprint) is declared once in :func:`blueprint`: the cell on the left, seen from an
+eye that frames it (:func:`framing`); on the right the progress, the live error over its last
+``RECENT_SAMPLES`` samples (at their own scale), the predicted workspace error; the log across the
+bottom. The log's last line names the recording to replay once the view is gone.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import signal
 import socket
 import subprocess
 import sys
+import textwrap
 import time
 import warnings
 from pathlib import Path
@@ -54,16 +60,35 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 WARN_WORDS = ("suspended", "rejected", "retrying", "failed", "timed out", "check the cable")
 
 
-def blueprint() -> rrb.Blueprint:
+LOG_WIDTH = 150
+"""Characters per session-log row: the log spans the window, about 190 characters at 1400 px."""
+RECENT_SAMPLES = 20
+"""The live error's plot shows this many recent samples, at their own scale: the first samples of a
+line, millimetres off, would flatten the hundredths that follow."""
+ROBOT, TOOL = (40, 120, 140), (240, 150, 30)
+
+
+def blueprint(eye: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
+    """The layout: the cell (seen from ``eye``) left, the live plots right, the log across the
+    bottom (its rows whole)."""
+    recent = rrb.VisibleTimeRange(
+        "sample",
+        start=rrb.TimeRangeBoundary.cursor_relative(seq=-RECENT_SAMPLES),
+        end=rrb.TimeRangeBoundary.cursor_relative(),
+    )
     live = rrb.Vertical(
-        rrb.TimeSeriesView(name="live error: reading - running calibration (mm)", origin="/live/error"),
+        rrb.TextDocumentView(name="progress", origin="/progress"),
+        rrb.TimeSeriesView(
+            name=f"live error, last {RECENT_SAMPLES} samples: reading - running calibration (mm)",
+            origin="/live/error",
+            time_ranges=[recent],
+        ),
         rrb.TimeSeriesView(
             name="predicted workspace error (mm)",
             origin="/live",
             contents=["$origin/predicted_workspace_mm", "$origin/predicted_workspace_95_mm"],
         ),
-        rrb.TextLogView(name="session log", origin="/log"),
-        row_shares=[3, 2, 2],
+        row_shares=[1, 4, 3],
         name="live",
     )
     readings = rrb.Vertical(
@@ -76,14 +101,45 @@ def blueprint() -> rrb.Blueprint:
         rrb.TimeSeriesView(name="solver cost per iteration", origin="/calibration/cost"),
         name="calibration",
     )
+    log = rrb.TextLogView(
+        name="session log",
+        origin="/log",
+        columns=rrb.TextLogColumns(
+            text_log_columns=[
+                rrb.components.TextLogColumn("EntityPath", visible=False),
+                rrb.components.TextLogColumn("LogLevel"),
+                rrb.components.TextLogColumn("Body"),
+            ]
+        ),
+    )
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(name="cell (base frame, mm)", origin="/cell"),
-            rrb.Tabs(live, readings, calibration),
-            column_shares=[2, 3],
+        rrb.Vertical(
+            rrb.Horizontal(
+                rrb.Spatial3DView(name="cell (base frame, mm)", origin="/cell", eye_controls=eye),
+                rrb.Tabs(live, readings, calibration),
+                column_shares=[2, 3],
+            ),
+            log,
+            row_shares=[3, 1],
         ),
         rrb.TimePanel(timeline="sample", state="collapsed"),
         collapse_panels=True,
+    )
+
+
+def framing(points_mm: np.ndarray) -> rrb.EyeControls3D:
+    """An eye that frames ``points_mm`` (N, 3) (the robot's base, the anchor, the gauge lines):
+    from the front-left and above their centre, far enough to see them all, z up."""
+    points = np.vstack([np.zeros(3), np.asarray(points_mm, float)])
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    centre, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+    away = np.array([-0.55, -0.7, 0.45])
+    away /= np.linalg.norm(away)
+    return rrb.EyeControls3D(
+        kind=rrb.Eye3DKind.Orbital,
+        position=(centre + 1.0 * size * away).tolist(),
+        look_target=centre.tolist(),
+        eye_up=[0.0, 0.0, 1.0],
     )
 
 
@@ -94,6 +150,7 @@ class LiveView:
 
     def __init__(self, rrd: Path, *, viewer: bool = False, web: str | None = None, resume: bool = False):
         rrd = Path(rrd)
+        self.rrd = rrd
         # the id is text Rerun sends as UTF-8: a folder name that is not is shown with \xNN
         self.rec = rr.RecordingStream("station", recording_id=f"session-{printable(rrd.parent.name)}")
         self.notes: list[str] = []
@@ -140,9 +197,18 @@ class LiveView:
                 )
         return sinks
 
-    def cell(self, anchor_mm, lines: dict[int, np.ndarray]) -> None:
-        """Static scene: the anchor and each gauge line as a segment (2, 3) in mm; series styles."""
+    def cell(self, anchor_mm, lines: dict[int, np.ndarray], robot_mm=None) -> None:
+        """Static scene: the anchor and each gauge line as a segment (2, 3) in mm, the robot's base,
+        the view framed on them and on ``robot_mm`` (K, 3), where the robot's joints will go;
+        series styles."""
         self._anchor = np.asarray(anchor_mm, float)
+        scene = [self._anchor[None], *lines.values()]
+        scene += [] if robot_mm is None else [np.asarray(robot_mm, float).reshape(-1, 3)]
+        self.rec.send_blueprint(blueprint(framing(np.vstack(scene))))
+        self.rec.log(
+            "cell/base", rr.Points3D([[0.0, 0.0, 0.0]], radii=25.0, colors=[ROBOT], labels=["robot base"]),
+            static=True,
+        )
         self.rec.log(
             "cell/anchor",
             rr.Points3D([self._anchor], radii=8.0, colors=[GREY], labels=["drawstring anchor"]),
@@ -150,7 +216,7 @@ class LiveView:
         )
         for lid, seg in lines.items():
             self.rec.log(
-                f"cell/lines/{lid}", rr.LineStrips3D([seg], radii=2.0, labels=[f"line {lid}"]), static=True
+                f"cell/lines/{lid}", rr.LineStrips3D([seg], radii=4.0, labels=[f"line {lid}"]), static=True
             )
         styles = {
             "live/length/reading": rr.SeriesLines(names="reading", colors=[BLUE]),
@@ -165,10 +231,21 @@ class LiveView:
         for path, style in styles.items():
             self.rec.log(path, style, static=True)
 
-    def sample(self, index: int, t_s: float, tcp_mm, length_mm: float, dial_mm: float, live) -> None:
+    def sample(
+        self,
+        index: int,
+        t_s: float,
+        tcp_mm,
+        length_mm: float,
+        dial_mm: float,
+        live,
+        chain_mm=None,
+        approach=None,
+    ) -> None:
         """One stored sample: where the nominal model puts the TCP, and ``live`` (``model_mm``,
         ``error_mm``, ``limit_mm``, ``suspect``; None until the running calibration is judged)
-        against the running calibration."""
+        against the running calibration; ``chain_mm`` (K, 3), the robot drawn through its joints to
+        the TCP, and the tool's ``approach`` (unit, base frame) where given."""
         self.rec.set_time("sample", sequence=index)
         self.rec.set_time("session_time", duration=t_s)
         tcp = np.asarray(tcp_mm, float)
@@ -180,6 +257,8 @@ class LiveView:
         self.rec.log(
             "cell/cable", rr.LineStrips3D([np.array([self._anchor, tcp])], radii=1.0, colors=[color])
         )
+        if chain_mm is not None:
+            self._robot(np.asarray(chain_mm, float), tcp, approach)
         self.rec.log("live/length/reading", rr.Scalars(length_mm))
         if np.isfinite(dial_mm):
             self.rec.log("live/dial", rr.Scalars(dial_mm))
@@ -192,6 +271,29 @@ class LiveView:
         if live.suspect:
             self.rec.log("live/error/suspect", rr.Scalars(live.error_mm))
 
+    def _robot(self, chain: np.ndarray, tcp: np.ndarray, approach) -> None:
+        """The robot as it stands: links through its joints, the joints, and the tool pointing
+        along ``approach`` onto the TCP."""
+        self.rec.log("cell/robot/links", rr.LineStrips3D([chain], radii=12.0, colors=[ROBOT]))
+        self.rec.log("cell/robot/joints", rr.Points3D(chain[:-1], radii=18.0, colors=[ROBOT]))
+        if approach is not None:
+            tool = 150.0 * np.asarray(approach, float)
+            self.rec.log(
+                "cell/robot/tool",
+                rr.Arrows3D(origins=[tcp - tool], vectors=[tool], radii=6.0, colors=[TOOL]),
+            )
+
+    def progress(self, done: int, total: int, line: int) -> None:
+        """How far the session is: ``done`` of ``total`` samples, the last on gauge ``line``."""
+        share = 100.0 * done / max(total, 1)
+        self.rec.log(
+            "progress",
+            rr.TextDocument(
+                f"**{done} of {total} samples** ({share:.0f} %), the last on line {line}",
+                media_type=rr.MediaType.MARKDOWN,
+            ),
+        )
+
     def refit(self, index: int, predicted_mm: float, bound_95_mm: float) -> None:
         """The running calibration's predicted workspace error [mm] and its 95 % bound after a refit
         on the samples up to ``index``."""
@@ -201,7 +303,11 @@ class LiveView:
         self.rec.log("live/predicted_workspace_95_mm", rr.Scalars(bound_95_mm))
 
     def message(self, text: str) -> None:
-        self.rec.log("log", rr.TextLog(text, level=log_level(text)))
+        """A session-log line; a long one in rows of ``LOG_WIDTH`` characters (the view cuts a row
+        at its right edge), the rows after the first indented."""
+        level = log_level(text)
+        for row in (textwrap.wrap(text, LOG_WIDTH, subsequent_indent="    ") or [""]):
+            self.rec.log("log", rr.TextLog(row, level=level))
 
     def calibration(self, method: str, before_mm, after_mm, cost_per_iteration) -> None:
         """Per-sample drawstring residuals (mm) before and after, and the solver's cost history."""
@@ -219,7 +325,9 @@ class LiveView:
 
     def close(self) -> None:
         """Flush and close the recording. One that could not be written whole (disk full) keeps
-        what it has; ``incomplete`` says why (None: complete)."""
+        what it has; ``incomplete`` says why (None: complete). The log's last line says where to
+        see it again once this view is gone."""
+        self.message(f"session over; replay it with: rerun {self.rrd}")
         try:
             self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
         except RuntimeError as exc:

@@ -64,7 +64,8 @@ def test_demo_runs_the_workflow_and_its_live_view_tells_the_story(tmp_path, caps
     bound = list(series(rrd, "/live/predicted_workspace_95_mm").values())
     assert len(predicted) == len(bound) > 10
     assert predicted[0] > 1.0 and predicted[-1] < 0.1 and bound[-1] < 0.15
-    session_line = next(line for line in text.splitlines() if line.startswith("session:   done"))
+    measured = f"session:   {len(plan)}/{len(plan)} samples in"
+    session_line = next(line for line in text.splitlines() if line.startswith(measured))
     assert f"{predicted[-1]:.3f} mm predicted" in session_line
     entities = {c.entity_path for c in RrdReader(rrd).stream().to_chunks()}
     assert {"/calibration/residual/lmlc/after", "/calibration/cost/lmlc", "/log"} <= entities

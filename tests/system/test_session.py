@@ -198,10 +198,31 @@ def test_rrd_holds_the_live_view_entities(finished):
         "/live/error",
         "/live/dial",
         "/log",
+        "/cell/base",
+        "/cell/robot/links",
+        "/cell/robot/joints",
+        "/cell/robot/tool",
+        "/progress",
     ):
         assert path in entities
     rows = sum(c.num_rows for c in chunks if c.entity_path == "/live/error" and not c.is_static)
     assert rows == 0  # 9 samples cannot determine the running calibration's 26 unknowns: no live error
+    # the view counts the samples, and its log's last line names the recording to replay
+    assert _texts(chunks, "/progress")[-1].startswith(f"**{N_TARGETS} of {N_TARGETS} samples** (100 %)")
+    rrd = folder / "session.rrd"
+    assert _texts(chunks, "/log")[-1] == f"session over; replay it with: rerun {rrd}"
+
+
+def _texts(chunks, entity: str) -> list[str]:
+    """The texts logged to ``entity`` (TextLog or TextDocument), in the order logged."""
+    out = []
+    for chunk in chunks:
+        if chunk.entity_path != entity or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        column = next(n for n in batch.schema.names if n.endswith(":text"))
+        out += [v[0] for v in batch.column(batch.schema.names.index(column)).to_pylist()]
+    return out
 
 
 def test_sigkill_mid_session_then_resume_without_torn_or_duplicate_rows(tmp_path):
@@ -357,14 +378,15 @@ def test_progress_is_a_bar_on_a_terminal_with_the_live_error_and_the_predicted_w
     bar.sample({"sample": 2, "target": 2, "line": 0, "length_mm": 1.0}, LiveError(1.0, 0.25, 0.1))
     bar.refit(0.0412, 0.0688)
     bar.message("suspended: dial not answering")
-    assert written[0].startswith("\r\033[K[##......] 1/4") and "error: no model yet" in written[0]
+    assert written[0].startswith("\r\033[K[##......] 1/4")
+    assert written[0].endswith("error: none until the model is determined (first fit under way)")
     assert written[1].endswith("error: none until the model is determined (1 of 26 samples)")
     assert "error +0.250 mm (limit 0.100)" in written[2]
     assert written[3].endswith("error +0.250 mm (limit 0.100)  workspace 0.0412 mm (95 %: 0.0688 mm)")
     assert written[4].startswith("\r\033[Ksuspended: dial not answering\n[######..] 3/4")
 
 
-def test_until_mm_ends_the_session_done_once_the_bound_is_met_and_a_resume_goes_on(tmp_path):
+def test_until_mm_ends_the_session_done_once_the_bound_is_met_and_a_resume_measures_the_rest(tmp_path):
     # simulated time only 5x: the refits (worker process) keep up on a loaded 2-core machine
     config = write_config(tmp_path, per_line=12, time_scale=5.0)
     folder = tmp_path / "sess"
@@ -376,21 +398,25 @@ def test_until_mm_ends_the_session_done_once_the_bound_is_met_and_a_resume_goes_
         assert first.returncode == 0, first.stdout + first.stderr
         taken = len(rows_of(folder))
         assert "done: accuracy reached;" in first.stdout and taken < 36
-        assert first.stdout.splitlines()[-1].startswith(f"done: {taken}/36 samples")
+        assert first.stdout.splitlines()[-1].startswith(f"saved: {taken}/36 samples")
         said = next(line for line in first.stdout.splitlines() if line.startswith("accuracy reached:"))
         assert float(said.split("95 % bound ")[1].split(" mm")[0]) <= 3.0
-        # the goal is kept with the session; a resume towards a tighter one measures the rest
+        # a resume without --until-mm measures the rest of the plan, saying the goal is not carried over
         second = subprocess.run(
-            [*sample, "--resume", str(folder), "--until-mm", "1e-6"],
+            [*sample, "--resume", str(folder)],
             capture_output=True,
             text=True,
             timeout=300,
         )
     assert second.returncode == 0, second.stdout + second.stderr
+    assert second.stdout.splitlines()[0] == (
+        f"resuming {folder}: {taken} of 36 targets measured; measuring the rest of the plan (the "
+        "session's earlier --until-mm 3 is not carried over: give --until-mm again to stop at a goal)"
+    )
     rows = rows_of(folder)
     assert [int(r["sample"]) for r in rows] == list(range(36))
     assert sorted(int(r["target"]) for r in rows) == list(range(36))
-    assert second.stdout.splitlines()[-1].startswith("done: 36/36 samples")
+    assert second.stdout.splitlines()[-1].startswith("saved: 36/36 samples")
     # the resumed recording holds the whole session: the first run's live errors and the new ones
     chunks = RrdReader(folder / "session.rrd").stream().to_chunks()
     logged = sum(c.num_rows for c in chunks if c.entity_path == "/live/length/reading" and not c.is_static)

@@ -175,7 +175,7 @@ def test_sample_without_plan_measures_the_plan_sim_serve_published(tmp_path):
     with serving(tmp_path, extra_config=FAST_SESSION.format(plan=plan_path)) as (_, config, _):
         result = run_cli("sample", "--config", str(config), "--out", str(tmp_path / "sess"))
     assert result.returncode == 0, result.stdout + result.stderr
-    assert result.stdout.splitlines()[-1].startswith(f"done: 9/9 samples in {tmp_path / 'sess'}")
+    assert result.stdout.splitlines()[-1].startswith(f"saved: 9/9 samples in {tmp_path / 'sess'}")
     cell, plan = make_cell(0, 3), load_plan(plan_path)
     np.testing.assert_allclose(plan.q_deg, cell.plan_deg, atol=1e-6)  # the cell's own plan
     with (tmp_path / "sess" / "samples.csv").open(newline="") as fh:
@@ -212,7 +212,7 @@ def test_sample_runs_at_the_time_scale_sim_serve_announces_and_refuses_another(t
     assert not (tmp_path / "a").exists()
     assert result.returncode == 0, result.stdout + result.stderr
     assert "time scale 20: the simulated robot's (`station sim serve`" in result.stdout
-    assert result.stdout.splitlines()[-1].startswith(f"done: 9/9 samples in {tmp_path / 'sess'}")
+    assert result.stdout.splitlines()[-1].startswith(f"saved: 9/9 samples in {tmp_path / 'sess'}")
     assert "time_scale = 20.0" in (tmp_path / "sess" / "session.toml").read_text()
     assert took_s < 60  # 9 targets at 20x; at real time alone the robot's walk takes over 40 s
     assert not announced.exists()  # withdrawn when sim serve stopped
@@ -252,7 +252,7 @@ def test_an_unreachable_device_leaves_no_session_folder_and_the_retry_works(tmp_
     with serving(tmp_path, extra_config=fast):
         retry = run_cli("sample", "--config", str(config), "--out", str(out))
     assert retry.returncode == 0, retry.stdout + retry.stderr
-    assert retry.stdout.splitlines()[-1].startswith(f"done: 9/9 samples in {out}")
+    assert retry.stdout.splitlines()[-1].startswith(f"saved: 9/9 samples in {out}")
 
 
 def test_read_with_no_simulator_exits_1_with_the_hint(tmp_path):

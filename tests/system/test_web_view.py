@@ -19,6 +19,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -40,6 +41,8 @@ ARGS = [
     "--disable-sync",
 ]
 RENDER_S = 25.0  # the viewer takes ~20 s to load and draw on a software renderer
+READY_S = 60.0  # then up to this long for the session to show live errors (a loaded machine)
+SHOWN_SAMPLES = 45  # the running calibration is determined by ~31 samples: live errors after it
 MIN_HUES, MIN_PIXELS = 4, 150
 
 
@@ -61,7 +64,7 @@ def _config(folder: Path) -> Path:
             "speed_deg_s": 120.0,
             "accel_deg_s2": 480.0,
             "dwell_s": 2.0,
-            "targets_per_line": 20,
+            "targets_per_line": 30,  # outlasts the wait for SHOWN_SAMPLES
             "plan_csv": str(folder / "plan.csv"),
         },
     }
@@ -76,15 +79,33 @@ def _station(*args: str, **kw) -> subprocess.Popen:
     )
 
 
-def _screenshot(url: str, out: Path) -> None:
+def _screenshot(url: str, out: Path, ready=lambda: True) -> None:
+    """The page at ``url`` once it had ``RENDER_S`` to draw and ``ready()`` holds (up to
+    ``READY_S``)."""
     sync_api = pytest.importorskip("playwright.sync_api")
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
         page = browser.new_page(viewport={"width": 1400, "height": 850})
         page.goto(url)
         time.sleep(RENDER_S)
+        deadline = time.monotonic() + READY_S
+        while not ready() and time.monotonic() < deadline:
+            time.sleep(0.5)
+        time.sleep(2.0)  # the viewer draws what arrived
         page.screenshot(path=str(out))
         browser.close()
+
+
+def _lines_of(proc: subprocess.Popen) -> list[str]:
+    """The lines ``proc`` prints, gathered by a thread as they come."""
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True).start()
+    return lines
+
+
+def _sample_index(line: str) -> int:
+    found = re.match(r"sample (\d+) ", line)
+    return int(found.group(1)) if found else -1
 
 
 def _hue_bins(png: Path) -> np.ndarray:
@@ -109,7 +130,9 @@ def test_the_printed_address_shows_the_live_session_in_a_browser(tmp_path):
         found = re.fullmatch(r"live view: (http://127\.0\.0\.1:\d+/\?url=\S+)\n", first)
         assert found, first
         url = found.group(1)
-        _screenshot(url, tmp_path / "live-view.png")
+        printed = _lines_of(sample)
+        shown = lambda: max(map(_sample_index, printed), default=-1) >= SHOWN_SAMPLES  # noqa: E731
+        _screenshot(url, tmp_path / "live-view.png", shown)
         assert sample.poll() is None, "the session ended before the screenshot: it shows no live view"
         sample.send_signal(signal.SIGINT)
         assert sample.wait(30) in (0, 130)

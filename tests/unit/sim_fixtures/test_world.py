@@ -41,6 +41,9 @@ def test_shipped_sim_setup_places_the_worlds_lines():
         for given, unit in ((line.direction, true.direction), (line.approach, true.approach)):
             np.testing.assert_allclose(given / np.linalg.norm(given), unit, atol=1e-12)
         np.testing.assert_allclose(line.dial_axis, true.dial_axis, atol=1e-12)
+        # the tool presses against the dial: it reads positive back along the approach (the
+        # planner's default approach is minus the dial axis), on every line alike
+        assert np.dot(line.approach, line.dial_axis) < -0.99 * np.linalg.norm(line.approach)
 
 
 def test_line_configurations_touch_their_lines(rng):

@@ -124,6 +124,7 @@ def test_ur_yaml_names_what_it_cannot_hold(corrected_jr680, tmp_path, capsys, rn
     robot = load_robot(corrected_jr680).model()
     assert f"{robot.dh[5, 2]:.4f} mm along x of wrist_3_link" in text
     assert "tool_mm" in text and "hash 'unknown'" in text
+    assert "warning: HSR-JR680 is not a Universal Robots arm by its name: ur-yaml is" in text
     q = rng.uniform(-np.pi, np.pi, (200, 6))
     remainder = np.eye(4)
     remainder[0, 3] = robot.dh[5, 2]
@@ -135,8 +136,9 @@ def test_ur_yaml_names_what_it_cannot_hold(corrected_jr680, tmp_path, capsys, rn
 
 def test_nominal_ur10_gives_universal_robots_default_file(tmp_path, capsys, rng):
     out = tmp_path / "ur10.yaml"
-    code, _, _ = _cli(capsys, "export", configs.path("robots/ur10.toml"), "--format", "ur-yaml", "--out", out)
-    assert code == 0
+    ur10 = configs.path("robots/ur10.toml")
+    code, text, _ = _cli(capsys, "export", ur10, "--format", "ur-yaml", "--out", out)
+    assert code == 0 and "warning" not in text  # a UR by its name
     ours = yaml.safe_load(out.read_text())["kinematics"]
     theirs = {
         n: dict(zip(("x", "y", "z", "roll", "pitch", "yaw"), v, strict=True)) for n, v in UR10_DEFAULT.items()

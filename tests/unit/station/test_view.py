@@ -21,7 +21,7 @@ def test_rows_on_no_line_get_their_own_bar_not_line_1s():
     [
         ("suspended: drawstring not answering", True),
         ("drawstring: bad CRC in reply 01 03; retrying", True),
-        ("capture at target 4 rejected: robot moved", True),
+        ("capture at target 4 rejected: the robot left before the capture finished, so it will be", True),
         ("sample 12: reading +0.300 mm off the running calibration: check the cable", True),
         ("running calibration: refit failed: ValueError", True),
         ("running calibration: the model is determined by 26 samples", False),
