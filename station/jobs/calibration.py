@@ -58,7 +58,7 @@ from station.jobs.report import (
     Selection,
     WorkspacePrediction,
 )
-from station.jobs.terms import MODELS, TermChoice, choose_terms
+from station.jobs.terms import MODELS, TermChoice, carry_over_warnings, choose_terms
 
 METHODS = ALL_METHODS
 WORKSPACE_POSES = 1000
@@ -386,6 +386,7 @@ def _report(
     messages += [choice.warning] if choice.warning else []
     messages += workspace_warnings(model, cal.x, after.train, workspace)
     messages += short_of_optimum(model, cal.x, fit.optimum, method)
+    messages += carry_over_warnings(model, cal, choice.selection)
     held = {**choice.held, **cal.held}
     return CalibrationReport(
         kind=model.kind,
@@ -640,8 +641,11 @@ def _parameters(cal: Calibration, names) -> dict[str, Estimate]:
 
 
 def _cross_validation(selection: TermSelection) -> CrossValidation:
-    rows = tuple(CrossValidationRow(s.round, s.label, s.rmse_mm, s.gain, s.kept) for s in selection.table)
-    return CrossValidation(selection.folds, selection.min_gain, rows)
+    rows = tuple(
+        CrossValidationRow(s.round, s.label, s.rmse_mm, s.gain, s.kept, s.reason) for s in selection.table
+    )
+    nominal = selection.nominal_rmse_mm
+    return CrossValidation(selection.folds, selection.min_gain, rows, selection.scheme, nominal)
 
 
 def _unit(v) -> np.ndarray:
