@@ -1,6 +1,7 @@
-"""Which joint-space terms a robot's data supports: k-fold cross-validation on the training rows.
+"""Which joint-space terms a robot's data supports: cross-validation on the training rows.
 
-A term earns its place only by predicting rows the fit did not see. The training rows are split
+A term earns its place only by predicting rows the fit did not see. ``station calibrate --model
+auto`` uses blocked folds (below, ``blocked_folds``); by default the training rows are split
 into k folds (``kfold``): within each placement (gauge line, tracker placement) the rows, in the
 order they were measured, are cut into k contiguous blocks, and fold f leaves out block f of every
 placement, so each fit keeps every placement and each left-out block is a stretch of poses the fit

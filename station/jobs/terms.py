@@ -8,9 +8,9 @@ and which a robot file carries (``calib.joint_terms``).
   masses; the setup's payload joins them);
 - ``full``: plus the first and second harmonics of every joint's angle;
 - ``auto``: ``full``'s groups judged by cross-validation on blocked folds of the training rows (one
-  gauge line, or one region of joint space, left out at a time: what the table does away from the
-  poses it was fitted on, ``calib.selection``): the compliances together, as a prior, kept when
-  determined, plausible and not harmful; each harmonic only if it cuts the error by at least 5 %.
+  region of joint space left out at a time: what the table does away from the poses it was fitted
+  on, ``calib.selection``): the compliances together, as a prior, kept when determined, plausible
+  and not harmful; each harmonic only if determined at five sigma and it cuts the error by 5 %.
 
 Whatever the data cannot determine is held by the pipeline with its reason, as a table parameter is.
 """
