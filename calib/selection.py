@@ -104,11 +104,15 @@ def region_folds(q: np.ndarray, k: int = FOLDS) -> list[np.ndarray]:
     Returns
     -------
     list of ndarray of int
-        Ascending row indices of each region; together every row exactly once.
+        Ascending row indices of each region; together every row exactly once (one region, all
+        rows, where the poses of joints 1-3 are all alike).
     """
     angles = q[:, :REGION_JOINTS]
     f = np.column_stack([np.cos(angles), np.sin(angles)])
     f = (f - f.mean(axis=0)) / np.maximum(f.std(axis=0), 1e-9)
+    k = min(k, len(np.unique(f.round(9), axis=0)))  # no more regions than distinct poses
+    if k < 2:
+        return [np.arange(len(q))]
     _, label = kmeans2(f, k, minit="++", rng=np.random.default_rng(0))
     return [np.flatnonzero(label == c) for c in range(k) if np.any(label == c)]
 

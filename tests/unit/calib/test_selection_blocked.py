@@ -85,3 +85,10 @@ def test_the_plausibility_and_harm_tests():
     assert "against gravity" in implausible(-7.0, 2.0)
     base = np.random.default_rng(1).normal(0, 1, 400)
     assert not_harmful(base * 0.99, base) and not not_harmful(base * 1.3, base)
+
+
+def test_no_more_regions_than_distinct_poses():
+    q = np.zeros((30, 6))
+    q[:10, 1] = 1.0
+    assert sorted(len(f) for f in region_folds(q)) == [10, 20]
+    assert [len(f) for f in region_folds(np.zeros((30, 6)))] == [30]
