@@ -15,10 +15,15 @@ the same way for the nominal robot and the corrected one. The figures are the di
   training series beside the auto model (one Gauss-Newton step with every unknown) and measured
   on the held-out series, which are registered again with it;
 - what is left: the auto model's training residual regressed on the first three harmonics of every
-  joint's angle, blocked 5-fold cross-validation on the training rows (how much of it any smooth
-  function of the joint angles could still predict).
+  joint's angle (a ridge fit, ``RIDGE`` of the features' mean square), cross-validated on 5
+  interleaved folds of the training rows (every fifth row): how much of it a smooth function of
+  the joint angles could still predict among the poses measured. Blocked folds would ask a
+  37-coefficient fit to extrapolate to a region it never saw (train D: 1.3e7 mm).
 
-Usage: ``python benchmarks/ipa_ur10.py --data DIR [--train B] [--test C D] [--json]``.
+``--all-splits`` runs every "train one series, test the other three" split and prints, after each
+split's table, one line per split: every model's pooled held-out RMSE and the terms auto chose.
+
+Usage: ``python benchmarks/ipa_ur10.py --data DIR [--train B] [--test C D | --all-splits] [--json]``.
 """
 
 from __future__ import annotations
@@ -38,7 +43,6 @@ from calib.calibrate import WithPrior  # noqa: E402
 from calib.kinematics import A, D, dh_table, tcp_jacobian  # noqa: E402
 from calib.metrics import error_metrics  # noqa: E402
 from calib.position import PositionModel, PositionSamples, register  # noqa: E402
-from calib.selection import kfold  # noqa: E402
 from sim_fixtures.world import Noise  # noqa: E402
 from station.formats.ipa import IpaSeries, probe_file_for, read_probe_mm, read_series  # noqa: E402
 from station.formats.samples import Samples  # noqa: E402
@@ -57,6 +61,8 @@ DRAWSTRING_SIGMA_MM = Noise().length_mm  # the simulated drawstring's reading no
 ANCHOR_OFFSET_MM = np.array([500.0, 300.0, -1200.0])  # anchor below and beside the workspace centre
 DRAWSTRING_MODELS = ("geometric", "compliance", "auto")
 HARMONIC_ORDERS = 3
+RIDGE = 1e-3
+"""Ridge weight of the "what is left" regression, relative to the mean square of its features."""
 
 
 @dataclass(frozen=True)
@@ -181,7 +187,7 @@ def thermal_held_out(tests, outcome, k: float, t_ref: float) -> dict[str, np.nda
 def residual_predictability(outcome: CalibrationOutcome) -> tuple[float, float]:
     """RMS of the training residual (3-D, base frame) [mm], and of what is left of it when each fold
     is predicted by a least-squares fit, on the other folds, of the first ``HARMONIC_ORDERS``
-    harmonics of every joint's angle (blocked 5-fold, ``calib.selection.kfold``)."""
+    harmonics of every joint's angle (a ridge fit, interleaved 5-fold: row r in fold r mod 5)."""
     model, x = outcome.model, outcome.calibration.x
     rot, _ = model.tracker_from_base(x)
     e = (model.samples.position - model.predicted_mm(x)) @ rot
@@ -190,10 +196,13 @@ def residual_predictability(outcome: CalibrationOutcome) -> tuple[float, float]:
         fun(h * q[:, j]) for j in range(6) for h in range(1, HARMONIC_ORDERS + 1) for fun in (np.sin, np.cos)
     ]
     features = np.column_stack(f)
+    ridge = RIDGE * np.mean(features**2) * len(q) * np.eye(features.shape[1])
     left = np.empty_like(e)
-    for rows in kfold(np.zeros(len(q), int)):
+    for fold in range(5):
+        rows = np.arange(fold, len(q), 5)
         fit = np.setdiff1d(np.arange(len(q)), rows)
-        coef, *_ = np.linalg.lstsq(features[fit], e[fit], rcond=None)
+        a = features[fit]
+        coef = np.linalg.solve(a.T @ a + ridge, a.T @ e[fit])
         left[rows] = e[rows] - features[rows] @ coef
     return float(np.sqrt(np.mean(np.sum(e**2, axis=1)))), float(np.sqrt(np.mean(np.sum(left**2, axis=1))))
 
@@ -211,17 +220,12 @@ def terms_text(outcome: CalibrationOutcome) -> str:
     return ", ".join(f"{n} {e.value:.4g} +- {e.sigma:.2g}" for n, e in outcome.report.terms.items()) or "-"
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--data", type=Path, required=True, help="the ipa-robot-accuracy folder")
-    p.add_argument("--train", default="B", choices=sorted(SERIES))
-    p.add_argument("--test", nargs="+", default=["C", "D"], choices=sorted(SERIES))
-    p.add_argument("--json", action="store_true", help="last stdout line: the pooled figures as JSON")
-    args = p.parse_args(argv)
+def run_split(data: Path, train_name: str, test_names: list[str], robot) -> dict:
+    """Every model trained on ``train_name`` and measured on ``test_names``: the printed table's
+    lines and the JSON summary."""
     rng = np.random.default_rng(0)
-    robot = load_robot(ROOT / "configs/robots/ur10.toml")
-    train = load(args.data, args.train)
-    tests = {name: load(args.data, name) for name in args.test}
+    train = load(data, train_name)
+    tests = {name: load(data, name) for name in test_names}
     train_set = position_set(train)
 
     rows, outcomes, times = {}, {}, {}
@@ -245,58 +249,132 @@ def main(argv=None) -> int:
     k, k_sigma = thermal_coefficient(auto, train.ipa.temperature_c)
     rows["position, auto + thermal"] = thermal_held_out(tests, auto, k, t_ref)
 
-    print(f"UR10, IPA dataset: train {args.train} ({len(train.ipa)} rows), test {' '.join(args.test)}")
-    print(
+    lines = [f"UR10, IPA dataset: train {train_name} ({len(train.ipa)} rows), test {' '.join(test_names)}"]
+    lines.append(
         f"{'held-out RMSE / MEAN / MAX [mm]':34}"
-        + "".join(f"{n + f' ({len(tests[n].ipa)})':>24}" for n in args.test)
+        + "".join(f"{n + f' ({len(tests[n].ipa)})':>24}" for n in test_names)
         + f"{'pooled':>24}"
     )
     for label, errs in rows.items():
-        cells = [fmt(pooled({n: errs[n]})) for n in args.test] + [fmt(pooled(errs))]
-        print(f"{label:34}" + "".join(f"{c:>24}" for c in cells))
-    print(f"training fit on {args.train} (RMSE [mm], time [s], terms):")
+        cells = [fmt(pooled({n: errs[n]})) for n in test_names] + [fmt(pooled(errs))]
+        lines.append(f"{label:34}" + "".join(f"{c:>24}" for c in cells))
+    lines.append(f"training fit on {train_name} (RMSE [mm], time [s], terms):")
     for kind, outcome in outcomes.items():
         fit = outcome.report.after.train.rmse_mm
-        print(f"  {kind:22} {fit:.3f}  {times[kind]:6.1f} s  {terms_text(outcome)}")
+        lines.append(f"  {kind:22} {fit:.3f}  {times[kind]:6.1f} s  {terms_text(outcome)}")
     for kind in ("auto", "drawstring auto"):
-        cv = outcomes[kind].report.cross_validation
-        steps = " -> ".join(f"{r.added or 'table'} {r.rmse_mm:.4f}" for r in cv.rows if r.kept)
-        last = [r for r in cv.rows if r.round == max(r.round for r in cv.rows) and not r.kept]
-        best_left = max(last, key=lambda r: r.gain, default=None)
-        rest = (
-            f"; best of the last round, not kept: {best_left.added} {best_left.gain:+.2%}"
-            if best_left
-            else ""
-        )
-        print(f"{kind}: {cv.folds}-fold cross-validated RMSE on {args.train}: {steps}{rest}")
+        lines.append(f"{kind}: {cv_text(outcomes[kind], train_name)}")
     t_range = np.ptp(train.ipa.temperature_c)
-    print(
-        f"thermal: k = {k * 1e6:.1f} +- {k_sigma * 1e6:.1f} ppm/K on {args.train} "
+    lines.append(
+        f"thermal: k = {k * 1e6:.1f} +- {k_sigma * 1e6:.1f} ppm/K on {train_name} "
         f"(T {t_ref:.2f} deg C, range {t_range:.2f} K); test means "
         + ", ".join(f"{n} {s.ipa.temperature_c.mean():.2f}" for n, s in tests.items())
     )
     raw, left = residual_predictability(auto)
-    print(
-        f"what is left: auto's residual on {args.train} {raw:.3f} mm RMS; after harmonics "
+    lines.append(
+        f"what is left: auto's residual on {train_name} {raw:.3f} mm RMS; after harmonics "
         f"1-{HARMONIC_ORDERS} of every joint, cross-validated: {left:.3f} mm"
     )
+    summary = {
+        "before": pooled(rows["nominal (before)"]),
+        "after": pooled(rows["position, --model geometric"]),
+        "train": train_name,
+        "test": test_names,
+        "drawstring_after": pooled(rows["drawstring, --model geometric"]),
+        "drawstring_compliance_after": pooled(rows["drawstring, --model compliance"]),
+        "compliance_after": pooled(rows["position, --model compliance"]),
+        "default_after": pooled(rows["position, --model auto"]),
+        "default_terms": list(auto.report.terms),
+        "full_after": pooled(rows["position, --model full"]),
+        "drawstring_default_after": pooled(rows["drawstring, --model auto"]),
+        "drawstring_default_terms": list(outcomes["drawstring auto"].report.terms),
+        "drawstring_default_warnings": list(outcomes["drawstring auto"].report.warnings),
+        "thermal_after": pooled(rows["position, auto + thermal"]),
+        "thermal_ppm_per_K": [k * 1e6, k_sigma * 1e6],
+        "pooled": {label: pooled(errs)["rmse_mm"] for label, errs in rows.items()},
+        "per_series": {
+            label: {n: error_metrics(e)["rmse_mm"] for n, e in errs.items()} for label, errs in rows.items()
+        },
+    }
+    return {"lines": lines, "summary": summary}
+
+
+def cv_text(outcome: CalibrationOutcome, train_name: str) -> str:
+    """The auto model's cross-validation in one line: folds, kept steps, the best left out."""
+    cv = outcome.report.cross_validation
+    if cv is None:
+        return "no cross-validation (too few rows)"
+    steps = " -> ".join(f"{r.added or 'table'} {r.rmse_mm:.4f}" for r in cv.rows if r.kept)
+    last = [r for r in cv.rows if r.round == max(r.round for r in cv.rows) and not r.kept]
+    best_left = max(last, key=lambda r: r.gain, default=None)
+    rest = f"; best of the last round, not kept: {best_left.added} {best_left.gain:+.2%}" if best_left else ""
+    left = "".join(f"; left {r.added}: {r.reason}" for r in cv.rows if r.reason)
+    return (
+        f"{cv.folds} folds ({cv.scheme}) on {train_name}, nominal {cv.nominal_rmse_mm:.4f}: "
+        f"{steps}{rest}{left}"
+    )
+
+
+SPLIT_COLUMNS = {
+    "nominal": "nominal (before)",
+    "geometric": "position, --model geometric",
+    "compliance": "position, --model compliance",
+    "full": "position, --model full",
+    "auto (default)": "position, --model auto",
+    "drawstring geometric": "drawstring, --model geometric",
+    "drawstring compliance": "drawstring, --model compliance",
+    "drawstring auto (default)": "drawstring, --model auto",
+}
+
+
+def splits_table(results: list[dict]) -> list[str]:
+    """The all-splits table (markdown): pooled held-out RMSE [mm] of every model per split, the
+    terms auto chose on each path, and the mean over the splits."""
+    head = ["train", "test", *SPLIT_COLUMNS, "auto's terms", "drawstring auto's terms"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    means = {c: [] for c in SPLIT_COLUMNS}
+    for r in results:
+        s = r["summary"]
+        cells = []
+        for column, label in SPLIT_COLUMNS.items():
+            value = s["pooled"][label]
+            means[column].append(value)
+            cells.append(f"{value:.3f}")
+        terms = [_short(s["default_terms"]), _short(s["drawstring_default_terms"])]
+        out.append(f"| {s['train']} | {' '.join(s['test'])} | " + " | ".join(cells + terms) + " |")
+    out.append("| mean | | " + " | ".join(f"{np.mean(v):.3f}" for v in means.values()) + " | | |")
+    return out
+
+
+def _short(terms: list[str]) -> str:
+    """Term names without their units: J2 compliance, J3 sin1, ..."""
+    names = [t.replace("_urad_per_Nm", "").replace("_deg", "").replace(".", " ") for t in terms]
+    return ", ".join(names) or "none"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--data", type=Path, required=True, help="the ipa-robot-accuracy folder")
+    p.add_argument("--train", default="B", choices=sorted(SERIES))
+    p.add_argument("--test", nargs="+", default=["C", "D"], choices=sorted(SERIES))
+    p.add_argument("--all-splits", action="store_true", help="train on each series, test on the other three")
+    p.add_argument("--json", action="store_true", help="last stdout line: the pooled figures as JSON")
+    args = p.parse_args(argv)
+    robot = load_robot(ROOT / "configs/robots/ur10.toml")
+    if args.all_splits:
+        splits = [(t, [n for n in sorted(SERIES) if n != t]) for t in sorted(SERIES)]
+    else:
+        splits = [(args.train, args.test)]
+    results = []
+    for train_name, test_names in splits:
+        results.append(run_split(args.data, train_name, test_names, robot))
+        print("\n".join(results[-1]["lines"]), flush=True)
+    if args.all_splits:
+        print("pooled held-out RMSE [mm], every split:")
+        print("\n".join(splits_table(results)))
     if args.json:
-        summary = {
-            "before": pooled(rows["nominal (before)"]),
-            "after": pooled(rows["position, --model geometric"]),
-            "train": args.train,
-            "test": args.test,
-            "drawstring_after": pooled(rows["drawstring, --model geometric"]),
-            "compliance_after": pooled(rows["position, --model compliance"]),
-            "default_after": pooled(rows["position, --model auto"]),
-            "default_terms": list(auto.report.terms),
-            "full_after": pooled(rows["position, --model full"]),
-            "drawstring_default_after": pooled(rows["drawstring, --model auto"]),
-            "drawstring_default_terms": list(outcomes["drawstring auto"].report.terms),
-            "thermal_after": pooled(rows["position, auto + thermal"]),
-            "thermal_ppm_per_K": [k * 1e6, k_sigma * 1e6],
-        }
-        print(json.dumps(summary))
+        summaries = [r["summary"] for r in results]
+        print(json.dumps({s["train"]: s for s in summaries} if args.all_splits else summaries[0]))
     return 0
 
 

@@ -190,7 +190,10 @@ def terms_summary(report: CalibrationReport) -> list[str]:
         cv = report.cross_validation
         kept = [r for r in cv.rows if r.kept]
         steps = " -> ".join(f"{r.added or 'table'} {r.rmse_mm:.3f}" for r in kept)
-        lines.append(f"model auto ({cv.folds}-fold cross-validated RMSE, mm): {steps}")
+        lines.append(
+            f"model auto (cross-validated RMSE on {cv.scheme}, mm; "
+            f"nominal table {cv.nominal_rmse_mm:.3f}): {steps}"
+        )
     if report.terms:
         terms = ", ".join(f"{n} {e.value:.4g} +- {e.sigma:.2g}" for n, e in report.terms.items())
         lines.append(f"terms: {terms}")

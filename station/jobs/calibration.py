@@ -60,7 +60,7 @@ from station.jobs.report import (
     WorkspacePrediction,
     now_utc,
 )
-from station.jobs.terms import MODELS, TermChoice, choose_terms
+from station.jobs.terms import MODELS, TermChoice, carry_over_warnings, choose_terms
 
 METHODS = ALL_METHODS
 WORKSPACE_POSES = 1000
@@ -403,6 +403,7 @@ def _report(
     messages += workspace_warnings(model, cal.x, after.train, workspace)
     short = short_of_optimum(model, cal.x, fit.optimum, method)
     messages += short
+    messages += carry_over_warnings(model, cal, choice.selection)
     held = {**choice.held, **cal.held}
     scope = holdout_scope(model, hold_model)
     return CalibrationReport(
@@ -811,8 +812,11 @@ def _parameters(cal: Calibration, names, nominal: np.ndarray) -> dict[str, Estim
 
 
 def _cross_validation(selection: TermSelection) -> CrossValidation:
-    rows = tuple(CrossValidationRow(s.round, s.label, s.rmse_mm, s.gain, s.kept) for s in selection.table)
-    return CrossValidation(selection.folds, selection.min_gain, rows)
+    rows = tuple(
+        CrossValidationRow(s.round, s.label, s.rmse_mm, s.gain, s.kept, s.reason) for s in selection.table
+    )
+    nominal = selection.nominal_rmse_mm
+    return CrossValidation(selection.folds, selection.min_gain, rows, selection.scheme, nominal)
 
 
 def _unit(v) -> np.ndarray:

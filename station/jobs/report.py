@@ -114,23 +114,28 @@ class Selection:
 class CrossValidationRow:
     """One line of ``--model auto``'s table: in ``round`` (0: the table alone), the model kept so
     far plus ``added`` (None: nothing) predicts left-out rows to ``rmse_mm``, a relative ``gain``
-    over the round's starting model; ``kept`` whether it stayed."""
+    over the round's starting model; ``kept`` whether it stayed; ``reason`` why a physically grounded
+    group (the compliances, entering together) was left."""
 
     round: int
     added: str | None
     rmse_mm: float
     gain: float
     kept: bool
+    reason: str | None = None
 
 
 @dataclass(frozen=True)
 class CrossValidation:
-    """How ``--model auto`` chose its terms: k ``folds`` of the training rows, the ``min_gain`` a
-    term must bring, and every score (``rows``)."""
+    """How ``--model auto`` chose its terms: k ``folds`` of the training rows (``scheme``: what each
+    leaves out), the ``min_gain`` a term must bring, every score (``rows``), and the nominal table's
+    error on the same folds (``nominal_rmse_mm``: what not calibrating gives there)."""
 
     folds: int
     min_gain: float
     rows: tuple[CrossValidationRow, ...]
+    scheme: str = ""
+    nominal_rmse_mm: float | None = None
 
 
 @dataclass(frozen=True)

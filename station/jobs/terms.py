@@ -7,8 +7,10 @@ and which a robot file carries (``calib.joint_terms``).
 - ``compliance``: plus each load-bearing joint yielding under gravity (needs the robot file's link
   masses; the setup's payload joins them);
 - ``full``: plus the first and second harmonics of every joint's angle;
-- ``auto``: of ``full``'s groups, those that cut the cross-validated error of the training rows by
-  at least 5 % (``calib.selection``).
+- ``auto``: ``full``'s groups judged by cross-validation on blocked folds of the training rows (one
+  region of joint space left out at a time: what the table does away from the poses it was fitted
+  on, ``calib.selection``): the compliances together, as a prior, kept when determined, plausible
+  and not harmful; each harmonic only if determined at five sigma and it cuts the error by 5 %.
 
 Whatever the data cannot determine is held by the pipeline with its reason, as a table parameter is.
 """
@@ -31,7 +33,7 @@ from calib.joint_terms import (
 from calib.kinematics import N_JOINTS, dh_table
 from calib.methods import TERM_MODELS
 from calib.models import MeasurementModel
-from calib.selection import FOLDS, TermSelection, select_terms
+from calib.selection import TermSelection, blocked_folds, fitted_errors, nominal_errors, rms, select_terms
 
 MODELS = TERM_MODELS
 ARM_JOINTS = (1, 2)
@@ -41,8 +43,14 @@ NO_MASSES = (
     "to yield under"
 )
 NOT_CHOSEN = (
-    "--model auto: it changes the cross-validated error of the training rows by {change:+.1%} "
-    "({base:.4f} -> {rmse:.4f} mm); a term must cut it by {need:.0%}"
+    "--model auto: it changes the blocked cross-validated error of the training rows by "
+    "{change:+.1%} ({base:.4f} -> {rmse:.4f} mm); a term must cut it by {need:.0%}"
+)
+PRIOR_LEFT = "--model auto: {reason}"
+WORSE_THAN_NOMINAL = (
+    "the calibrated model predicts poses away from those it was fitted on worse than the nominal "
+    "table ({rmse:.3f} mm against {nominal:.3f} mm, cross-validated on {scheme}): do not use this "
+    "table; measure configurations spread over every joint's range"
 )
 TOO_FEW = (
     "--model auto: {n} samples leave too few per fold ({per_fold}) for the {needed} unknowns of "
@@ -103,18 +111,47 @@ def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, u
     if kind != "auto":
         return TermChoice(model.with_terms(offer.pool.subset(every)), None, offer.held)
     n = len(model.samples)
-    per_fold = n - -(-n // FOLDS)
+    folds, scheme = blocked_folds(model.samples.q)
+    per_fold = n - max(len(f) for f in folds)
     if per_fold < unknowns + len(every):
         warning = TOO_FEW.format(n=n, per_fold=per_fold, needed=unknowns + len(every))
         return TermChoice(model, None, offer.held, warning)
-    selection = select_terms(model, list(offer.groups), offer.pool, CalibrationOptions())
+    prior = [g for g in offer.groups if all(t.key == COMPLIANCE for t in g.terms)]
+    others = [g for g in offer.groups if g not in prior]
+    selection = select_terms(
+        model, others, offer.pool, CalibrationOptions(), folds=folds, prior=prior, scheme=scheme
+    )
     kept = [t for g in selection.groups for t in g.terms]
     held = dict(offer.held)
     by_label = {g.label: g for g in offer.groups}
-    base = {s.round: s.rmse_mm for s in selection.table if s.kept}
     for label, score in selection.rejected().items():
-        reason = NOT_CHOSEN.format(
-            rmse=score.rmse_mm, base=base[score.round - 1], change=-score.gain, need=selection.min_gain
+        reason = (
+            PRIOR_LEFT.format(reason=score.reason)
+            if score.reason
+            else NOT_CHOSEN.format(
+                rmse=score.rmse_mm,
+                base=score.rmse_mm / (1.0 - score.gain),
+                change=-score.gain,
+                need=selection.min_gain,
+            )
         )
         held.update(dict.fromkeys((t.name for t in by_label[label].terms), reason))
     return TermChoice(model.with_terms(offer.pool.subset(kept)), selection, held)
+
+
+def carry_over_warnings(
+    model: MeasurementModel, cal: Calibration, selection: TermSelection | None
+) -> list[str]:
+    """A warning when the calibration ``cal`` of ``model`` predicts left-out regions of joint space
+    worse than the nominal table does on the same folds (``auto``'s own cross-validation where it
+    ran, else the blocked folds computed here)."""
+    if selection is not None:
+        mine, nominal, scheme = selection.rmse_mm, selection.nominal_rmse_mm, selection.scheme
+    else:
+        folds, scheme = blocked_folds(model.samples.q)
+        if len(model.samples) - max(len(f) for f in folds) < int(cal.identified.sum()):
+            return []
+        mine, nominal = rms(fitted_errors(model, cal, folds)), rms(nominal_errors(model, cal, folds))
+    if mine < nominal:
+        return []
+    return [WORSE_THAN_NOMINAL.format(rmse=mine, nominal=nominal, scheme=scheme)]
