@@ -19,6 +19,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from errors import InputError
+from station.formats.base import printable
 
 ENV = "STATION_HISTORY_DB"
 BUSY_TIMEOUT_MS = 30000
@@ -84,8 +85,8 @@ class Record:
             robot_name=robot.name,
             time_utc=datetime.now(timezone.utc).isoformat(timespec="seconds"),
             command=command,
-            samples=str(samples),
-            table_path=str(table),
+            samples=printable(str(samples)),  # SQLite text is UTF-8: a name that is not, as \\xNN
+            table_path=printable(str(table)),
             table_hash=file_hash(table),
             verdict=verdict,
             rmse_mm=rmse,

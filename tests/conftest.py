@@ -33,8 +33,9 @@ def rng():
 
 
 @pytest.fixture(autouse=True)
-def history_db(tmp_path, monkeypatch):
-    """Every command's history record goes to a database of the test's own, never the user's."""
-    path = tmp_path / "history.sqlite"
+def history_db(tmp_path_factory, monkeypatch):
+    """Every command's history record goes to a database of the test's own, never the user's, and
+    outside the test's tmp_path (tests list what a command wrote there)."""
+    path = tmp_path_factory.mktemp("history") / "history.sqlite"
     monkeypatch.setenv("STATION_HISTORY_DB", str(path))
     return path
