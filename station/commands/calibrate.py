@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from calib.methods import ALL_METHODS, DEFAULT_TERM_MODEL, TERM_MODELS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
+from station.commands.long_work import Ticker, available_memory_bytes, check_calibrate_memory
 
 if TYPE_CHECKING:
     from station.formats.samples import Samples
@@ -64,7 +65,9 @@ def run(args) -> int:
         if path:
             check_writable(path, flag)
     inputs = load_inputs(args)
-    with parameters_as_flags(FLAGS):
+    rows = len(inputs.samples) + (len(inputs.holdout) if inputs.holdout is not None else 0)
+    check_calibrate_memory(str(args.samples), rows, available_memory_bytes())
+    with parameters_as_flags(FLAGS), Ticker(f"calibrate: {len(inputs.samples)} rows") as ticker:
         outcome = calibration.calibrate_samples(
             inputs.samples,
             inputs.robot,
@@ -75,6 +78,7 @@ def run(args) -> int:
             select=args.select,
             terms=args.model,
             notes=inputs.notes,
+            stage=ticker.stage,
         )
     if outcome.report.fit_check.refusal:
         raise InputError(f"{args.samples}: {outcome.report.fit_check.refusal}; nothing written")
