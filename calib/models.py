@@ -450,12 +450,22 @@ class DrawstringLineModel:
         dp[:, :, :N_DH], dp[:, :, self._terms_at :] = jac_table, jac_terms
         return p, dp
 
+    def _robot_points(self, x, jacobian: bool):
+        """``(p, dp)`` of :meth:`_robot_jacobian` (dp None unless ``jacobian``), reused while the
+        table and terms stay as they were: the setup fit moves only the setup unknowns, and its
+        every evaluation would otherwise redo the kinematics of all rows."""
+        key = np.concatenate([x[:N_DH], x[self._terms_at :]]).tobytes()
+        cached = getattr(self, "_robot_cache", None)
+        if cached is not None and cached[0] == key and (cached[2] is not None or not jacobian):
+            return cached[1], cached[2]
+        self._robot_cache = None  # not two sets of Jacobians alive at once
+        p, dp = self._robot_jacobian(x) if jacobian else (self.tcp(x), None)
+        self._robot_cache = (key, p, dp)
+        return p, dp
+
     def _evaluate(self, x, jacobian):
         st = self.setup_values
-        if jacobian:
-            p, dp = self._robot_jacobian(x)
-        else:
-            p = self.tcp(x)
+        p, dp = self._robot_points(x, jacobian)
         rel = p - self.anchor(x)
         dist = np.linalg.norm(rel, axis=1)
         r_len = (dist - self.length_offset(x) - self.samples.length) / st.sigma_length

@@ -208,7 +208,9 @@ class RunningCalibration:
         self.tool = np.asarray(robot.tool_mm, float)
         self.samples = SessionSamples(np.empty((0, 6)), np.empty(0), np.empty(0), np.empty(0, int))
         self.latest: Refit | None = None
-        self.history: list[tuple[Refit, dict[int, int]]] = []  # judged refits, samples per line
+        # each judged refit's predicted workspace error [mm] and samples per line (not the refit: it
+        # holds its samples, and a long session's refits together would hold N^2 rows)
+        self.history: list[tuple[float, dict[int, int]]] = []
         self.saturated: set[int] = set()
         self.goal_met = False
         self._want_next = False  # a planner suggestion is wanted and not yet started
@@ -301,7 +303,7 @@ class RunningCalibration:
         if not self.history:
             self.listener.message(f"running calibration: the model is determined by {fit.n} samples")
         counts = _counts(self.samples.line[: fit.n])
-        self.history.append((fit, counts))
+        self.history.append((fit.workspace.predicted_rmse_mm, counts))
         self._saturation(fit, counts)
         bound = fit.workspace.predicted_rmse_95_mm
         if self.until_mm is not None and not self.goal_met and bound <= self.until_mm:
@@ -316,10 +318,10 @@ class RunningCalibration:
         line = int(self.samples.line[fit.n - 1])
         if line < 0 or line in self.saturated:
             return
-        earlier = [f for f, c in self.history if c.get(line, 0) <= counts[line] - SATURATION_SAMPLES]
+        earlier = [e for e, c in self.history if c.get(line, 0) <= counts[line] - SATURATION_SAMPLES]
         if not earlier:
             return
-        before, now = earlier[-1].workspace.predicted_rmse_mm, fit.workspace.predicted_rmse_mm
+        before, now = earlier[-1], fit.workspace.predicted_rmse_mm
         gain = 1.0 - now / before
         if gain >= SATURATION_GAIN:
             return
@@ -378,7 +380,15 @@ def line_segments(tcp_mm: np.ndarray, line_ids: np.ndarray) -> dict[int, np.ndar
     for lid in np.unique(line_ids):
         p = tcp_mm[line_ids == lid]
         centre = p.mean(axis=0)
-        direction = np.linalg.svd(p - centre)[2][0] if len(p) > 1 else np.array([1.0, 0, 0])
+        direction = _principal_axis(p - centre)
         s = (p - centre) @ direction
         out[int(lid)] = centre + np.outer([s.min() - 20.0, s.max() + 20.0], direction)
     return out
+
+
+def _principal_axis(centred: np.ndarray) -> np.ndarray:
+    """The unit direction (3,) of largest spread of the points ``centred`` (n, 3): the leading
+    eigenvector of their 3 x 3 scatter matrix (memory and time linear in n); x for one point."""
+    if len(centred) < 2:
+        return np.array([1.0, 0.0, 0.0])
+    return np.linalg.eigh(centred.T @ centred)[1][:, -1]

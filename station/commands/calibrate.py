@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from calib.methods import ALL_METHODS, DEFAULT_TERM_MODEL, TERM_MODELS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
+from station.commands.long_work import Ticker, available_memory_bytes, check_calibrate_memory
 from station.commands.verify import add_history_flags, record_history
 
 if TYPE_CHECKING:
@@ -66,7 +67,9 @@ def run(args) -> int:
         if path:
             check_writable(path, flag)
     inputs = load_inputs(args)
-    with parameters_as_flags(FLAGS):
+    rows = len(inputs.samples) + (len(inputs.holdout) if inputs.holdout is not None else 0)
+    check_calibrate_memory(str(args.samples), rows, available_memory_bytes())
+    with parameters_as_flags(FLAGS), Ticker(f"calibrate: {len(inputs.samples)} rows") as ticker:
         outcome = calibration.calibrate_samples(
             inputs.samples,
             inputs.robot,
@@ -77,6 +80,7 @@ def run(args) -> int:
             select=args.select,
             terms=args.model,
             notes=inputs.notes,
+            stage=ticker.stage,
         )
     if outcome.report.fit_check.refusal:
         raise InputError(f"{args.samples}: {outcome.report.fit_check.refusal}; nothing written")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -162,6 +163,7 @@ def calibrate_samples(
     select: int | None = None,
     terms: str = "geometric",
     notes: tuple[str, ...] = (),
+    stage: Callable[[str], None] = lambda text: None,
 ) -> CalibrationOutcome:
     """Calibrate on ``samples`` and evaluate before/after on training and ``holdout`` rows.
 
@@ -171,9 +173,10 @@ def calibrate_samples(
     ``notes`` (what the caller noticed of the inputs, e.g. a flag replacing a session's robot) lead
     the report's warnings and, for a fit refused, name the likely cause. Raises ``InputError`` for
     too few samples and ``ParameterError`` for a bad ``method``, ``select``, ``terms`` or a missing
-    ``setup``.
+    ``setup``. ``stage(text)`` is told what it does as it goes (a command's progress lines).
     """
     t0 = time.perf_counter()
+    stage("checking the rows")
     for rows in (samples, holdout):
         if rows is not None:
             check_joint_limits(rows, robot)
@@ -182,8 +185,12 @@ def calibrate_samples(
     if terms not in MODELS:
         raise ParameterError(MESSAGES["terms"], value=terms, choices=", ".join(MODELS))
     payload = payload_of(robot, setup)
+    if terms == "auto":
+        stage("choosing the terms by cross-validation (a fit per candidate and fold)")
     choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
+    stage(f"fitting ({method})")
     fit = SOLVERS[method](choice, method, select)
+    stage("checking the fit and writing the report")
     elapsed = time.perf_counter() - t0
     origin = provenance(samples, robot, setup_where if setup is not None else None)
     hold_model = holdout_model(choice.model, holdout)

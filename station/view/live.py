@@ -57,6 +57,12 @@ GREEN, RED, GREY = (40, 200, 80), (230, 60, 50), (150, 150, 150)
 FLUSH_TIMEOUT_S = 10.0
 BLUE, ORANGE, PURPLE = (60, 120, 230), (240, 150, 30), (170, 80, 200)
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
+WRITERS = (
+    "anyone there can watch it and can also log into it, e.g. a false 'done' line (Rerun's gRPC server "
+    "takes data from every client: it has no read-only mode and no password); session.rrd keeps only "
+    "what the station logged"
+)
+"""What others who reach the web view's gRPC port can do (README, "Live view security")."""
 WARN_WORDS = ("suspended", "rejected", "retrying", "failed", "timed out", "check the cable")
 
 
@@ -193,7 +199,7 @@ class LiveView:
             if web not in LOOPBACK:
                 self.notes.append(
                     f"note: --web-bind {web} serves the live view to every machine that reaches this one "
-                    f"on ports {self.web.web_port} and {self.web.grpc_port}"
+                    f"on ports {self.web.web_port} and {self.web.grpc_port}: {WRITERS}"
                 )
         return sinks
 
