@@ -65,10 +65,11 @@ class Suspend(Exception):
     """A condition that pauses the session until it clears; the message says which, ``cause``
     names the condition (the same while it lasts, whatever the readings)."""
 
-    def __init__(self, reason: str, cause: str, device: str | None = None):
+    def __init__(self, reason: str, cause: str, device: str | None = None, error_reply: bool = False):
         super().__init__(reason)
         self.cause = cause
-        self.device = device  # set when the device stopped answering
+        self.device = device  # set when the device stopped answering, or answers only with errors
+        self.error_reply = error_reply  # it answers, with an error code
 
 
 class Devices:
@@ -76,7 +77,8 @@ class Devices:
 
     ``read(name)`` retries transient failures with a reconnect, waiting with ``sleep`` (s) between
     attempts and telling ``on_retry(error)`` of each failure retried; a device that stays silent or
-    answers with an error code raises :class:`Suspend` naming it.
+    answers with an error code raises :class:`Suspend` naming it (a dial's error code is its gate:
+    off the edge).
     """
 
     def __init__(
@@ -102,7 +104,7 @@ class Devices:
         except DeviceReplyError as exc:
             if name == "dial":
                 raise Suspend(f"dial out of range ({exc.cause})", "dial out of range") from exc
-            raise Suspend(str(exc), f"{name} error reply") from exc
+            raise Suspend(str(exc), f"{name} error reply", device=name, error_reply=True) from exc
         except DriverError as exc:
             last = exc.__cause__ if isinstance(exc.__cause__, DriverError) else exc  # the last attempt's
             cause = f"{name} silent ({type(last).__name__})"  # a new kind of failure is a new cause
@@ -191,8 +193,9 @@ class Rejected(Exception):
     """A capture that broke the rule; the message says how."""
 
 
-def capture(devices: Devices, rules: Rules) -> Capture:
-    """K rounds of every device, checked against the rule (:class:`Rejected` if broken)."""
+def capture(devices: Devices, rules: Rules, target_q_deg=None) -> Capture:
+    """K rounds of every device, checked against the rule (:class:`Rejected` if broken); with
+    ``target_q_deg`` (deg) every robot reading must lie within ``match_deg`` of it."""
     has_dial = "dial" in devices.drivers
     rounds = []
     for _ in range(rules.readings):
@@ -200,14 +203,19 @@ def capture(devices: Devices, rules: Rules) -> Capture:
     closing = devices.read("robot")  # brackets the last sensor readings: did the robot leave?
     t_mono = [r.t_monotonic for rnd in rounds for r in rnd]
     window = max(t_mono) - min(t_mono)
-    q = np.array([rnd[0].values["q_deg"] for rnd in rounds])
+    q = np.array([rnd[0].values["q_deg"] for rnd in rounds], float)
     robots = [rnd[0] for rnd in rounds] + [closing]
-    qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
-    q_all = np.array([r.values["q_deg"] for r in robots])
-    length = np.array([rnd[1].values["length_mm"] for rnd in rounds])
+    length = np.array([rnd[1].values["length_mm"] for rnd in rounds], float)
     dial = (
-        np.array([rnd[2].values["dial_mm"] for rnd in rounds]) if has_dial else np.full(len(rounds), np.nan)
+        np.array([rnd[2].values["dial_mm"] for rnd in rounds], float)
+        if has_dial
+        else np.full(len(rounds), np.nan)
     )
+    broken = _unusable(robots, length, dial if has_dial else None, rules, target_q_deg)
+    if broken:  # the other checks compare numbers that are not the robot's now, or not numbers
+        raise Rejected("; ".join(broken))
+    qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
+    q_all = np.array([r.values["q_deg"] for r in robots], float)
     _check(rules, window, q_all, qd, length, dial)
     return Capture(
         q_deg=q.mean(axis=0),
@@ -220,6 +228,42 @@ def capture(devices: Devices, rules: Rules) -> Capture:
         t_wall_s=rounds[0][0].t_wall,
         raw=[_raw_row(k, rnd) for k, rnd in enumerate(rounds)],
     )
+
+
+def _unusable(robots: list[Reading], length, dial, rules: Rules, target_q_deg) -> list[str]:
+    """Why the readings of a capture cannot make a sample, in the operator's words: a value that
+    is not a number, a robot package older than the capture window (the controller's stream fell
+    behind: ``package_age_s``, where the robot reports it), or the robot away from the target the
+    capture is for (it left before the capture finished)."""
+    broken = []
+    q = np.array([r.values["q_deg"] for r in robots], float)
+    qd = np.array([r.values["qd_deg_s"] for r in robots], float)
+    for what, values in (
+        ("robot joints", np.r_[q.ravel(), qd.ravel()]),
+        ("drawstring", length),
+        ("dial", dial),
+    ):
+        if values is not None and not np.all(np.isfinite(values)):
+            broken.append(f"the {what} gave no number ({_first_bad(values)})")
+    age = max((float(r.values.get("package_age_s", 0.0)) for r in robots), default=0.0)
+    if age > rules.window_s:
+        broken.append(
+            f"the robot's data arrived {age * 1e3:.0f} ms late (over the {rules.window_s * 1e3:.0f} ms "
+            "window): the controller's stream fell behind"
+        )
+    if target_q_deg is not None and np.all(np.isfinite(q)):
+        away = float(np.max(np.abs(q - np.asarray(target_q_deg, float))))
+        if away > rules.match_deg:
+            broken.append(
+                f"the robot left before the capture finished (joints up to {away:.2f} deg from the "
+                f"target, over {rules.match_deg:g} deg)"
+            )
+    return broken
+
+
+def _first_bad(values) -> str:
+    values = np.asarray(values, float)
+    return str(values[~np.isfinite(values)][0])
 
 
 def _check(rules: Rules, window, q, qd, length, dial) -> None:
