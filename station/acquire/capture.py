@@ -114,7 +114,10 @@ class Devices:
 class Settle:
     """Whether the robot has been still for ``rules.settle_s``: mode RUNNING, every joint speed
     below ``settle_speed_deg_s`` and every joint within ``still_deg`` of where the still period
-    began. ``ever`` says whether it settled at all since the last :meth:`reset`."""
+    began. ``ever`` says whether it settled at all since the last :meth:`reset`. The still period
+    is timed on the controller's clock where the robot reports one (``controller_time_s``), and
+    a package later than the capture window (``package_age_s``) breaks it: a stream that stalls
+    repeats its last package, which is no evidence of a robot at rest."""
 
     def __init__(self, rules: Rules):
         self.rules = rules
@@ -133,12 +136,14 @@ class Settle:
             speed >= self.rules.settle_speed_deg_s
             or robot.values["robot_mode"] != RUNNING
             or drift > self.rules.still_deg
+            or float(robot.values.get("package_age_s", 0.0)) > self.rules.window_s
         ):
             self.reset()
             return False
+        t = float(robot.values.get("controller_time_s", robot.t_monotonic))
         if self.since is None:
-            self.since, self.q0 = robot.t_monotonic, q
-        settled = robot.t_monotonic - self.since >= self.rules.settle_s
+            self.since, self.q0 = t, q
+        settled = t - self.since >= self.rules.settle_s
         self.ever |= settled
         return settled
 

@@ -584,3 +584,21 @@ def test_suspensions_that_clear_and_recur_do_not_hold_the_session_for_ever(tmp_p
     assert cell.run() is State.TIMED_OUT
     assert sum(m.startswith("suspended") for m in cell.messages) > 5
     assert cell.folder.rows == []
+
+
+def test_a_stalled_stream_repeating_its_last_package_is_no_settle(tmp_path, clock):
+    """The controller's packages stop advancing (its clock stands still) while the robot passes
+    target 0: the repeated package looks still, but the robot never settles on it; the real dwell
+    later is captured."""
+    q = PLAN.q_deg
+
+    def robot(t: float) -> dict:
+        if 0.5 <= t < 3.0:  # stalled: the package of t = 0.5 over and over
+            return {**still(q[0]), "controller_time_s": 0.5}
+        return {**timeline((0.5, moving(q[0])), *walk(q, start_s=3.0))(t), "controller_time_s": t}
+
+    cell = Cell(tmp_path, clock, robot)
+    cell.robot.fields = {**ROBOT_FIELDS, "controller_time_s": Field("s")}
+    cell.drawstring.script = lambda t: {"length_mm": ANCHOR_MM + q[0][0]}
+    assert cell.run() is State.DONE
+    assert float(cell.folder.rows[0]["t_s"]) >= 3.5  # not before the robot really arrived and rested
