@@ -106,6 +106,11 @@ class DeviceReplyError(DriverError):
         self.code = code
 
 
+class IncompatibleDevice(DriverError):
+    """The device answers, but not as the station needs (e.g. an RTDE recipe of other types): not
+    retried, and no sign of a reachable device either."""
+
+
 class DeviceUnreachable(DriverError):
     """The link is down (port missing, connection refused or reset) or stayed down after retries."""
 

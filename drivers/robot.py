@@ -43,6 +43,7 @@ from drivers.base import (
     Driver,
     Field,
     GarbledReply,
+    IncompatibleDevice,
     Reading,
     excerpt,
 )
@@ -143,9 +144,7 @@ class RtdeJointSource(Driver):
                 self._check_recipe(self._ask(s, "O", struct.pack(">d", self.frequency_hz) + _names()))
                 step = "the start request"
                 if self._ask(s, "S") != b"\x01":
-                    raise DeviceReplyError(
-                        self.name, f"{self._where} refused to start streaming", code="START"
-                    )
+                    raise IncompatibleDevice(self.name, f"{self._where} refused to start streaming")
                 step = "a data package after start"
                 self._check_package(self._receive(s, "U"))
         except TimeoutError as exc:
@@ -192,11 +191,10 @@ class RtdeJointSource(Driver):
                     code="NOT_FOUND",
                 )
             if got != want:
-                raise DeviceReplyError(
+                raise IncompatibleDevice(
                     self.name,
                     f"{self._where} types {name} as {excerpt(got)}, not {want}: "
                     "not a UR controller's recipe, refused",
-                    code="RECIPE",
                 )
 
     def _check_package(self, payload: bytes) -> None:

@@ -22,9 +22,9 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from drivers.base import (
     EXCERPT_CHARS,
     Backoff,
-    DeviceReplyError,
     DeviceTimeout,
     GarbledReply,
+    IncompatibleDevice,
     call_with_reconnect,
 )
 from drivers.drawstring import AsciiDrawstring, ModbusDrawstring, RegisterMap
@@ -155,7 +155,7 @@ def test_a_recipe_typing_actual_q_otherwise_is_refused():
     server = rtde(RtdeFaults(types=(("actual_q", "VECTOR3D"),)))
     try:
         with pytest.raises(
-            DeviceReplyError, match="types actual_q as VECTOR3D, not VECTOR6D: not a UR controller"
+            IncompatibleDevice, match="types actual_q as VECTOR3D, not VECTOR6D: not a UR controller"
         ):
             RtdeJointSource(server.host, probe_timeout_s=0.5).open()
     finally:
@@ -260,3 +260,15 @@ def test_station_read_of_a_drawstring_holding_nan_prints_valid_json_or_refuses(t
                 assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     finally:
         server.stop()
+
+
+def test_station_read_refuses_a_recipe_of_other_types_in_one_line(tmp_path):
+    """Issue 21: `actual_q` typed VECTOR3D once read as joints ending in zeros, exit 0."""
+    server = rtde(RtdeFaults(types=(("actual_q", "VECTOR3D"),)))
+    try:
+        proc, _ = station_read(tmp_path, server.host, 1)
+    finally:
+        server.stop()
+    assert proc.returncode == 1 and proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "types actual_q as VECTOR3D, not VECTOR6D" in lines[0], proc.stderr
