@@ -11,7 +11,10 @@ shared ``time_scale``):
    ``window_s``, and a closing robot reading; rejected if a reading fails its gate (the cable
    slackened after the check), the joints spread more than ``still_deg`` or a joint moved faster
    than the settle speed (the robot moved), or the drawstring spread more than ``jump_mm`` or the
-   dial more than ``dial_stable_mm`` (a sensor jumped);
+   dial more than ``dial_stable_mm`` (a sensor jumped); also if a value is not a finite number, a
+   robot reading lies farther than ``match_deg`` from the target (the robot left), a robot package
+   is later than ``window_s`` or the closing one was sent before the sensors' last reading (the
+   controller's stream fell behind; the closing reading waits up to ``window_s`` for a newer one);
 4. the sample is the mean of the K rounds, with the standard deviation of each quantity and the
    timestamp of every reading.
 """
@@ -28,6 +31,7 @@ from drivers.base import Backoff, DeviceReplyError, Driver, DriverError, Reading
 from station.config import SessionConfig
 
 RUNNING = 7  # UR robot_mode RUNNING (RTDE guide)
+JITTER_S = 0.005  # s: a robot package may be this much older than a reading taken as it arrived
 
 
 @dataclass(frozen=True)
@@ -205,7 +209,8 @@ def capture(devices: Devices, rules: Rules, target_q_deg=None) -> Capture:
     rounds = []
     for _ in range(rules.readings):
         rounds.append([devices.read(n) for n in ("robot", "drawstring", "dial") if n != "dial" or has_dial])
-    closing = devices.read("robot")  # brackets the last sensor readings: did the robot leave?
+    last_sensor_s = max(r.t_monotonic for r in rounds[-1][1:])
+    closing = _closing(devices, rules, last_sensor_s)
     t_mono = [r.t_monotonic for rnd in rounds for r in rnd]
     window = max(t_mono) - min(t_mono)
     q = np.array([rnd[0].values["q_deg"] for rnd in rounds], float)
@@ -216,7 +221,7 @@ def capture(devices: Devices, rules: Rules, target_q_deg=None) -> Capture:
         if has_dial
         else np.full(len(rounds), np.nan)
     )
-    broken = _unusable(robots, length, dial if has_dial else None, rules, target_q_deg)
+    broken = _unusable(robots, length, dial if has_dial else None, rules, target_q_deg, last_sensor_s)
     if broken:  # the other checks compare numbers that are not the robot's now, or not numbers
         raise Rejected("; ".join(broken))
     qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
@@ -235,11 +240,24 @@ def capture(devices: Devices, rules: Rules, target_q_deg=None) -> Capture:
     )
 
 
-def _unusable(robots: list[Reading], length, dial, rules: Rules, target_q_deg) -> list[str]:
+def _closing(devices: Devices, rules: Rules, last_sensor_s: float) -> Reading:
+    """The robot reading that brackets the sensors' last one (did the robot leave?): one whose
+    package was sent after it (``package_age_s`` within ``JITTER_S`` of the time since), read
+    again while the stream catches up, for ``window_s`` at most."""
+    while True:
+        closing = devices.read("robot")
+        since = closing.t_monotonic - last_sensor_s
+        if float(closing.values.get("package_age_s", 0.0)) <= since + JITTER_S or since > rules.window_s:
+            return closing
+        devices.sleep(JITTER_S / 4)
+
+
+def _unusable(robots: list[Reading], length, dial, rules: Rules, target_q_deg, last_sensor_s) -> list[str]:
     """Why the readings of a capture cannot make a sample, in the operator's words: a value that
-    is not a number, a robot package older than the capture window (the controller's stream fell
-    behind: ``package_age_s``, where the robot reports it), or the robot away from the target the
-    capture is for (it left before the capture finished)."""
+    is not a number, a robot package older than the capture window or a closing package sent
+    before the sensors' last reading (``last_sensor_s``) (the controller's stream fell behind:
+    ``package_age_s``, where the robot reports it), or the robot away from the target the capture
+    is for (it left before the capture finished)."""
     broken = []
     q = np.array([r.values["q_deg"] for r in robots], float)
     qd = np.array([r.values["qd_deg_s"] for r in robots], float)
@@ -255,6 +273,14 @@ def _unusable(robots: list[Reading], length, dial, rules: Rules, target_q_deg) -
         broken.append(
             f"the robot's data arrived {age * 1e3:.0f} ms late (over the {rules.window_s * 1e3:.0f} ms "
             "window): the controller's stream fell behind"
+        )
+    closing = robots[-1]
+    if (
+        early := float(closing.values.get("package_age_s", 0.0)) - (closing.t_monotonic - last_sensor_s)
+    ) > JITTER_S:
+        broken.append(
+            f"the robot's last data predate the sensors' last reading by {early * 1e3:.0f} ms: "
+            "the controller's stream fell behind"
         )
     if target_q_deg is not None and np.all(np.isfinite(q)):
         away = float(np.max(np.abs(q - np.asarray(target_q_deg, float))))

@@ -602,3 +602,38 @@ def test_a_stalled_stream_repeating_its_last_package_is_no_settle(tmp_path, cloc
     cell.drawstring.script = lambda t: {"length_mm": ANCHOR_MM + q[0][0]}
     assert cell.run() is State.DONE
     assert float(cell.folder.rows[0]["t_s"]) >= 3.5  # not before the robot really arrived and rested
+
+
+def test_a_stream_that_stalls_during_a_capture_rejects_it(tmp_path, clock):
+    """From the first sensor read at target 0 on, the controller repeats one package for 1 s (its
+    age grows): no robot package is sent after the sensors' last reading, so the robot's stillness
+    is not known; rejected, and taken when the stream is back."""
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    robot, length, stall = cell.robot.script, cell.drawstring.script, {}
+
+    def stalled(t: float) -> dict:
+        if "from" in stall and t < stall["from"] + 1.0:
+            return {**robot(t), "package_age_s": t - stall["from"]}
+        return robot(t)
+
+    def first_read_starts_the_stall(t: float) -> dict:
+        stall.setdefault("from", t)
+        return length(t)
+
+    cell.robot.script, cell.drawstring.script = stalled, first_read_starts_the_stall
+    assert cell.run() is State.DONE
+    assert any("the robot's last data predate the sensors' last reading by" in m for m in cell.messages)
+    assert cell.targets() == [0, 1, 2]
+    assert float(cell.folder.rows[0]["t_s"]) > stall["from"] + 1.0
+
+
+def test_a_stream_lagging_steadily_is_waited_for_not_rejected(tmp_path, clock):
+    """Every package 30 ms late (a steady link delay the baseline did not absorb): the closing
+    reading waits for the package sent after the sensors' last reading, and the capture stands."""
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    robot = cell.robot.script
+    cell.robot.script = lambda t: {**robot(t), "package_age_s": 0.03}
+    session = cell.session()
+    assert session.run() is State.DONE
+    assert session.rejected == 0
+    assert cell.targets() == [0, 1, 2]
