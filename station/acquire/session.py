@@ -4,11 +4,13 @@ States: WAITING (for the robot to settle at an unfinished target) -> CAPTURING -
 SUSPENDED while a suspender holds (robot not running, a sensor out of its gate, a device not
 answering), back to WAITING by itself when it clears; and the ends DONE (every target measured),
 STOPPED (stop requested: Ctrl-C), TIMED_OUT (no progress of any kind for ``target_timeout_s``:
-no capture stored and no finished plan target settled at that the robot had not settled at since
-the last capture; time spent suspended does not count, so suspensions that clear and recur do not
-hold the session for ever); DONE also when asked to finish early (:meth:`Session.finish`: the
-running calibration reached its goal). A device that stays silent or answers only with errors for
-``unreachable_s`` while the session is suspended for it ends the session (DeviceError).
+no capture stored, no capture attempted at an unfinished target (its first
+``ATTEMPTS_PER_TARGET`` rejections count), and no finished plan target settled at that the robot
+had not settled at since the last capture or attempt; time spent suspended does not count, so
+suspensions that clear and recur do not hold the session for ever); DONE also when asked to
+finish early (:meth:`Session.finish`: the running calibration reached its goal). A device that
+stays silent or answers only with errors for ``unreachable_s`` while the session is suspended for
+it ends the session (DeviceError).
 
 The log names every fault: each suspension and each change of the condition holding it, and each
 transient failure retried (``drawstring: bad CRC in reply ...; retrying``); of the reconnects to a
@@ -28,6 +30,7 @@ so the engine runs on a simulated clock in the tests; the devices' readings carr
 
 from __future__ import annotations
 
+import collections
 import enum
 import time
 from collections.abc import Callable
@@ -52,6 +55,13 @@ from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
 SUSPENDED_POLL_S = 0.1  # re-check a suspending condition this often
+ATTEMPTS_PER_TARGET = 10  # rejected captures at one target that still count as progress
+
+
+def _listed(targets: list[int]) -> str:
+    """Target ids for a message: the first ten, then how many more."""
+    more = f" and {len(targets) - 10} more" if len(targets) > 10 else ""
+    return ", ".join(map(str, targets[:10])) + more
 
 
 class State(enum.Enum):
@@ -98,6 +108,7 @@ class Session:
         self.rejected = 0
         self._visited: set[int] = set()  # plan targets settled at since the last capture
         self._reached: set[int] = set()  # plan targets settled at in this run
+        self._rejected_at: collections.Counter[int] = collections.Counter()  # rejected captures, by target
         self._suspended_by: Suspend | None = None
         self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
         devices.on_retry = self._retrying
@@ -163,11 +174,15 @@ class Session:
             cap = capture(self.devices, self.rules, self.plan.q_deg[index])
         except Rejected as why:
             self.rejected += 1
+            self._rejected_at[index] += 1
             self.listener.message(
                 f"capture at target {int(self.plan.target[index])} rejected: {why}; it will be taken again"
             )
             self.settle.reset()
-            return False
+            if self._rejected_at[index] > ATTEMPTS_PER_TARGET:
+                return False
+            self._visited.clear()  # an attempt: the robot's next round through the plan may succeed
+            return True
         finally:
             self.state = State.WAITING
         self._store(index, cap)
@@ -259,14 +274,13 @@ class Session:
                 f"{self.rules.settle_speed_deg_s:g} deg/s and joints within {self.rules.still_deg:g} deg "
                 f"for {self.rules.settle_s * scale:g} s)"
             )
+        elif tried := [int(self.plan.target[i]) for i in self.pending if self._rejected_at[i]]:
+            why = f"every capture at target{'s' if len(tried) > 1 else ''} {_listed(tried)} was rejected"
         else:
             why = "the robot settled only at finished targets or away from the plan"
             never = [int(self.plan.target[i]) for i in self.pending if i not in self._reached]
             if never:
-                shown = ", ".join(map(str, never[:10])) + (
-                    f" and {len(never) - 10} more" if len(never) > 10 else ""
-                )
-                why += f"; never reached: target{'s' if len(never) > 1 else ''} {shown}"
+                why += f"; never reached: target{'s' if len(never) > 1 else ''} {_listed(never)}"
         return f"no capture for {waited:g} s: {why}"
 
     def _end(self, state: State, text: str) -> State:

@@ -26,7 +26,7 @@ from drivers.base import (
 )
 from errors import DeviceError
 from station.acquire.capture import RUNNING, Capture, Devices, Rules
-from station.acquire.session import SUSPENDED_POLL_S, Listener, Session, State
+from station.acquire.session import ATTEMPTS_PER_TARGET, SUSPENDED_POLL_S, Listener, Session, State
 from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
@@ -637,3 +637,24 @@ def test_a_stream_lagging_steadily_is_waited_for_not_rejected(tmp_path, clock):
     assert session.run() is State.DONE
     assert session.rejected == 0
     assert cell.targets() == [0, 1, 2]
+
+
+def test_captures_rejected_at_a_target_each_round_end_the_session_naming_it(tmp_path, clock):
+    """The drawstring jumps in every capture at target 2 while the robot cycles: each attempt is
+    progress until ``ATTEMPTS_PER_TARGET`` of them, then the session ends saying why."""
+    q = PLAN.q_deg
+    cell = Cell(tmp_path, clock, timeline(*walk(list(q) * 100)))
+    reads = iter(range(10**9))
+    length = cell.length_from_pose
+
+    def jumps_at_target_2(t: float) -> dict:
+        value = length(t)
+        at_2 = abs(value["length_mm"] - ANCHOR_MM - q[2][0]) < 1e-9
+        return {"length_mm": value["length_mm"] + (next(reads) % 2) * at_2}
+
+    cell.drawstring.script = jumps_at_target_2
+    session = cell.session()
+    assert session.run() is State.TIMED_OUT
+    assert cell.targets() == [0, 1]
+    assert cell.messages[-1].startswith("timed out: no capture for 10 s: every capture at target 2 was")
+    assert session.rejected > ATTEMPTS_PER_TARGET
