@@ -3,12 +3,12 @@
 States: WAITING (for the robot to settle at an unfinished target) -> CAPTURING -> WAITING ...;
 SUSPENDED while a suspender holds (robot not running, a sensor out of its gate, a device not
 answering), back to WAITING by itself when it clears; and the ends DONE (every target measured),
-STOPPED (stop requested: Ctrl-C), TIMED_OUT (no progress of any kind for ``target_timeout_s``:
-no capture stored, no capture attempted at an unfinished target (its first
-``ATTEMPTS_PER_TARGET`` rejections count), and no finished plan target settled at that the robot
-had not settled at since the last capture or attempt; time spent suspended does not count, so
-suspensions that clear and recur do not hold the session for ever); DONE also when asked to
-finish early (:meth:`Session.finish`: the running calibration reached its goal). A device that
+STOPPED (stop requested: Ctrl-C), TIMED_OUT (no progress of any kind for ``target_timeout_s``: no
+capture stored, no attempt at an unfinished target (a settle there, whatever its gates and capture
+then find; a target's first ``ATTEMPTS_PER_TARGET`` count), and no finished plan target settled at
+that the robot had not settled at since the last capture or attempt; time spent suspended does not
+count, so suspensions that clear and recur do not hold the session for ever); DONE also when asked
+to finish early (:meth:`Session.finish`: the running calibration reached its goal). A device that
 stays silent or answers only with errors for ``unreachable_s`` while the session is suspended for
 it ends the session (DeviceError).
 
@@ -55,7 +55,7 @@ from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
 SUSPENDED_POLL_S = 0.1  # re-check a suspending condition this often
-ATTEMPTS_PER_TARGET = 10  # rejected captures at one target that still count as progress
+ATTEMPTS_PER_TARGET = 10  # settles at one unfinished target that still count as progress
 
 
 def _listed(targets: list[int]) -> str:
@@ -108,7 +108,8 @@ class Session:
         self.rejected = 0
         self._visited: set[int] = set()  # plan targets settled at since the last capture
         self._reached: set[int] = set()  # plan targets settled at in this run
-        self._rejected_at: collections.Counter[int] = collections.Counter()  # rejected captures, by target
+        self._attempts: collections.Counter[int] = collections.Counter()  # settles at unfinished targets
+        self._attempted = False  # the last poll was an attempt that counts as progress
         self._suspended_by: Suspend | None = None
         self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
         devices.on_retry = self._retrying
@@ -137,6 +138,7 @@ class Session:
                 return self._end(State.STOPPED, "stopped on request")
             if self._finish is not None:
                 return self._end(State.DONE, self._finish)
+            self._attempted = False
             try:
                 if self._step():
                     last_progress = self.clock()
@@ -145,7 +147,8 @@ class Session:
                 since = self.clock()
                 self._suspended(why)
                 self.settle.reset()
-                last_progress += self.clock() - since  # waiting out a condition is not idling
+                # an attempt is progress; else waiting out a condition is not idling
+                last_progress = self.clock() if self._attempted else last_progress + self.clock() - since
                 continue
             if self.clock() - last_progress > self.rules.target_timeout_s:
                 return self._end(State.TIMED_OUT, self._timeout_message())
@@ -168,26 +171,31 @@ class Session:
             new = index not in self._visited
             self._visited.add(index)
             return new
+        self._attempt(index)
         check_gates(self.devices, self.rules)
         self.state = State.CAPTURING
         try:
             cap = capture(self.devices, self.rules, self.plan.q_deg[index])
         except Rejected as why:
             self.rejected += 1
-            self._rejected_at[index] += 1
             self.listener.message(
                 f"capture at target {int(self.plan.target[index])} rejected: {why}; it will be taken again"
             )
             self.settle.reset()
-            if self._rejected_at[index] > ATTEMPTS_PER_TARGET:
-                return False
-            self._visited.clear()  # an attempt: the robot's next round through the plan may succeed
-            return True
+            return self._attempted
         finally:
             self.state = State.WAITING
         self._store(index, cap)
         self._visited.clear()
         return True
+
+    def _attempt(self, index: int) -> None:
+        """Count a settle at unfinished target ``index``: progress for its first
+        ``ATTEMPTS_PER_TARGET`` (the robot's next round through the plan may succeed)."""
+        self._attempts[index] += 1
+        if self._attempts[index] <= ATTEMPTS_PER_TARGET:
+            self._attempted = True
+            self._visited.clear()
 
     def _match(self, q_deg: np.ndarray) -> int | None:
         """Index of the plan target nearest to ``q_deg`` if within ``match_deg`` (finished or not)."""
@@ -274,8 +282,11 @@ class Session:
                 f"{self.rules.settle_speed_deg_s:g} deg/s and joints within {self.rules.still_deg:g} deg "
                 f"for {self.rules.settle_s * scale:g} s)"
             )
-        elif tried := [int(self.plan.target[i]) for i in self.pending if self._rejected_at[i]]:
-            why = f"every capture at target{'s' if len(tried) > 1 else ''} {_listed(tried)} was rejected"
+        elif tried := [int(self.plan.target[i]) for i in self.pending if self._attempts[i]]:
+            why = (
+                f"every attempt at target{'s' if len(tried) > 1 else ''} {_listed(tried)} was rejected or "
+                "suspended (see above)"
+            )
         else:
             why = "the robot settled only at finished targets or away from the plan"
             never = [int(self.plan.target[i]) for i in self.pending if i not in self._reached]

@@ -656,5 +656,5 @@ def test_captures_rejected_at_a_target_each_round_end_the_session_naming_it(tmp_
     session = cell.session()
     assert session.run() is State.TIMED_OUT
     assert cell.targets() == [0, 1]
-    assert cell.messages[-1].startswith("timed out: no capture for 10 s: every capture at target 2 was")
+    assert cell.messages[-1].startswith("timed out: no capture for 10 s: every attempt at target 2 was")
     assert session.rejected > ATTEMPTS_PER_TARGET
