@@ -27,7 +27,10 @@ from drivers.base import (
     Field,
     GarbledReply,
     Reading,
+    excerpt,
 )
+
+MAX_REPLY_BYTES = 256  # a reply line longer than this is no instrument's: garbage
 
 
 @dataclass(frozen=True)
@@ -91,8 +94,8 @@ def parse_reply(device: str, dialect: Dialect, line: bytes) -> float:
     if match := re.fullmatch(dialect.value_re, text):
         return float(match["value"])
     if match := re.fullmatch(dialect.error_re, text):
-        raise DeviceReplyError(device, f"device error {text!r}", code=match["code"])
-    raise GarbledReply(device, f"unparseable reply {line!r}")
+        raise DeviceReplyError(device, f"device error {excerpt(repr(text), len(line))}", code=match["code"])
+    raise GarbledReply(device, f"unparseable reply {excerpt(repr(line), len(line))}")
 
 
 class AsciiSerialDriver(Driver):
@@ -134,11 +137,15 @@ class AsciiSerialDriver(Driver):
         try:
             self.port.reset_input_buffer()
             self.port.write(self.dialect.request)
-            raw = self.port.read_until(term)
+            raw = self.port.read_until(term, MAX_REPLY_BYTES)
         except (serial.SerialException, OSError, TermiosError) as exc:
             self.port.close()
             raise DeviceUnreachable(self.name, f"link lost on {self.port.port}: {exc}") from exc
         if not raw.endswith(term):
-            got = f"incomplete reply {raw!r}" if raw else "no reply"
+            if len(raw) >= MAX_REPLY_BYTES:
+                raise GarbledReply(
+                    self.name, f"no terminator in {excerpt(repr(raw), len(raw))}: the device floods bytes"
+                )
+            got = f"incomplete reply {excerpt(repr(raw), len(raw))}" if raw else "no reply"
             raise DeviceTimeout(self.name, f"{got} within {self.port.timeout} s")
         return raw[: -len(term)]

@@ -64,6 +64,19 @@ class Reading:
         )
 
 
+EXCERPT_CHARS = 80  # what a device's reply contributes to a message, at most
+
+
+def excerpt(text: str, n_bytes: int | None = None) -> str:
+    """``text`` (a device's reply as a message shows it: hex or repr) cut to ``EXCERPT_CHARS``
+    characters, with the reply's size (``n_bytes``) said: a device flooding bytes does not flood
+    the log."""
+    if len(text) <= EXCERPT_CHARS:
+        return text
+    size = f"{n_bytes} bytes" if n_bytes is not None else f"{len(text)} characters"
+    return f"{text[:EXCERPT_CHARS]}... ({size})"
+
+
 class DriverError(DeviceError):
     """A device failed; ``device`` names it and ``cause`` says how."""
 
@@ -91,6 +104,11 @@ class DeviceReplyError(DriverError):
     def __init__(self, device: str, cause: str, code: str):
         super().__init__(device, cause)
         self.code = code
+
+
+class IncompatibleDevice(DriverError):
+    """The device answers, but not as the station needs (e.g. an RTDE recipe of other types): not
+    retried, and no sign of a reachable device either."""
 
 
 class DeviceUnreachable(DriverError):

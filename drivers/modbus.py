@@ -11,6 +11,7 @@ exception code.
 from __future__ import annotations
 
 import logging
+import math
 from typing import ClassVar
 
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -25,10 +26,12 @@ from drivers.base import (
     Driver,
     GarbledReply,
     Reading,
+    excerpt,
 )
 from drivers.registers import RegisterLayout
 
 FUNCTION_CODES = {"holding": 3, "input": 4}  # Modbus read holding / read input registers
+MBAP_UNIT = 6  # Modbus TCP: the unit id's offset in a frame (after transaction, protocol, length)
 
 # pymodbus logs every failure itself ("No response received ...", "Repeating....") on stderr; the
 # driver raises each one, named, and the session logs it: its own lines would only add noise.
@@ -50,11 +53,15 @@ class ModbusRegisterDriver(Driver):
         self.client = client
         self.registers = layout
         self._rx = b""  # raw bytes of the last reply, to tell a CRC error from silence
+        self._tx = b""  # the last request's frame, to tell a stray reply from garbage
         client.transaction.trace_packet = self._trace  # pymodbus's packet hook, both ways
 
     def _trace(self, sending: bool, data: bytes) -> bytes:
-        """Keep the bytes received since the last request (pymodbus passes the whole buffer)."""
-        self._rx = b"" if sending else data
+        """Keep the last request and the bytes received since (pymodbus passes the whole buffer)."""
+        if sending:
+            self._tx, self._rx = data, b""
+        else:
+            self._rx = data
         return data
 
     def open(self) -> None:
@@ -66,6 +73,13 @@ class ModbusRegisterDriver(Driver):
 
     def read(self) -> Reading:
         values = self.registers.decode(self._read_registers())
+        if not all(math.isfinite(v) for v in values):
+            regs = self.registers
+            raise GarbledReply(
+                self.name,
+                f"{self.what} {regs.address}..{regs.address + regs.count - 1} hold no number "
+                f"({', '.join(f'{v:g}' for v in values)})",
+            )
         value = values if self.fields[self.field].shape else values[0]
         return Reading.now(self.name, {self.field: value}, self.fields)
 
@@ -104,11 +118,28 @@ class ModbusRegisterDriver(Driver):
             return DeviceUnreachable(self.name, f"link lost to {self._where()}: {exc}")
         rx = self._rx
         if isinstance(self.client, ModbusSerialClient) and self._is_bad_crc_reply(rx):
-            return CrcError(self.name, f"bad CRC in reply {rx.hex(' ')}")
+            return CrcError(self.name, f"bad CRC in reply {excerpt(rx.hex(' '), len(rx))}")
+        if stray := self._stray(rx):
+            return GarbledReply(self.name, f"{stray}: {excerpt(rx.hex(' '), len(rx))}")
         if rx:
-            return GarbledReply(self.name, f"unparseable reply {rx.hex(' ')}")
+            return GarbledReply(self.name, f"unparseable reply {excerpt(rx.hex(' '), len(rx))}")
         timeout = self.client.comm_params.timeout_connect
         return DeviceTimeout(self.name, f"no reply from {self._where()} within {timeout} s")
+
+    def _stray(self, rx: bytes) -> str | None:
+        """What a well-formed reply that is not ours was (pymodbus skips it, then times out): a
+        reply to another transaction (TCP: a late reply, or another client) or from another
+        device id (another device on the line or behind the gateway); None if it is neither."""
+        unit_at = 0 if isinstance(self.client, ModbusSerialClient) else MBAP_UNIT
+        if len(rx) < unit_at + 2 or rx[unit_at + 1] & 0x7F != FUNCTION_CODES[self.registers.table]:
+            return None
+        if unit_at and len(self._tx) >= 2 and rx[:2] != self._tx[:2]:
+            got, ours = int.from_bytes(rx[:2], "big"), int.from_bytes(self._tx[:2], "big")
+            return f"a reply to transaction {got}, not to ours ({ours}): a late reply or another client"
+        if rx[unit_at] != self.registers.device_id:
+            ours = self.registers.device_id
+            return f"a reply from device id {rx[unit_at]}, not {ours}: another device answered"
+        return None
 
     def _is_bad_crc_reply(self, rx: bytes) -> bool:
         """Whether ``rx`` is a reply frame from our device (id, function) whose CRC is wrong."""

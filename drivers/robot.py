@@ -8,8 +8,15 @@ RTDE notes (ur_rtde 1.6):
 
 - ``RTDEReceiveInterface(host, frequency, variables)`` connects to port 30004 (fixed), holds the
   GIL and blocks until the first data package arrives. A controller that accepts the TCP
-  connection but never answers would hang it, so :meth:`RtdeJointSource.open` first makes a short
-  protocol probe of its own (a ``V`` request, answered within ``probe_timeout_s``).
+  connection but stalls anywhere in the handshake would hang it (or fill stderr with its
+  "boost system Exception" lines), and it unpacks whatever types the controller names for the
+  recipe. So :meth:`RtdeJointSource.open` first walks the whole handshake itself, each step
+  answered within ``probe_timeout_s``: protocol version, controller version, the output recipe
+  (its types checked: ``actual_q`` must be VECTOR6D, ...), start, and one data package of the
+  recipe's size with finite values; only then does ur_rtde connect.
+- Every reading is checked: finite joints and speeds, a known robot mode; ``package_age_s`` says
+  how much later than usual the package arrived (controller timestamp against the local clock,
+  the usual link latency being the least seen since open, allowed to drift 1 ms/s).
 - After the link drops, ``isConnected()`` turns false (EOF at once; a silent controller after
   ur_rtde's 2.5 s read deadline) and ``read()`` raises :class:`DeviceUnreachable`. The reconnect
   path is :func:`drivers.base.call_with_reconnect` (close, back off, open). It builds a fresh
@@ -36,7 +43,9 @@ from drivers.base import (
     Driver,
     Field,
     GarbledReply,
+    IncompatibleDevice,
     Reading,
+    excerpt,
 )
 from drivers.modbus import ModbusRegisterDriver
 from drivers.registers import DataType, Encoding, RegisterLayout
@@ -45,16 +54,23 @@ RTDE_PORT = 30004
 RTDE_VARIABLES = ("timestamp", "actual_q", "actual_qd", "robot_mode")
 JOINTS = 6
 
+RTDE_TYPES = ("DOUBLE", "VECTOR6D", "VECTOR6D", "INT32")  # of RTDE_VARIABLES (UR's RTDE guide)
+_DATA = struct.Struct(">B d 6d 6d i")  # a data package of that recipe: recipe id, then the values
+ROBOT_MODES = range(-1, 9)  # UR robot_mode: -1 NO_CONTROLLER .. 8 UPDATING_FIRMWARE
+CLOCK_DRIFT = 1e-3  # s/s the controller's clock may run slower than ours
+
 RTDE_FIELDS = {
     "q_deg": Field("deg", (JOINTS,), "actual joint positions"),
     "qd_deg_s": Field("deg/s", (JOINTS,), "actual joint velocities"),
     "robot_mode": Field("", (), "UR robot mode (7 = RUNNING)"),
     "controller_time_s": Field("s", (), "controller timestamp of the data package"),
+    "package_age_s": Field("s", (), "how much later than usual the package arrived"),
 }
 
 # RTDE protocol-version request and its reply (UR RTDE guide): header uint16 size + uint8 'V'.
 _PROBE_REQUEST = struct.pack(">HBH", 5, ord("V"), 2)
 _PROBE_REPLY = struct.pack(">HBB", 4, ord("V"), 1)
+_HEADER = struct.Struct(">HB")
 
 
 class RtdeJointSource(Driver):
@@ -86,6 +102,7 @@ class RtdeJointSource(Driver):
         self._last_stamp = math.nan
         self._last_change = 0.0
         self._silent = False  # the last read found no new package for stale_s
+        self._latency = (math.inf, 0.0)  # least (local - controller time) seen, and when [s]
 
     @property
     def _where(self) -> str:
@@ -103,26 +120,95 @@ class RtdeJointSource(Driver):
                 ) from exc
             raise DeviceUnreachable(self.name, f"{self._where}: {exc}") from exc
         self._last_stamp, self._last_change = math.nan, time.monotonic()
+        self._latency = (math.inf, 0.0)
 
     def _probe(self) -> None:
-        """Connect and ask for protocol version 2, every step within ``probe_timeout_s``."""
+        """Walk the RTDE handshake up to the first data package, every step within
+        ``probe_timeout_s``, and check what the controller answers."""
+        step = "the connection"
         try:
             with socket.create_connection((self.host, RTDE_PORT), self.probe_timeout_s) as s:
                 s.settimeout(self.probe_timeout_s)
+                step = "the protocol request"
                 s.sendall(_PROBE_REQUEST)
                 reply = _recv_exactly(s, len(_PROBE_REPLY))
+                if reply != _PROBE_REPLY:
+                    raise GarbledReply(
+                        self.name,
+                        f"{self._where} answered the protocol request with "
+                        f"{excerpt(reply.hex(' '), len(reply))}, expected {_PROBE_REPLY.hex(' ')}",
+                    )
+                step = "the controller version request"
+                self._ask(s, "v")
+                step = "the output recipe request"
+                self._check_recipe(self._ask(s, "O", struct.pack(">d", self.frequency_hz) + _names()))
+                step = "the start request"
+                if self._ask(s, "S") != b"\x01":
+                    raise IncompatibleDevice(self.name, f"{self._where} refused to start streaming")
+                step = "a data package after start"
+                self._check_package(self._receive(s, "U"))
         except TimeoutError as exc:
             raise DeviceTimeout(
-                self.name,
-                f"{self._where} did not answer the protocol request within {self.probe_timeout_s} s",
+                self.name, f"{self._where} did not answer {step} within {self.probe_timeout_s} s"
             ) from exc
         except OSError as exc:
-            raise DeviceUnreachable(self.name, f"cannot connect to {self._where}: {exc}") from exc
-        if reply != _PROBE_REPLY:
+            where = (
+                f"cannot connect to {self._where}" if step == "the connection" else f"{self._where}: {step}"
+            )
+            raise DeviceUnreachable(self.name, f"{where}: {exc}") from exc
+
+    def _ask(self, s: socket.socket, kind: str, payload: bytes = b"") -> bytes:
+        """Send one request of type ``kind``; its reply's payload."""
+        s.sendall(_HEADER.pack(_HEADER.size + len(payload), ord(kind)) + payload)
+        return self._receive(s, kind)
+
+    def _receive(self, s: socket.socket, kind: str) -> bytes:
+        """The payload of the next package of type ``kind`` (text messages skipped)."""
+        while True:
+            header = _recv_exactly(s, _HEADER.size)
+            if len(header) < _HEADER.size:
+                raise DeviceUnreachable(self.name, f"{self._where} closed the connection")
+            size, got = _HEADER.unpack(header)
+            payload = _recv_exactly(s, max(0, size - _HEADER.size))
+            if got == ord(kind):
+                return payload
+            if got != ord("M"):
+                package = header + payload
+                raise GarbledReply(
+                    self.name,
+                    f"{self._where} answered {kind!r} with a {chr(got)!r} package "
+                    f"{excerpt(package.hex(' '), len(package))}",
+                )
+
+    def _check_recipe(self, reply: bytes) -> None:
+        """The controller's types for the recipe must be UR's (else ur_rtde unpacks garbage)."""
+        types = reply[1:].decode("ascii", errors="replace").split(",")
+        for name, want, got in zip(RTDE_VARIABLES, RTDE_TYPES, types + [""] * len(RTDE_TYPES), strict=False):
+            if got == "NOT_FOUND":
+                raise DeviceReplyError(
+                    self.name,
+                    f"{self._where} lacks a variable: {name} not found by the controller",
+                    code="NOT_FOUND",
+                )
+            if got != want:
+                raise IncompatibleDevice(
+                    self.name,
+                    f"{self._where} types {name} as {excerpt(got)}, not {want}: "
+                    "not a UR controller's recipe, refused",
+                )
+
+    def _check_package(self, payload: bytes) -> None:
+        """The first data package: the recipe's size and finite values."""
+        if len(payload) != _DATA.size:
             raise GarbledReply(
                 self.name,
-                f"{self._where} answered the protocol request with "
-                f"{reply.hex(' ')}, expected {_PROBE_REPLY.hex(' ')}",
+                f"{self._where} sent a data package of {len(payload) + _HEADER.size} bytes, "
+                f"the recipe makes {_DATA.size + _HEADER.size}",
+            )
+        values = _DATA.unpack(payload)[1:]
+        if not all(math.isfinite(v) for v in values):
+            raise GarbledReply(
+                self.name, f"{self._where} sent a data package with values that are not numbers"
             )
 
     def close(self) -> None:
@@ -143,6 +229,12 @@ class RtdeJointSource(Driver):
             raise DeviceUnreachable(self.name, f"{self._where} connection lost")
         stamp, q, qd, mode = self._consistent_sample()
         now = time.monotonic()
+        if not all(math.isfinite(v) for v in (stamp, *q, *qd)) or len(q) != JOINTS or mode not in ROBOT_MODES:
+            raise GarbledReply(
+                self.name,
+                f"{self._where} sent a package that is no robot state "
+                f"(joints {excerpt(repr(list(q)))}, robot mode {mode})",
+            )
         if stamp != self._last_stamp:
             self._last_stamp, self._last_change = stamp, now
         elif now - self._last_change > self.stale_s:
@@ -155,8 +247,16 @@ class RtdeJointSource(Driver):
             "qd_deg_s": tuple(math.degrees(v) for v in qd),
             "robot_mode": int(mode),
             "controller_time_s": stamp,
+            "package_age_s": self._age(now, stamp),
         }
         return Reading.now(self.name, values, RTDE_FIELDS)
+
+    def _age(self, now: float, stamp: float) -> float:
+        """How much later than the least latency seen the package ``stamp`` is read at ``now``."""
+        least, since = self._latency
+        least = min(least + CLOCK_DRIFT * (now - since), now - stamp)
+        self._latency = (least, now)
+        return (now - stamp) - least
 
     def _consistent_sample(self) -> tuple[float, list, list, int]:
         """Timestamp, q, qd and mode of one package: ur_rtde's getters lock per call, so read
@@ -168,6 +268,10 @@ class RtdeJointSource(Driver):
             if rtde.getTimestamp() == stamp:
                 break
         return sample
+
+
+def _names() -> bytes:
+    return ",".join(RTDE_VARIABLES).encode("ascii")
 
 
 def _recv_exactly(sock: socket.socket, n: int) -> bytes:

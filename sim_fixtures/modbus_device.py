@@ -5,9 +5,11 @@ The sensor is one pymodbus ``SimDevice`` whose registers hold the length in the 
 SimDevice ``action``), which takes a fresh measurement (true length + noise, quantised to the
 encoding's resolution, e.g. 1 um for ``int32_um``) and writes it into the registers the reply is
 built from. Faults (``sim_fixtures.serial_device.FaultPlan``) act on the next requests:
-``error`` answers Modbus exception 4 (device failure); ``crc`` flips the last CRC byte of the RTU
-reply; ``garbled`` sends noise instead of the reply; ``silence`` sends nothing; ``unplug`` resets
-the TCP connections (RST) or pulls the RTU cable at the station's end.
+``error`` answers Modbus exception 4 (device failure); ``nan`` / ``inf`` publish a float that is
+no number (float32 layouts only); ``crc`` flips the last CRC byte of the RTU reply; ``garbled``
+sends noise instead of the reply; ``silence`` sends nothing; ``unplug`` resets the TCP
+connections (RST) or pulls the RTU cable at the station's end; ``stray`` answers as another
+transaction (TCP) or another device id (RTU), a well-formed reply that is not the station's.
 
 The server runs on its own asyncio loop in a daemon thread: :class:`ModbusDevice` starts it,
 reports the bound address, and stops it within a bounded time.
@@ -23,6 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from pymodbus.constants import ExcCodes
+from pymodbus.framer import FramerRTU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
@@ -78,9 +81,17 @@ class ModbusDevice:
         if self._fault == "error":
             return ExcCodes.DEVICE_FAILURE
         offset = self.registers.address - start_address
-        words = self._encode(self.measure())
+        value = self.measure()
+        if self._fault in ("nan", "inf"):
+            value = self._no_number(value, float(self._fault))
+        words = self._encode(value)
         registers[offset : offset + len(words)] = words
         return None
+
+    @staticmethod
+    def _no_number(value, bad: float):
+        """``value`` (a length, or a joint vector) with its first number replaced by ``bad``."""
+        return bad if isinstance(value, float | int) else [bad, *list(value)[1:]]
 
     def _encode(self, value) -> list[int]:
         """Registers for one measurement (a length in mm)."""
@@ -93,12 +104,23 @@ class ModbusDevice:
             return data[:-1] + bytes([data[-1] ^ 0xFF])
         if fault == "garbled":
             return GARBAGE
+        if fault == "stray":
+            return self._stray(data)
         if fault == "silence":
             return b""
         if fault == "unplug":
             self._unplug()
             return b""
         return data
+
+    def _stray(self, reply: bytes) -> bytes:
+        """``reply`` as another transaction's (TCP: transaction id + 1) or another device's (RTU:
+        device id + 1, its CRC made right)."""
+        if not self.cable:
+            tid = (int.from_bytes(reply[:2], "big") + 1) % 0x10000
+            return tid.to_bytes(2, "big") + reply[2:]
+        frame = bytes([(reply[0] + 1) % 248]) + reply[1:-2]
+        return frame + FramerRTU.compute_CRC(frame).to_bytes(2, "big")
 
     def unplug(self) -> None:
         """Pull the cable until :meth:`replug`: RTU, the station's end of the link disappears; TCP,

@@ -22,6 +22,11 @@ ur_rtde's ``RTDEReceiveInterface`` constructor holds the GIL while it waits for 
 package, and its port is fixed at 30004: the server must run in another process
 (:class:`RtdeServerProcess`), on its own loopback address (127.0.0.x) when tests run in parallel.
 RTDEReceiveInterface connects to port 30004 only (no dashboard or script port).
+
+Faults (:class:`RtdeFaults`, fixed for the server's life) make the controller as unkind as a broken
+one: a handshake that stalls at one request, an output recipe typing a field otherwise (``actual_q``
+as VECTOR3D), a 64 KiB garbage package instead of data, and every n-th package carrying NaN joints
+or a state ``late_s`` old (a stream that fell behind).
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from sim_fixtures import rtde_wire as wire
 
 RTDE_PORT = 30004
 MAX_FREQUENCY_HZ = 500.0  # e-Series control loop
+GARBAGE_PACKAGE = bytes(random.Random(7).getrandbits(8) for _ in range(0xFFFF - 4))  # 64 KiB of noise
 SAFETY_NORMAL = 1  # UR safety_mode NORMAL
 RUNTIME_PLAYING = 2  # UR runtime_state PLAYING
 
@@ -59,6 +65,38 @@ class ControllerVersion:
     minor: int = 12
     bugfix: int = 0
     build: int = 0
+
+
+@dataclass(frozen=True)
+class RtdeFaults:
+    """A broken controller (see the module notes): ``stall_at`` the request letter never answered
+    (``V``, ``v``, ``O``, ``S``; ``U``: started, but no data package ever), ``types`` output types
+    said instead of the real ones, ``garbage`` the first package replaced by 64 KiB of noise,
+    ``nan_every`` / ``late_every`` every n-th package with NaN joints / a state ``late_s`` old."""
+
+    stall_at: str | None = None
+    types: tuple[tuple[str, str], ...] = ()
+    garbage: bool = False
+    nan_every: int = 0
+    late_every: int = 0
+    late_s: float = 0.2
+
+    def recipe_types(self, names) -> list[str]:
+        said = dict(self.types)
+        return [said.get(n, t) for n, t in zip(names, wire.output_types(names), strict=True)]
+
+    def spoil(self, outputs: dict, count: int, state_at) -> dict:
+        """The ``count``-th package's outputs as this controller sends them."""
+        if self.late_every and count % self.late_every == 0:
+            outputs = state_at(self.late_s)
+        if self.nan_every and count % self.nan_every == 0:
+            outputs = {**outputs, "actual_q": (math.nan,) * 6}
+        return outputs
+
+
+def _fit(value, rtde_type: str):
+    """A modelled value cut to the size of the type the controller says it has."""
+    return tuple(value)[: wire.item_count(rtde_type)] if rtde_type.startswith("VECTOR") else value
 
 
 @dataclass
@@ -102,6 +140,7 @@ class _Session:
         self.next_recipe_id = 1
         self.streaming = False
         self.next_send = 0.0
+        self.sent = 0
 
     def run(self) -> None:
         """Serve until the client leaves or the server stops; socket errors end the session."""
@@ -134,6 +173,8 @@ class _Session:
     def _answer(self, package: wire.Package) -> None:
         """Reply to one request (data and text packages from the client need no reply)."""
         kind = package.kind
+        if chr(kind) == self.server.faults.stall_at:
+            return  # a controller stuck in its handshake: the client waits for ever
         if kind == wire.REQUEST_PROTOCOL_VERSION:
             version = wire.parse_protocol_request(package.payload)
             self.conn.sendall(wire.bool_reply(kind, version == wire.PROTOCOL_VERSION))
@@ -148,9 +189,10 @@ class _Session:
                 wire.pack(kind, b"\x00" + ",".join([wire.NOT_FOUND] * len(names)).encode("ascii"))
             )
         elif kind == wire.START:
-            self.streaming = self.recipe is not None
+            started = self.recipe is not None
+            self.streaming = started and self.server.faults.stall_at != "U"
             self.next_send = time.monotonic()
-            self.conn.sendall(wire.bool_reply(kind, self.streaming))
+            self.conn.sendall(wire.bool_reply(kind, started))
         elif kind == wire.PAUSE:
             self.streaming = False
             self.conn.sendall(wire.bool_reply(kind, True))
@@ -158,7 +200,7 @@ class _Session:
     def _setup_outputs(self, payload: bytes) -> bytes:
         """Accept the recipe if every name is known; answer the types either way."""
         frequency, names = wire.parse_setup_outputs(payload)
-        types = wire.output_types(names)
+        types = self.server.faults.recipe_types(names)
         recipe_id = self.next_recipe_id
         if wire.NOT_FOUND not in types and names:
             frequency = min(max(frequency, 1.0), MAX_FREQUENCY_HZ)
@@ -174,10 +216,19 @@ class _Session:
             with self.server.skipped.get_lock():
                 self.server.skipped.value += late
         scheduled = self.next_send + late * recipe.period_s
-        outputs = self.server.outputs(scheduled)
-        values = wire.values_for(recipe.names, recipe.types, outputs)
-        self.conn.sendall(wire.data_package(recipe.recipe_id, recipe.fmt, recipe.types, values))
         self.next_send = scheduled + recipe.period_s
+        faults, self.sent = self.server.faults, self.sent + 1
+        if faults.garbage and self.sent == 1:
+            self.conn.sendall(wire.pack(wire.DATA_PACKAGE, bytes([recipe.recipe_id]) + GARBAGE_PACKAGE))
+            return
+        outputs = faults.spoil(
+            self.server.outputs(scheduled), self.sent, lambda ago: self.server.outputs(scheduled - ago)
+        )
+        values = [
+            _fit(v, t)
+            for v, t in zip(wire.values_for(recipe.names, recipe.types, outputs), recipe.types, strict=True)
+        ]
+        self.conn.sendall(wire.data_package(recipe.recipe_id, recipe.fmt, recipe.types, values))
 
 
 class RtdeServer:
@@ -196,8 +247,10 @@ class RtdeServer:
         start_monotonic: float | None = None,
         version: ControllerVersion = ControllerVersion(),
         skipped=None,
+        faults: RtdeFaults = RtdeFaults(),
     ):
         self.robot = robot
+        self.faults = faults
         self.skipped = multiprocessing.Value("q", 0) if skipped is None else skipped
         self.version = version
         self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
@@ -231,11 +284,17 @@ class RtdeServer:
             t.join(timeout=1.0)
 
 
-def _serve_in_child(robot, host, port, start_monotonic, version, skipped, ready, stop) -> None:
+def _serve_in_child(robot, host, port, start_monotonic, version, skipped, ready, stop, faults) -> None:
     """Child-process entry: bind, report the address (or the bind error), serve until stopped."""
     try:
         server = RtdeServer(
-            robot, host, port, start_monotonic=start_monotonic, version=version, skipped=skipped
+            robot,
+            host,
+            port,
+            start_monotonic=start_monotonic,
+            version=version,
+            skipped=skipped,
+            faults=faults,
         )
     except OSError as exc:
         ready.send(("error", f"cannot bind RTDE server to {host}:{port}: {exc}"))
@@ -262,8 +321,10 @@ class RtdeServerProcess:
         start_monotonic: float | None = None,
         version: ControllerVersion = ControllerVersion(),
         timeout_s: float = 10.0,
+        faults: RtdeFaults = RtdeFaults(),
     ):
         self.robot = robot
+        self.faults = faults
         self.host, self.port = host, port
         self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
         self.version = version
@@ -307,6 +368,7 @@ class RtdeServerProcess:
                 self._skipped,
                 sender,
                 self._stop,
+                self.faults,
             ),
         )
         self._process.start()

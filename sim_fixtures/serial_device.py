@@ -8,7 +8,10 @@ no driver is attached (a Linux pty master reads EIO once its last slave closes).
 Faults (:class:`FaultPlan`) apply to the next requests: ``garbled`` (bytes outside the dialect),
 ``error`` (the dialect's error code 3, "out of range"), ``silence`` (no reply: the driver times
 out) and ``unplug`` (the pty disappears mid-read; :meth:`PtyPort.replug` brings the device back
-at the same link on a new ``/dev/pts/N``). ``crc`` (Modbus RTU) is applied by the Modbus device.
+at the same link on a new ``/dev/pts/N``). ``crc`` (Modbus RTU), ``nan`` and ``inf`` (a float
+register holding no number) and ``stray`` (another transaction's reply) are applied by the Modbus
+device. :meth:`FaultPlan.every` repeats a fault on every n-th request, for as long as the device
+runs.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from pathlib import Path
 
 from drivers.ascii import Dialect
 
-FAULTS = ("garbled", "error", "silence", "unplug", "crc")
+FAULTS = ("garbled", "error", "silence", "unplug", "crc", "nan", "inf", "stray")
 GARBAGE = b"+0\xff12.3#5"  # what a flipped bit or a loose ground makes of a reply
 POLL_S = 0.05  # how often a device thread looks at its stop flag, s
 
@@ -38,13 +41,27 @@ class FaultPlan:
         self._queue: collections.deque[str] = collections.deque()
         self._lock = threading.Lock()
         self.applied: list[tuple[float, str]] = []
+        self._every: dict[str, int] = {}
+        self._requests = 0
 
     def inject(self, kind: str, count: int = 1) -> None:
         """Apply fault ``kind`` (one of :data:`FAULTS`) to the next ``count`` requests."""
-        if kind not in FAULTS:
-            raise ValueError(f"fault must be one of {FAULTS}, got {kind!r}")
+        self._known(kind)
         with self._lock:
             self._queue.extend([kind] * count)
+
+    def every(self, kind: str, n: int) -> None:
+        """Apply fault ``kind`` to every ``n``-th request from now on (queued faults go first)."""
+        self._known(kind)
+        if n < 1:
+            raise ValueError(f"every: n must be >= 1, got {n}")
+        with self._lock:
+            self._every[kind] = n
+
+    @staticmethod
+    def _known(kind: str) -> None:
+        if kind not in FAULTS:
+            raise ValueError(f"fault must be one of {FAULTS}, got {kind!r}")
 
     @property
     def pending(self) -> int:
@@ -55,10 +72,13 @@ class FaultPlan:
     def take(self) -> str | None:
         """The fault for the request being answered, or None."""
         with self._lock:
-            if not self._queue:
-                return None
-            kind = self._queue.popleft()
-            self.applied.append((time.monotonic(), kind))
+            self._requests += 1
+            if self._queue:
+                kind = self._queue.popleft()
+            else:
+                kind = next((k for k, n in self._every.items() if self._requests % n == 0), None)
+            if kind is not None:
+                self.applied.append((time.monotonic(), kind))
             return kind
 
 

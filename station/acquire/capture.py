@@ -11,7 +11,10 @@ shared ``time_scale``):
    ``window_s``, and a closing robot reading; rejected if a reading fails its gate (the cable
    slackened after the check), the joints spread more than ``still_deg`` or a joint moved faster
    than the settle speed (the robot moved), or the drawstring spread more than ``jump_mm`` or the
-   dial more than ``dial_stable_mm`` (a sensor jumped);
+   dial more than ``dial_stable_mm`` (a sensor jumped); also if a value is not a finite number, a
+   robot reading lies farther than ``match_deg`` from the target (the robot left), a robot package
+   is later than ``window_s`` or the closing one was sent before the sensors' last reading (the
+   controller's stream fell behind; the closing reading waits up to ``window_s`` for a newer one);
 4. the sample is the mean of the K rounds, with the standard deviation of each quantity and the
    timestamp of every reading.
 """
@@ -28,6 +31,7 @@ from drivers.base import Backoff, DeviceReplyError, Driver, DriverError, Reading
 from station.config import SessionConfig
 
 RUNNING = 7  # UR robot_mode RUNNING (RTDE guide)
+JITTER_S = 0.005  # s: a robot package may be this much older than a reading taken as it arrived
 
 
 @dataclass(frozen=True)
@@ -65,10 +69,11 @@ class Suspend(Exception):
     """A condition that pauses the session until it clears; the message says which, ``cause``
     names the condition (the same while it lasts, whatever the readings)."""
 
-    def __init__(self, reason: str, cause: str, device: str | None = None):
+    def __init__(self, reason: str, cause: str, device: str | None = None, error_reply: bool = False):
         super().__init__(reason)
         self.cause = cause
-        self.device = device  # set when the device stopped answering
+        self.device = device  # set when the device stopped answering, or answers only with errors
+        self.error_reply = error_reply  # it answers, with an error code
 
 
 class Devices:
@@ -76,7 +81,8 @@ class Devices:
 
     ``read(name)`` retries transient failures with a reconnect, waiting with ``sleep`` (s) between
     attempts and telling ``on_retry(error)`` of each failure retried; a device that stays silent or
-    answers with an error code raises :class:`Suspend` naming it.
+    answers with an error code raises :class:`Suspend` naming it (a dial's error code is its gate:
+    off the edge).
     """
 
     def __init__(
@@ -102,7 +108,7 @@ class Devices:
         except DeviceReplyError as exc:
             if name == "dial":
                 raise Suspend(f"dial out of range ({exc.cause})", "dial out of range") from exc
-            raise Suspend(str(exc), f"{name} error reply") from exc
+            raise Suspend(str(exc), f"{name} error reply", device=name, error_reply=True) from exc
         except DriverError as exc:
             last = exc.__cause__ if isinstance(exc.__cause__, DriverError) else exc  # the last attempt's
             cause = f"{name} silent ({type(last).__name__})"  # a new kind of failure is a new cause
@@ -112,7 +118,10 @@ class Devices:
 class Settle:
     """Whether the robot has been still for ``rules.settle_s``: mode RUNNING, every joint speed
     below ``settle_speed_deg_s`` and every joint within ``still_deg`` of where the still period
-    began. ``ever`` says whether it settled at all since the last :meth:`reset`."""
+    began. ``ever`` says whether it settled at all since the last :meth:`reset`. The still period
+    is timed on the controller's clock where the robot reports one (``controller_time_s``), and
+    a package later than the capture window (``package_age_s``) breaks it: a stream that stalls
+    repeats its last package, which is no evidence of a robot at rest."""
 
     def __init__(self, rules: Rules):
         self.rules = rules
@@ -131,12 +140,14 @@ class Settle:
             speed >= self.rules.settle_speed_deg_s
             or robot.values["robot_mode"] != RUNNING
             or drift > self.rules.still_deg
+            or float(robot.values.get("package_age_s", 0.0)) > self.rules.window_s
         ):
             self.reset()
             return False
+        t = float(robot.values.get("controller_time_s", robot.t_monotonic))
         if self.since is None:
-            self.since, self.q0 = robot.t_monotonic, q
-        settled = robot.t_monotonic - self.since >= self.rules.settle_s
+            self.since, self.q0 = t, q
+        settled = t - self.since >= self.rules.settle_s
         self.ever |= settled
         return settled
 
@@ -196,23 +207,30 @@ class Rejected(Exception):
     """A capture that broke the rule; the message says how."""
 
 
-def capture(devices: Devices, rules: Rules) -> Capture:
-    """K rounds of every device, checked against the rule (:class:`Rejected` if broken)."""
+def capture(devices: Devices, rules: Rules, target_q_deg=None) -> Capture:
+    """K rounds of every device, checked against the rule (:class:`Rejected` if broken); with
+    ``target_q_deg`` (deg) every robot reading must lie within ``match_deg`` of it."""
     has_dial = "dial" in devices.drivers
     rounds = []
     for _ in range(rules.readings):
         rounds.append([devices.read(n) for n in ("robot", "drawstring", "dial") if n != "dial" or has_dial])
-    closing = devices.read("robot")  # brackets the last sensor readings: did the robot leave?
+    last_sensor_s = max(r.t_monotonic for r in rounds[-1][1:])
+    closing = _closing(devices, rules, last_sensor_s)
     t_mono = [r.t_monotonic for rnd in rounds for r in rnd]
     window = max(t_mono) - min(t_mono)
-    q = np.array([rnd[0].values["q_deg"] for rnd in rounds])
+    q = np.array([rnd[0].values["q_deg"] for rnd in rounds], float)
     robots = [rnd[0] for rnd in rounds] + [closing]
-    qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
-    q_all = np.array([r.values["q_deg"] for r in robots])
-    length = np.array([rnd[1].values["length_mm"] for rnd in rounds])
+    length = np.array([rnd[1].values["length_mm"] for rnd in rounds], float)
     dial = (
-        np.array([rnd[2].values["dial_mm"] for rnd in rounds]) if has_dial else np.full(len(rounds), np.nan)
+        np.array([rnd[2].values["dial_mm"] for rnd in rounds], float)
+        if has_dial
+        else np.full(len(rounds), np.nan)
     )
+    broken = _unusable(robots, length, dial if has_dial else None, rules, target_q_deg, last_sensor_s)
+    if broken:  # the other checks compare numbers that are not the robot's now, or not numbers
+        raise Rejected("; ".join(broken))
+    qd = max(float(np.max(np.abs(r.values["qd_deg_s"]))) for r in robots)
+    q_all = np.array([r.values["q_deg"] for r in robots], float)
     _check(rules, window, q_all, qd, length, dial)
     return Capture(
         q_deg=q.mean(axis=0),
@@ -225,6 +243,63 @@ def capture(devices: Devices, rules: Rules) -> Capture:
         t_wall_s=rounds[0][0].t_wall,
         raw=[_raw_row(k, rnd) for k, rnd in enumerate(rounds)],
     )
+
+
+def _closing(devices: Devices, rules: Rules, last_sensor_s: float) -> Reading:
+    """The robot reading that brackets the sensors' last one (did the robot leave?): one whose
+    package was sent after it (``package_age_s`` within ``JITTER_S`` of the time since), read
+    again while the stream catches up, for ``window_s`` at most."""
+    while True:
+        closing = devices.read("robot")
+        since = closing.t_monotonic - last_sensor_s
+        if float(closing.values.get("package_age_s", 0.0)) <= since + JITTER_S or since > rules.window_s:
+            return closing
+        devices.sleep(JITTER_S / 4)
+
+
+def _unusable(robots: list[Reading], length, dial, rules: Rules, target_q_deg, last_sensor_s) -> list[str]:
+    """Why the readings of a capture cannot make a sample, in the operator's words: a value that
+    is not a number, a robot package older than the capture window or a closing package sent
+    before the sensors' last reading (``last_sensor_s``) (the controller's stream fell behind:
+    ``package_age_s``, where the robot reports it), or the robot away from the target the capture
+    is for (it left before the capture finished)."""
+    broken = []
+    q = np.array([r.values["q_deg"] for r in robots], float)
+    qd = np.array([r.values["qd_deg_s"] for r in robots], float)
+    for what, values in (
+        ("robot joints", np.r_[q.ravel(), qd.ravel()]),
+        ("drawstring", length),
+        ("dial", dial),
+    ):
+        if values is not None and not np.all(np.isfinite(values)):
+            broken.append(f"the {what} gave no number ({_first_bad(values)})")
+    age = max((float(r.values.get("package_age_s", 0.0)) for r in robots), default=0.0)
+    if age > rules.window_s:
+        broken.append(
+            f"the robot's data arrived {age * 1e3:.0f} ms late (over the {rules.window_s * 1e3:.0f} ms "
+            "window): the controller's stream fell behind"
+        )
+    closing = robots[-1]
+    if (
+        early := float(closing.values.get("package_age_s", 0.0)) - (closing.t_monotonic - last_sensor_s)
+    ) > JITTER_S:
+        broken.append(
+            f"the robot's last data predate the sensors' last reading by {early * 1e3:.0f} ms: "
+            "the controller's stream fell behind"
+        )
+    if target_q_deg is not None and np.all(np.isfinite(q)):
+        away = float(np.max(np.abs(q - np.asarray(target_q_deg, float))))
+        if away > rules.match_deg:
+            broken.append(
+                f"the robot left before the capture finished (joints up to {away:.2f} deg from the "
+                f"target, over {rules.match_deg:g} deg)"
+            )
+    return broken
+
+
+def _first_bad(values) -> str:
+    values = np.asarray(values, float)
+    return str(values[~np.isfinite(values)][0])
 
 
 def _check(rules: Rules, window, q, qd, length, dial) -> None:

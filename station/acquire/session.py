@@ -3,9 +3,14 @@
 States: WAITING (for the robot to settle at an unfinished target) -> CAPTURING -> WAITING ...;
 SUSPENDED while a suspender holds (robot not running, a sensor out of its gate, a device not
 answering), back to WAITING by itself when it clears; and the ends DONE (every target measured),
-STOPPED (stop requested: Ctrl-C), TIMED_OUT (for ``target_timeout_s`` no capture, and no plan
-target the robot settled at that it had not just visited); DONE also
-when asked to finish early (:meth:`Session.finish`: the running calibration reached its goal).
+STOPPED (stop requested: Ctrl-C), TIMED_OUT (no progress of any kind for ``target_timeout_s``: no
+capture stored, no attempt at an unfinished target (a settle there, whatever its gates and capture
+then find; a target's first ``ATTEMPTS_PER_TARGET`` count), and no finished plan target settled at
+that the robot had not settled at since the last capture or attempt; time spent suspended does not
+count, so suspensions that clear and recur do not hold the session for ever); DONE also when asked
+to finish early (:meth:`Session.finish`: the running calibration reached its goal). A device that
+stays silent or answers only with errors for ``unreachable_s`` while the session is suspended for
+it ends the session (DeviceError).
 
 The log names every fault: each suspension and each change of the condition holding it, and each
 transient failure retried (``drawstring: bad CRC in reply ...; retrying``); of the reconnects to a
@@ -14,9 +19,10 @@ device the session is suspended for, only a failure of a new kind.
 Checkpoints sit between captures and between polls: a stop or finish request is honoured there, so
 the sample in flight is always stored whole, and the listener's ``tick`` runs there (work that
 must never delay a capture looks in on its results there). A capture is assigned to the nearest
-target of the plan (joint space, max |dq| within ``match_deg``); if that target is finished
-already (the robot revisits it) nothing is captured, so a resumed session never duplicates a
-target.
+target of the plan (joint space, max |dq| within ``match_deg``) and stored under it only if every
+robot reading of the capture is still there (else it is rejected and taken again); if that target
+is finished already (the robot revisits it) nothing is captured, so a resumed session never
+duplicates a target.
 
 Time is read from the ``clock`` (s, monotonic) and waited with the ``sleep`` the session is given,
 so the engine runs on a simulated clock in the tests; the devices' readings carry their own stamps.
@@ -24,6 +30,7 @@ so the engine runs on a simulated clock in the tests; the devices' readings carr
 
 from __future__ import annotations
 
+import collections
 import enum
 import time
 from collections.abc import Callable
@@ -48,6 +55,13 @@ from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
 SUSPENDED_POLL_S = 0.1  # re-check a suspending condition this often
+ATTEMPTS_PER_TARGET = 10  # settles at one unfinished target that still count as progress
+
+
+def _listed(targets: list[int]) -> str:
+    """Target ids for a message: the first ten, then how many more."""
+    more = f" and {len(targets) - 10} more" if len(targets) > 10 else ""
+    return ", ".join(map(str, targets[:10])) + more
 
 
 OFF_EDGE = ("dial gate", "dial out of range")
@@ -107,7 +121,10 @@ class Session:
         self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
         self.settle = Settle(rules)
         self.rejected = 0
-        self._visited: int | None = None  # the plan target the robot last settled at
+        self._visited: set[int] = set()  # plan targets settled at since the last capture
+        self._reached: set[int] = set()  # plan targets settled at in this run
+        self._attempts: collections.Counter[int] = collections.Counter()  # settles at unfinished targets
+        self._attempted = False  # the last poll was an attempt that counts as progress
         self._suspended_by: Suspend | None = None
         self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
         devices.on_retry = self._retrying
@@ -136,19 +153,21 @@ class Session:
                 return self._end(State.STOPPED, "stopped on request")
             if self._finish is not None:
                 return self._end(State.DONE, self._finish)
+            self._attempted = False
             try:
                 if self._step():
                     last_progress = self.clock()
                     self.settle.ever = False
             except Suspend as why:
+                since = self.clock()
                 try:
                     self._suspended(why)
                 except OffEdge:
                     waited = self.rules.target_timeout_s * self.rules.time_scale
                     return self._end(State.TIMED_OUT, OFF_EDGE_TIMEOUT.format(s=waited))
                 self.settle.reset()
-                self.settle.ever = False
-                last_progress = self.clock()
+                # an attempt is progress; else waiting out a condition is not idling
+                last_progress = self.clock() if self._attempted else last_progress + self.clock() - since
                 continue
             if self.clock() - last_progress > self.rules.target_timeout_s:
                 return self._end(State.TIMED_OUT, self._timeout_message())
@@ -157,8 +176,8 @@ class Session:
 
     def _step(self) -> bool:
         """One poll: True on progress, a sample stored or the robot settled at a finished target
-        other than the last it settled at (a resumed program walking what was measured before).
-        Raises :class:`Suspend`."""
+        it had not settled at since the last capture (a resumed program walking what was measured
+        before; a program cycling through them again is no progress). Raises :class:`Suspend`."""
         robot = self.devices.read("robot")
         check_running(robot)
         if not self.settle.update(robot):
@@ -166,22 +185,36 @@ class Session:
         index = self._match(np.asarray(robot.values["q_deg"]))
         if index is None:
             return False
-        moved_on, self._visited = index != self._visited, index
+        self._reached.add(index)
         if index not in self.pending:
-            return moved_on
+            new = index not in self._visited
+            self._visited.add(index)
+            return new
+        self._attempt(index)
         check_gates(self.devices, self.rules)
         self.state = State.CAPTURING
         try:
-            cap = capture(self.devices, self.rules)
+            cap = capture(self.devices, self.rules, self.plan.q_deg[index])
         except Rejected as why:
             self.rejected += 1
-            self.listener.message(f"capture at target {int(self.plan.target[index])} rejected: {why}")
+            self.listener.message(
+                f"capture at target {int(self.plan.target[index])} rejected: {why}; it will be taken again"
+            )
             self.settle.reset()
-            return False
+            return self._attempted
         finally:
             self.state = State.WAITING
         self._store(index, cap)
+        self._visited.clear()
         return True
+
+    def _attempt(self, index: int) -> None:
+        """Count a settle at unfinished target ``index``: progress for its first
+        ``ATTEMPTS_PER_TARGET`` (the robot's next round through the plan may succeed)."""
+        self._attempts[index] += 1
+        if self._attempts[index] <= ATTEMPTS_PER_TARGET:
+            self._attempted = True
+            self._visited.clear()
 
     def _match(self, q_deg: np.ndarray) -> int | None:
         """Index of the plan target nearest to ``q_deg`` if within ``match_deg`` (finished or not)."""
@@ -210,9 +243,9 @@ class Session:
 
     def _suspended(self, first: Suspend) -> None:
         """Stay SUSPENDED, re-checking every ``SUSPENDED_POLL_S``, until the condition clears (or a
-        stop request).
-        A device silent for longer than ``unreachable_s`` ends the session (DeviceError); a robot
-        standing off the edge (``OFF_EDGE``) for ``target_timeout_s`` raises :class:`OffEdge`."""
+        stop request). A device silent, or answering only with errors, for longer than
+        ``unreachable_s`` ends the session (DeviceError); a robot standing off the edge
+        (``OFF_EDGE``) for ``target_timeout_s`` raises :class:`OffEdge`."""
         self.state = State.SUSPENDED
         self.listener.message(f"suspended: {first}")
         self._suspended_by = first
@@ -233,8 +266,9 @@ class Session:
                     raise OffEdge from still
                 silent_since = silent_since if still.device else self.clock()
                 if self.clock() - silent_since > self.rules.unreachable_s:
+                    how = "answering only with errors" if still.error_reply else "silent"
                     raise DeviceError(
-                        f"{still} (silent for over {self.rules.unreachable_s:g} s; "
+                        f"{still} ({how} for over {self.rules.unreachable_s:g} s; "
                         f"{len(self.folder.rows)} samples kept)"
                     ) from still
         self.state = State.WAITING
@@ -272,8 +306,16 @@ class Session:
                 f"{self.rules.settle_speed_deg_s:g} deg/s and joints within {self.rules.still_deg:g} deg "
                 f"for {self.rules.settle_s * scale:g} s)"
             )
+        elif tried := [int(self.plan.target[i]) for i in self.pending if self._attempts[i]]:
+            why = (
+                f"every attempt at target{'s' if len(tried) > 1 else ''} {_listed(tried)} was rejected or "
+                "suspended (see above)"
+            )
         else:
             why = "the robot settled only at finished targets or away from the plan"
+            never = [int(self.plan.target[i]) for i in self.pending if i not in self._reached]
+            if never:
+                why += f"; never reached: target{'s' if len(never) > 1 else ''} {_listed(never)}"
         return f"no capture for {waited:g} s: {why}"
 
     def _end(self, state: State, text: str) -> State:

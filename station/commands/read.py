@@ -8,6 +8,7 @@ unreachable after the configured retries ends the command with exit 1, naming it
 from __future__ import annotations
 
 import json
+import math
 
 import configs
 from drivers.base import Backoff, DeviceUnreachable, Driver, Reading, call_with_reconnect
@@ -38,15 +39,22 @@ def read_once(driver: Driver, backoff: Backoff) -> Reading:
 
 
 def as_json(readings: dict[str, Reading]) -> dict:
-    """All values side by side, then per device its units and timestamps."""
+    """All values side by side, then per device its units and timestamps; a value that is not a
+    finite number is null (JSON has no NaN)."""
     out: dict = {}
     for reading in readings.values():
-        out.update(reading.values)
+        out.update({name: _finite_or_none(value) for name, value in reading.values.items()})
     out["devices"] = {
         name: {"units": dict(r.units), "t_monotonic": r.t_monotonic, "t_wall": r.t_wall}
         for name, r in readings.items()
     }
     return out
+
+
+def _finite_or_none(value):
+    if isinstance(value, tuple | list):
+        return [_finite_or_none(v) for v in value]
+    return value if not isinstance(value, float) or math.isfinite(value) else None
 
 
 def run(args) -> int:
@@ -58,5 +66,5 @@ def run(args) -> int:
         readings = {name: read_once(section.build(), backoff) for name, section in cfg.devices().items()}
     except DeviceUnreachable as exc:
         raise DeviceError(f"{exc} ({unreachable_hint(cfg, exc)})") from exc
-    print(json.dumps(as_json(readings)))
+    print(json.dumps(as_json(readings), allow_nan=False))
     return 0

@@ -26,6 +26,13 @@ from sim_fixtures.rtde_server import start_on_free_loopback
 from tests.system.serial_script import ScriptedSerial
 
 TARGETS = [[0.0, -50.0, -20.0, 0.0, -90.0, 0.0], [20.0, -40.0, -30.0, 5.0, -80.0, 10.0]]
+RTDE_UNITS = {
+    "q_deg": "deg",
+    "qd_deg_s": "deg/s",
+    "robot_mode": "",
+    "controller_time_s": "s",
+    "package_age_s": "s",
+}
 QUICK = Backoff(attempts=4, initial_s=0.05, max_s=0.2)
 
 
@@ -61,7 +68,7 @@ def rtde_server():
 def test_rtde_reads_joints_in_degrees_as_simulated(rtde_server):
     robot = make_robot()
     with RtdeJointSource(rtde_server.host, 500.0) as source:
-        assert set(source.describe()) == {"q_deg", "qd_deg_s", "robot_mode", "controller_time_s"}
+        assert set(source.describe()) == set(RTDE_UNITS)
         states, deadline = set(), time.monotonic() + 6.0
         while states != {True, False} and time.monotonic() < deadline:
             reading = source.read()
@@ -72,7 +79,7 @@ def test_rtde_reads_joints_in_degrees_as_simulated(rtde_server):
             states.add(truth.dwelling)
             time.sleep(0.03)
     assert states == {True, False}
-    assert reading.units == {"q_deg": "deg", "qd_deg_s": "deg/s", "robot_mode": "", "controller_time_s": "s"}
+    assert reading.units == RTDE_UNITS
     assert reading.device == "robot" and abs(reading.t_wall - time.time()) < 5
 
 

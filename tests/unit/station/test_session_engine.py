@@ -26,7 +26,7 @@ from drivers.base import (
 )
 from errors import DeviceError
 from station.acquire.capture import RUNNING, Capture, Devices, Rules
-from station.acquire.session import SUSPENDED_POLL_S, Listener, Session, State
+from station.acquire.session import ATTEMPTS_PER_TARGET, SUSPENDED_POLL_S, Listener, Session, State
 from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
@@ -114,6 +114,7 @@ ROBOT_FIELDS = {
     "q_deg": Field("deg", (6,)),
     "qd_deg_s": Field("deg/s", (6,)),
     "robot_mode": Field(""),
+    "package_age_s": Field("s"),
 }
 
 
@@ -488,3 +489,185 @@ def test_a_robot_standing_off_the_edge_times_out_saying_so(tmp_path, clock):
     assert cell.said("suspended: dial reads -3.500 mm, outside its gate")
     assert cell.messages[-1].startswith("timed out: no capture for 10 s: the dial reads outside its gate")
     assert clock() < 5.0 + RULES.target_timeout_s + 5.0
+
+
+def teleports_during_the_first_capture(cell: Cell, to_q, *, values=None) -> None:
+    """From the first gate read of the drawstring on, the next ``readings + 1`` robot readings (the
+    first capture's) are still at ``to_q`` (with ``values`` added): stale or wrong packages."""
+    state = {"left": 0}
+    script = cell.robot.script
+
+    def length(t: float) -> dict:  # the sensor measures where the robot really is
+        return {"length_mm": ANCHOR_MM + script(t)["q_deg"][0]}
+
+    def robot(t: float) -> dict:
+        if state["left"] > 0:
+            state["left"] -= 1
+            return {**still(to_q), **(values or {})}
+        return script(t)
+
+    def drawstring(t: float) -> dict:
+        if state["left"] == 0 and not cell.folder.rows and not state.get("done"):
+            state["left"], state["done"] = RULES.readings + 1, True
+        return length(t)
+
+    cell.robot.script, cell.drawstring.script = robot, drawstring
+
+
+def stored_within_match(cell: Cell) -> bool:
+    q = np.array([[float(r[f"q{i + 1}_deg"]) for i in range(6)] for r in cell.folder.rows])
+    planned = cell.plan.q_deg[[int(r["target"]) for r in cell.folder.rows]]
+    return bool(np.all(np.abs(q - planned).max(axis=1) <= RULES.match_deg))
+
+
+def test_a_capture_whose_joints_are_not_at_its_target_is_rejected_and_taken_again(tmp_path, clock):
+    """Issue 20: the settled joints matched target 0, the capture's own (identical, still) joints
+    are at target 2's pose: nothing may be stored under target 0 from them."""
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    teleports_during_the_first_capture(cell, PLAN.q_deg[2])
+    assert cell.run() is State.DONE
+    assert cell.said(
+        "capture at target 0 rejected: the robot left before the capture finished (joints up to 20.00 deg "
+        "from the target, over 2 deg); it will be taken again"
+    )
+    assert cell.targets() == [0, 1, 2]
+    assert stored_within_match(cell)
+
+
+def test_a_capture_of_late_robot_packages_is_rejected(tmp_path, clock):
+    """The controller's packages of the first capture arrived 0.6 s late (a loaded station): the
+    joints they carry are not the robot's while the sensors were read."""
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    teleports_during_the_first_capture(cell, PLAN.q_deg[0], values={"package_age_s": 0.6})
+    assert cell.run() is State.DONE
+    assert cell.said(
+        "capture at target 0 rejected: the robot's data arrived 600 ms late (over the 500 ms window)"
+    )
+    assert cell.targets() == [0, 1, 2]
+
+
+@pytest.mark.parametrize("device", ["drawstring", "robot"])
+def test_a_capture_with_a_nan_reading_is_rejected_and_nothing_non_finite_is_stored(tmp_path, clock, device):
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    if device == "robot":
+        teleports_during_the_first_capture(cell, [np.nan] * 6)
+    else:
+        reads = iter(range(1_000_000))
+        length = cell.length_from_pose
+        cell.drawstring.script = lambda t: {"length_mm": np.nan} if next(reads) % 7 == 3 else length(t)
+    assert cell.run() is State.DONE
+    what = "robot joints" if device == "robot" else "drawstring"
+    assert cell.said(f"capture at target 0 rejected: the {what} gave no number (nan)")
+    assert cell.targets() == [0, 1, 2]
+    text = cell.folder.samples_csv.read_text() + cell.folder.raw_csv.read_text()
+    assert "nan" not in text.lower() and "inf" not in text.lower()
+
+
+def test_a_device_answering_only_with_errors_ends_the_session_after_the_unreachable_limit(tmp_path, clock):
+    """Issue 21: a drawstring answering every read with a Modbus exception once was 'suspended /
+    resumed' for ever; now it counts as failing and ``unreachable_s`` applies."""
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=1e9)))
+    cell.drawstring.script = lambda t: DeviceReplyError(
+        "drawstring", "Modbus exception code 2 reading length register 0..1", code="2"
+    )
+    with pytest.raises(DeviceError, match=r"exception code 2 .*\(answering only with errors for over 5 s"):
+        cell.run()
+    assert clock() < 0.5 + RULES.settle_s + RULES.unreachable_s + 1.0
+    assert sum(m == "resumed" for m in cell.messages) == 0
+
+
+def test_a_plan_target_the_program_never_visits_ends_the_session_naming_it(tmp_path, clock):
+    """Issue 21: the robot cycles through targets 0 and 1 for ever and never goes to target 2:
+    revisiting finished targets is no progress; the end names the target never reached."""
+    q = PLAN.q_deg
+    cell = Cell(tmp_path, clock, timeline(*walk([q[0], q[1]] * 200)))
+    assert cell.run() is State.TIMED_OUT
+    assert cell.targets() == [0, 1]
+    assert cell.messages[-1].startswith("timed out: no capture for 10 s: the robot settled only at finished")
+    assert "; never reached: target 2;" in cell.messages[-1]
+    # the last capture at 3.0 + settle; then one cycle of new (finished) targets at most, then the timeout
+    assert clock() < 3.0 + RULES.settle_s + 2 * 2.5 + RULES.target_timeout_s + 0.5
+
+
+def test_suspensions_that_clear_and_recur_do_not_hold_the_session_for_ever(tmp_path, clock):
+    """A slack cable suspends at each target the cycling robot settles at; its moving on clears it:
+    the time between the suspensions counts toward the target timeout, the suspensions do not."""
+    cell = Cell(tmp_path, clock, timeline(*walk(list(PLAN.q_deg) * 100)))
+    cell.drawstring.script = lambda t: {"length_mm": 10.0}
+    assert cell.run() is State.TIMED_OUT
+    assert sum(m.startswith("suspended") for m in cell.messages) > 5
+    assert cell.folder.rows == []
+
+
+def test_a_stalled_stream_repeating_its_last_package_is_no_settle(tmp_path, clock):
+    """The controller's packages stop advancing (its clock stands still) while the robot passes
+    target 0: the repeated package looks still, but the robot never settles on it; the real dwell
+    later is captured."""
+    q = PLAN.q_deg
+
+    def robot(t: float) -> dict:
+        if 0.5 <= t < 3.0:  # stalled: the package of t = 0.5 over and over
+            return {**still(q[0]), "controller_time_s": 0.5}
+        return {**timeline((0.5, moving(q[0])), *walk(q, start_s=3.0))(t), "controller_time_s": t}
+
+    cell = Cell(tmp_path, clock, robot)
+    cell.robot.fields = {**ROBOT_FIELDS, "controller_time_s": Field("s")}
+    cell.drawstring.script = lambda t: {"length_mm": ANCHOR_MM + q[0][0]}
+    assert cell.run() is State.DONE
+    assert float(cell.folder.rows[0]["t_s"]) >= 3.5  # not before the robot really arrived and rested
+
+
+def test_a_stream_that_stalls_during_a_capture_rejects_it(tmp_path, clock):
+    """From the first sensor read at target 0 on, the controller repeats one package for 1 s (its
+    age grows): no robot package is sent after the sensors' last reading, so the robot's stillness
+    is not known; rejected, and taken when the stream is back."""
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg, dwell_s=4.0)))
+    robot, length, stall = cell.robot.script, cell.drawstring.script, {}
+
+    def stalled(t: float) -> dict:
+        if "from" in stall and t < stall["from"] + 1.0:
+            return {**robot(t), "package_age_s": t - stall["from"]}
+        return robot(t)
+
+    def first_read_starts_the_stall(t: float) -> dict:
+        stall.setdefault("from", t)
+        return length(t)
+
+    cell.robot.script, cell.drawstring.script = stalled, first_read_starts_the_stall
+    assert cell.run() is State.DONE
+    assert any("the robot's last data predate the sensors' last reading by" in m for m in cell.messages)
+    assert cell.targets() == [0, 1, 2]
+    assert float(cell.folder.rows[0]["t_s"]) > stall["from"] + 1.0
+
+
+def test_a_stream_lagging_steadily_is_waited_for_not_rejected(tmp_path, clock):
+    """Every package 30 ms late (a steady link delay the baseline did not absorb): the closing
+    reading waits for the package sent after the sensors' last reading, and the capture stands."""
+    cell = Cell(tmp_path, clock, timeline(*walk(PLAN.q_deg)))
+    robot = cell.robot.script
+    cell.robot.script = lambda t: {**robot(t), "package_age_s": 0.03}
+    session = cell.session()
+    assert session.run() is State.DONE
+    assert session.rejected == 0
+    assert cell.targets() == [0, 1, 2]
+
+
+def test_captures_rejected_at_a_target_each_round_end_the_session_naming_it(tmp_path, clock):
+    """The drawstring jumps in every capture at target 2 while the robot cycles: each attempt is
+    progress until ``ATTEMPTS_PER_TARGET`` of them, then the session ends saying why."""
+    q = PLAN.q_deg
+    cell = Cell(tmp_path, clock, timeline(*walk(list(q) * 100)))
+    reads = iter(range(10**9))
+    length = cell.length_from_pose
+
+    def jumps_at_target_2(t: float) -> dict:
+        value = length(t)
+        at_2 = abs(value["length_mm"] - ANCHOR_MM - q[2][0]) < 1e-9
+        return {"length_mm": value["length_mm"] + (next(reads) % 2) * at_2}
+
+    cell.drawstring.script = jumps_at_target_2
+    session = cell.session()
+    assert session.run() is State.TIMED_OUT
+    assert cell.targets() == [0, 1]
+    assert cell.messages[-1].startswith("timed out: no capture for 10 s: every attempt at target 2 was")
+    assert session.rejected > ATTEMPTS_PER_TARGET
