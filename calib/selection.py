@@ -217,10 +217,14 @@ def _fold_errors(model, x, free, weights, folds) -> np.ndarray:
     return out
 
 
-def fitted_errors(model: MeasurementModel, cal: Calibration, folds: list[np.ndarray]) -> np.ndarray:
-    """``cross_validated_errors`` from a calibration already made (``cal`` of ``model``), every row
-    weighted alike: each fold's rows [mm] after one Gauss-Newton step on the other folds' rows."""
-    weights = np.ones(len(WithPrior(model, model.x0).rows))
+def fitted_errors(
+    model: MeasurementModel, cal: Calibration, folds: list[np.ndarray], weights: np.ndarray | None = None
+) -> np.ndarray:
+    """``cross_validated_errors`` from a calibration already made (``cal`` of ``model``): each fold's
+    rows [mm] after one Gauss-Newton step on the other folds' rows, weighted by ``weights`` (the
+    model's and the prior's rows; None: every row alike)."""
+    if weights is None:
+        weights = np.ones(len(WithPrior(model, model.x0).rows))
     return _fold_errors(model, cal.x, cal.identified, weights, folds)
 
 

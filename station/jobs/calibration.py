@@ -410,7 +410,7 @@ def _report(
     messages += workspace_warnings(model, cal.x, after.train, workspace)
     short = short_of_optimum(model, cal.x, fit.optimum, method)
     messages += short
-    messages += carry_over_warnings(model, cal, choice.selection)
+    messages += carry_over_warnings(model, cal)
     held = {**choice.held, **cal.held}
     scope = holdout_scope(model, hold_model)
     return CalibrationReport(

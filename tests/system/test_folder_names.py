@@ -22,7 +22,7 @@ def test_a_session_in_a_folder_named_in_another_encoding_is_recorded_and_calibra
             cwd=ROOT, capture_output=True, timeout=120,
         )  # fmt: skip
     assert sample.returncode == 0, sample.stderr.decode(errors="replace")
-    assert sample.stdout.splitlines()[-1].startswith(b"done: 36/36 samples in " + os.fsencode(folder))
+    assert sample.stdout.splitlines()[-1].startswith(b"saved: 36/36 samples in " + os.fsencode(folder))
     assert len(rows_of(folder)) == 36 and (folder / "session.rrd").stat().st_size > 0
     calibrate = subprocess.run(
         [sys.executable, "-m", "station.cli", "calibrate", str(folder), "--model", "geometric", "--out"]
