@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.calibrate import Calibration, CalibrationOptions
+from calib.calibrate import Calibration, CalibrationOptions, WithPrior
 from calib.joint_terms import (
     COMPLIANCE,
     JointTerms,
@@ -150,9 +150,11 @@ def carry_over_warnings(model: MeasurementModel, cal: Calibration) -> list[str]:
     folds, scheme = blocked_folds(model.samples.q)
     if len(model.samples) - max(len(f) for f in folds) < int(cal.identified.sum()):
         return []
-    kept = np.ones(len(model.samples), bool)
-    kept[cal.downweighted] = False
-    mine = rms(fitted_errors(model, cal, folds, cal.after.weights)[kept])
+    weights, kept = None, np.ones(len(model.samples), bool)
+    if cal.after.weights.size == len(WithPrior(model, model.x0).rows):  # not a subset's fit (MCS)
+        weights = cal.after.weights
+        kept[cal.downweighted] = False
+    mine = rms(fitted_errors(model, cal, folds, weights)[kept])
     nominal = rms(nominal_errors(model, cal, folds)[kept])
     if mine < nominal:
         return []
