@@ -361,23 +361,23 @@ class World:
         robot reaches there, moved (orientation kept) onto its true line, off it along the dial axis
         by the operator's placement. Returns true configurations [deg] and the line ids of those
         reached (a target pushed out of the joint limits is skipped, as an operator would)."""
-        by_id = {ln.id: ln for ln in self.lines}
-        q_plan = np.atleast_2d(q_plan_deg)
-        targets = np.empty((len(q_plan), 4, 4))
-        for k, (q, lid) in enumerate(zip(q_plan, line_ids, strict=True)):
-            ln = by_id[int(lid)]
-            targets[k] = self.true.pose(q)
-            rel = targets[k, :3, 3] - ln.centre
-            offset = rng.uniform(-1, 1) * self.noise.placement_mm
-            targets[k, :3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + offset * ln.dial_axis
-        q_true, reached = self.true.ik(targets, q_plan)
-        return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
+
+        def placed(ln: GaugeLine, rel: np.ndarray) -> np.ndarray:
+            return rng.uniform(-1, 1) * self.noise.placement_mm * ln.dial_axis
+
+        return self._onto_lines(q_plan_deg, line_ids, placed)
 
     def land(self, q_plan_deg, line_ids) -> tuple[np.ndarray, np.ndarray]:
         """Where a program commanding configurations (N, 6) [deg] really touches: the pose the true
         robot reaches there, brought across onto its true line (the edge guides the tool across it)
         but left off it along the dial axis by the robot's own miss, which the dial reads. Returns
         true configurations [deg] and the line ids of those reached."""
+        return self._onto_lines(q_plan_deg, line_ids, lambda ln, rel: (rel @ ln.dial_axis) * ln.dial_axis)
+
+    def _onto_lines(self, q_plan_deg, line_ids, off) -> tuple[np.ndarray, np.ndarray]:
+        """The true robot's poses at planned configurations (N, 6) [deg] moved onto their true lines
+        (orientation kept), then by ``off(line, pose - centre)`` [mm]; the true configurations [deg]
+        and the line ids of those the true robot reaches."""
         by_id = {ln.id: ln for ln in self.lines}
         q_plan = np.atleast_2d(q_plan_deg)
         targets = np.empty((len(q_plan), 4, 4))
@@ -385,8 +385,7 @@ class World:
             ln = by_id[int(lid)]
             targets[k] = self.true.pose(q)
             rel = targets[k, :3, 3] - ln.centre
-            kept = (rel @ ln.direction) * ln.direction + (rel @ ln.dial_axis) * ln.dial_axis
-            targets[k, :3, 3] = ln.centre + kept
+            targets[k, :3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + off(ln, rel)
         q_true, reached = self.true.ik(targets, q_plan)
         return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
 
