@@ -3,8 +3,6 @@ server laid out as the OPC UA Robotics companion specification, fed by the simul
 program; what a cell's wiring gets wrong (a node id, a server gone) is named, and ``sim serve``'s
 station reads its robot through it."""
 
-import random
-import socket
 import time
 
 import numpy as np
@@ -14,34 +12,19 @@ from drivers.base import RETRYABLE, DeviceReplyError
 from drivers.opcua import OpcUaJointSource
 from errors import InputError
 from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
-from sim_fixtures.robot_program import SimRobot
 from sim_fixtures.station_sim import SimStation
 from station.config import station_config
+from tests.system.moving import free_address, two_targets
 
 POSITIONS = [position_node(i) for i in range(1, 7)]
 SPEEDS = [speed_node(i) for i in range(1, 7)]
 
 
-def _free_address() -> tuple[str, int]:
-    host = f"127.0.0.{random.SystemRandom().randint(2, 250)}"
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return host, s.getsockname()[1]
-
-
 @pytest.fixture
 def moving():
     """A robot program between two targets (30 deg/s), its OPC UA server, the program's clock."""
-    robot = SimRobot(
-        [[0.0] * 6, [90.0, -45, 30, 10, 20, 60]], speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0
-    )
-    t0 = time.monotonic()
-
-    def state():
-        s = robot.state(time.monotonic() - t0)
-        return s.q_deg, s.qd_deg_s
-
-    server = OpcUaRobotServer(state, *_free_address()).start()
+    robot, t0, state = two_targets(dwell_s=1.0)
+    server = OpcUaRobotServer(state, *free_address()).start()
     yield server, robot, t0
     server.stop()
 
@@ -94,8 +77,8 @@ def test_a_node_the_server_lacks_is_named_and_a_server_gone_is_retryable(moving)
 
 
 def test_sim_serve_publishes_its_robot_over_opcua_for_the_station(tmp_path):
-    host, port = _free_address()
-    _, ds_port = _free_address()
+    host, port = free_address()
+    _, ds_port = free_address()
     raw = {
         "robot": {"kind": "opcua", "url": f"opc.tcp://{host}:{port}"},  # the node ids: their defaults
         "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": ds_port},

@@ -3,8 +3,6 @@ server publishing the simulated robot program's ``sensor_msgs/JointState``; a jo
 message lacks is named, a publisher gone is retryable, and ``sim serve``'s station reads its robot
 through it."""
 
-import random
-import socket
 import time
 
 import numpy as np
@@ -13,32 +11,17 @@ import pytest
 from drivers.base import RETRYABLE, DeviceReplyError
 from drivers.ros import RosJointSource
 from errors import InputError
-from sim_fixtures.robot_program import SimRobot
 from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.station_sim import SimStation
 from station.config import station_config
-
-
-def _free_address() -> tuple[str, int]:
-    host = f"127.0.0.{random.SystemRandom().randint(2, 250)}"
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return host, s.getsockname()[1]
+from tests.system.moving import free_address, two_targets
 
 
 @pytest.fixture
 def bridge():
     """A robot program moving between two targets, its rosbridge, the program's clock."""
-    robot = SimRobot(
-        [[0.0] * 6, [90.0, -45, 30, 10, 20, 60]], speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=0.5
-    )
-    t0 = time.monotonic()
-
-    def state():
-        s = robot.state(time.monotonic() - t0)
-        return s.q_deg, s.qd_deg_s
-
-    server = RosbridgeServer(state, *_free_address()).start()
+    robot, t0, state = two_targets(dwell_s=0.5)
+    server = RosbridgeServer(state, *free_address()).start()
     yield server, robot, t0
     server.stop()
 
@@ -77,8 +60,8 @@ def test_a_joint_the_message_lacks_is_named_and_a_bridge_gone_is_retryable(bridg
 
 
 def test_sim_serve_publishes_its_robot_over_rosbridge_for_the_station(tmp_path):
-    host, port = _free_address()
-    _, ds_port = _free_address()
+    host, port = free_address()
+    _, ds_port = free_address()
     raw = {
         "robot": {"kind": "ros", "host": host, "port": port},
         "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": ds_port},
