@@ -5,6 +5,7 @@ import random
 import socket
 import time
 
+from drivers.base import RETRYABLE
 from sim_fixtures.robot_program import SimRobot
 
 
@@ -29,3 +30,17 @@ def two_targets(dwell_s: float):
         return s.q_deg, s.qd_deg_s
 
     return robot, t0, state
+
+
+def fails_retryably(source) -> bool:
+    """Whether reading ``source`` (opened, its server stopped) raises a retryable error within 50
+    reads 0.05 s apart, as a session's device loop needs to reconnect rather than give up."""
+    try:
+        for _ in range(50):
+            source.read()
+            time.sleep(0.05)
+    except RETRYABLE:
+        return True
+    finally:
+        source.close()
+    return False

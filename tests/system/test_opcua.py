@@ -8,13 +8,13 @@ import time
 import numpy as np
 import pytest
 
-from drivers.base import RETRYABLE, DeviceReplyError
+from drivers.base import DeviceReplyError
 from drivers.opcua import OpcUaJointSource
 from errors import InputError
 from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.station_sim import SimStation
 from station.config import station_config
-from tests.system.moving import free_address, two_targets
+from tests.system.moving import fails_retryably, free_address, two_targets
 
 POSITIONS = [position_node(i) for i in range(1, 7)]
 SPEEDS = [speed_node(i) for i in range(1, 7)]
@@ -69,11 +69,7 @@ def test_a_node_the_server_lacks_is_named_and_a_server_gone_is_retryable(moving)
     source = OpcUaJointSource(server.url, POSITIONS, timeout_s=0.5)
     source.open()
     server.stop()
-    with pytest.raises(RETRYABLE):
-        for _ in range(50):
-            source.read()
-            time.sleep(0.05)
-    source.close()
+    assert fails_retryably(source)
 
 
 def test_sim_serve_publishes_its_robot_over_opcua_for_the_station(tmp_path):

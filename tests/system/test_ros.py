@@ -8,13 +8,13 @@ import time
 import numpy as np
 import pytest
 
-from drivers.base import RETRYABLE, DeviceReplyError
+from drivers.base import DeviceReplyError
 from drivers.ros import RosJointSource
 from errors import InputError
 from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.station_sim import SimStation
 from station.config import station_config
-from tests.system.moving import free_address, two_targets
+from tests.system.moving import fails_retryably, free_address, two_targets
 
 
 @pytest.fixture
@@ -52,11 +52,7 @@ def test_a_joint_the_message_lacks_is_named_and_a_bridge_gone_is_retryable(bridg
     source = RosJointSource(server.host, server.port, server.topic, JOINT_NAMES)
     source.open()
     server.stop()
-    with pytest.raises(RETRYABLE):
-        for _ in range(50):
-            source.read()
-            time.sleep(0.05)
-    source.close()
+    assert fails_retryably(source)
 
 
 def test_sim_serve_publishes_its_robot_over_rosbridge_for_the_station(tmp_path):
