@@ -88,6 +88,39 @@ def noise_test(residuals: np.ndarray, weights: np.ndarray, n_free: int) -> Noise
     )
 
 
+def neighbour_agreement(q_rad: np.ndarray, residuals: np.ndarray, chunk: int = 512) -> float:
+    """How alike the residuals of neighbouring poses are: an error of the robot that the model does
+    not express varies smoothly with the pose, so neighbours share it; instrument noise does not.
+
+    Parameters
+    ----------
+    q_rad : ndarray, shape (N, 6)
+        The rows' joint angles [rad]; a row's neighbour is the nearest other row in the cosines and
+        sines of its joints.
+    residuals : ndarray, shape (N,) or (N, k)
+        Each row's residual (any unit, the same for every row).
+    chunk : int
+        Rows whose distances to all others are held at once (memory ``chunk * N`` floats).
+
+    Returns
+    -------
+    float
+        ``sum_i r_i . r_nn(i) / sum_i |r_i|^2``: about 0 (within ``1 / sqrt(N k)``) for independent
+        noise, near 1 for an error that is a smooth function of the pose.
+    """
+    r = np.asarray(residuals, float).reshape(len(q_rad), -1)
+    f = np.column_stack([np.cos(q_rad), np.sin(q_rad)])
+    sq = np.sum(f**2, axis=1)
+    nearest = np.empty(len(f), int)
+    for start in range(0, len(f), chunk):
+        block = f[start : start + chunk]
+        d = sq[start : start + chunk, None] - 2.0 * block @ f.T + sq[None, :]
+        d[np.arange(len(block)), np.arange(start, start + len(block))] = np.inf
+        nearest[start : start + chunk] = np.argmin(d, axis=1)
+    total = float(np.sum(r**2))
+    return float(np.sum(r * r[nearest]) / total) if total > 0 else 0.0
+
+
 def excursions(x: np.ndarray, x_ref: np.ndarray, prior_sigma: np.ndarray, free: np.ndarray) -> np.ndarray:
     """How far each fitted unknown moved from where the fit started, in its prior sigmas.
 

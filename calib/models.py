@@ -106,6 +106,10 @@ class MeasurementModel(Protocol):
         """The contract's error of each sample row [mm], shape (N,), at ``x``."""
         ...
 
+    def row_residuals(self, x: np.ndarray) -> np.ndarray:
+        """Each sample row's signed residual (N, k) at ``x``, whitened by its stated noise."""
+        ...
+
     def tcp_in_flange(self, x: np.ndarray) -> np.ndarray:
         """The TCP (3,) [mm] in the flange frame at ``x``: the measured point."""
         ...
@@ -436,6 +440,10 @@ class DrawstringLineModel:
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Whitened residuals (m,): N drawstring rows, then two per row on a line."""
         return self._evaluate(x, jacobian=False)[0]
+
+    def row_residuals(self, x: np.ndarray) -> np.ndarray:
+        """Each row's whitened drawstring residual (N, 1) (the line rows are the fit's, not the row's)."""
+        return self.residuals(x)[: len(self.samples), None]
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
         """Whitened residuals (m,) and their analytic Jacobian (m, n), None unless ``jacobian``."""

@@ -320,6 +320,10 @@ class PositionModel:
         """Whitened residuals (3N,): per row the x, y, z position error over ``sigma``."""
         return self._evaluate(x, jacobian=False)[0]
 
+    def row_residuals(self, x: np.ndarray) -> np.ndarray:
+        """Each row's whitened x, y, z position error (N, 3)."""
+        return self.residuals(x).reshape(len(self.samples), 3)
+
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
         """Whitened residuals (3N,) and their analytic Jacobian (3N, n), None unless ``jacobian``."""
         return self._evaluate(x, jacobian)

@@ -83,7 +83,10 @@ class FitCheck:
     report warns) or ``inconsistent`` (``station calibrate`` refuses the result with ``refusal``);
     each gauge line's dial judged against its rows (``dial_lines``, ``station.jobs.absorbed``), what
     rows read without a dial lose (``dial_mode``) and the nominal table's expected workspace error
-    (``nominal_rmse_mm``), which the calibration's 95 % bound must beat."""
+    (``nominal_rmse_mm``), which the calibration's 95 % bound must beat; for a residual beyond the
+    noise, how alike neighbouring poses' residuals are (``neighbour_agreement``: 0 for noise, near 1
+    for a smooth error) and whether that makes it an error of the robot the model misses
+    (``model_error``) rather than the instruments'."""
 
     noise_ratio: float
     chi2: float
@@ -97,6 +100,8 @@ class FitCheck:
     dial_lines: tuple[LineDial, ...] = ()
     dial_mode: str | None = None
     nominal_rmse_mm: float | None = None
+    neighbour_agreement: float | None = None
+    model_error: bool = False
 
 
 @dataclass(frozen=True)

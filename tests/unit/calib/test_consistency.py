@@ -4,7 +4,7 @@ noise, and how far each parameter moved in its prior sigmas."""
 import numpy as np
 from scipy.special import erfc
 
-from calib.consistency import chi_square_sf, dial_gain, excursions, noise_test, wild_rows
+from calib.consistency import chi_square_sf, dial_gain, excursions, neighbour_agreement, noise_test, wild_rows
 
 
 def test_chi_square_tail_matches_its_closed_forms():
@@ -62,3 +62,16 @@ def test_dial_gain_recovers_the_dial_axis_and_its_sign():
         found = dial_gain(tcp, point, direction, sign * dial)
         np.testing.assert_allclose(found.gain, sign * np.array([0.0, 0.0, 0.8]), atol=5 * found.sigma)
         assert 0.2 * noise / np.std(dial) / np.sqrt(40) < found.sigma < 5 * noise / np.std(dial) / np.sqrt(40)
+
+
+def test_neighbours_agree_on_a_smooth_error_and_not_on_noise():
+    """A residual that is a function of the pose (a sag growing with joint 2's cosine) is shared by
+    neighbouring poses; independent noise is not, within a few of its standard errors 1/sqrt(N k)."""
+    rng = np.random.default_rng(3)
+    n = 1500
+    q = rng.uniform(-np.pi, np.pi, (n, 6))
+    smooth = np.column_stack([np.cos(q[:, 1]), np.sin(q[:, 2]), np.cos(q[:, 0] - q[:, 1])])
+    noise = rng.normal(size=(n, 3))
+    assert abs(neighbour_agreement(q, noise)) < 4 / np.sqrt(noise.size)
+    assert neighbour_agreement(q, smooth + 0.3 * noise) > 0.5
+    assert neighbour_agreement(q, smooth[:, 0], chunk=97) == neighbour_agreement(q, smooth[:, 0])

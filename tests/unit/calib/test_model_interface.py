@@ -59,6 +59,10 @@ def test_a_drawstring_model_answers_the_station(drawstring):
     assert advice.cover == "its own 2 lines" and "add a line placement along" in advice.next_measurement
     held_out = model.with_samples(model.samples.subset(np.arange(5, 15)))
     assert held_out.kind == "drawstring" and held_out.row_error_mm(model.x0).shape == (10,)
+    x = model.x0.copy()
+    x[model.names.index("anchor.x_mm")] += 1.0  # every row's residual moves; the row order is kept
+    sigma = model.residuals(x)[0] / model.row_error_mm(x)[0]
+    np.testing.assert_allclose(model.row_residuals(x)[:, 0], sigma * model.row_error_mm(x))
 
 
 def test_a_position_model_answers_the_station():
@@ -78,3 +82,8 @@ def test_a_position_model_answers_the_station():
     assert advice.cover == "its 30 poses" and "more configurations" in advice.next_measurement
     held_out = model.with_samples(model.samples.subset(np.arange(10)))
     assert held_out.row_error_mm(model.x0).shape == (10,)
+    x = model.x0.copy()
+    x[model.names.index("J2.a_mm")] += 1.0
+    np.testing.assert_allclose(
+        np.linalg.norm(model.row_residuals(x), axis=1) * model.sigma, model.row_error_mm(x), rtol=1e-9
+    )
