@@ -20,10 +20,12 @@ DESCRIPTION = """\
 Robot calibration station: measure a robot along gauge-block lines with a drawstring sensor, a dial
 indicator and its joint angles, and calibrate its Denavit-Hartenberg table.
 
-A session: `station plan` (which poses) -> `station sample` (measure them, with a running
-calibration) -> `station calibrate` (the corrected table and its report) -> `station export` or
-`station compensate` (use it). `station demo` runs all of it on simulated devices; `station sim
-serve` starts those devices for the other commands; `station read` checks the wiring."""
+A session: `station plan` (which poses) -> `station program` (the robot program that measures
+them) -> `station sample` (measure them, with a running calibration) -> `station calibrate` (the
+corrected table and its report) -> `station export` or `station compensate` (use it). Later,
+`station verify` judges the table on new samples and `station history` lists each robot's records.
+`station demo` runs all of it on simulated devices; `station sim serve` starts those devices for the
+other commands; `station read` checks the wiring."""
 
 COMMANDS = (  # in the order of the workflow, as the help lists them
     "demo",

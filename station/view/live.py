@@ -31,6 +31,7 @@ bottom. The log's last line names the recording to replay once the view is gone.
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import signal
 import socket
@@ -196,7 +197,7 @@ class LiveView:
                 return sinks
             sinks.append(rr.GrpcSink(self.web.sink_url))
             self.notes.append(f"live view: {self.web.url}")
-            if web not in LOOPBACK:
+            if not _loopback(web):
                 self.notes.append(
                     f"note: --web-bind {web} serves the live view to every machine that reaches this one "
                     f"on ports {self.web.web_port} and {self.web.grpc_port}: {WRITERS}"
@@ -382,6 +383,14 @@ def recorded_samples(rrd: Path) -> int | None:
     except (RuntimeError, OSError):
         return None
     return sum(c.num_rows for c in chunks if c.entity_path == "/live/length/reading" and not c.is_static)
+
+
+def _loopback(bind: str) -> bool:
+    """Whether only this machine reaches ``bind`` (127.0.0.0/8, ::1, localhost)."""
+    try:
+        return bind == "localhost" or ipaddress.ip_address(bind).is_loopback
+    except ValueError:  # a host name: whatever it resolves to may be reached from elsewhere
+        return False
 
 
 class WebViewer:
