@@ -10,7 +10,8 @@ a of the link before joint i. Regrouped, with row 1's alpha and a zero (joint 1 
 and alpha; the standard last row's a and alpha (an offset of the flange after joint 6, which the
 modified table has no row for) is the ``flange`` pair. Both tables give the same flange frame
 and TCP at every reading. Tables are (6, 4) in ``calib.params.DH_KEYS`` order (theta, d, a, alpha),
-in any consistent units.
+in any consistent units. A link's centre of mass moves with its frame: Craig's frame i sits at joint
+i, the standard one at the link's far end, ``Tx(a_i) Rx(alpha_i)`` further (``com_from_mdh``).
 """
 
 from __future__ import annotations
@@ -62,3 +63,27 @@ def dh_name(name: str) -> str:
     if joint[:1] == "J" and joint[1:].isdigit() and int(joint[1:]) > 1:
         return f"J{int(joint[1:]) - 1}.{key}"
     return name
+
+
+def _link_end(dh: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Each standard row's a (6,) and the cosine and sine of its alpha (6,): the step from a
+    modified frame i (at joint i) to the standard frame i (at the link's end), ``Tx(a_i) Rx(alpha_i)``."""
+    alpha = dh[:, ALPHA]
+    return dh[:, A], (np.cos(alpha), np.sin(alpha))
+
+
+def com_from_mdh(com_mdh: np.ndarray, dh: np.ndarray) -> np.ndarray:
+    """Each link's centre of mass (6, 3) in the standard frames of the table ``dh`` (6, 4) (rad, mm)
+    from its place in the modified frames (6, 3) [mm] (Craig's frame i sits at joint i):
+    ``Rx(-alpha_i) (c - a_i x)``."""
+    a, (c, s) = _link_end(dh)
+    x, y, z = np.asarray(com_mdh, float).T
+    x = x - a
+    return np.column_stack([x, c * y + s * z, -s * y + c * z])
+
+
+def com_to_mdh(com_dh: np.ndarray, dh: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`com_from_mdh`: ``a_i x + Rx(alpha_i) c``."""
+    a, (c, s) = _link_end(dh)
+    x, y, z = np.asarray(com_dh, float).T
+    return np.column_stack([x + a, c * y - s * z, s * y + c * z])

@@ -11,7 +11,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, NonNegativeFloat, model_validator
 
-from calib.conventions import dh_from_mdh, dh_name, mdh_name
+from calib.conventions import com_from_mdh, dh_from_mdh, dh_name, mdh_name
 from calib.joint_terms import TERM_KINDS, JointTerms, LinkMasses, Term
 from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees, display_factor
 from calib.robot_model import RobotModel
@@ -104,10 +104,6 @@ class RobotFile(Strict):
                 'joints.0: under convention = "mdh" its alpha_deg and a_mm place joint 1 in a base frame '
                 "of their own; the station's base frame is joint 1's: give 0 for both"
             )
-        if any(j.mass_kg is not None or j.com_mm is not None for j in self.joints):
-            raise ValueError(
-                'joints: mass_kg and com_mm are given in standard D-H frames; convention = "mdh" takes none'
-            )
         return self
 
     def file_table_deg(self) -> np.ndarray:
@@ -132,13 +128,15 @@ class RobotFile(Strict):
         return np.array([[j.q_min_deg, j.q_max_deg] for j in self.joints])
 
     def link_masses(self, payload: Payload | None = None) -> LinkMasses | None:
-        """The links' masses with ``payload`` (default: the file's own) lumped into link 6; None
-        unless every joint gives ``mass_kg`` and ``com_mm``."""
+        """The links' masses with ``payload`` (default: the file's own) lumped into link 6, each
+        centre of mass in its standard D-H frame (a modified table's are given in Craig's frames);
+        None unless every joint gives ``mass_kg`` and ``com_mm``."""
         if any(j.mass_kg is None or j.com_mm is None for j in self.joints):
             return None
-        links = LinkMasses(
-            np.array([j.mass_kg for j in self.joints]), np.array([j.com_mm for j in self.joints])
-        )
+        com = np.array([j.com_mm for j in self.joints], float)
+        if self.convention == "mdh":  # given in Craig's frames, at the joints
+            com = com_from_mdh(com, dh_from_degrees(self.table_deg()))
+        links = LinkMasses(np.array([j.mass_kg for j in self.joints]), com)
         payload = payload or self.payload
         return links if payload is None else links.with_payload(payload.mass_kg, payload.com_mm)
 

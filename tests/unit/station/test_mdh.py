@@ -11,10 +11,10 @@ import tomli_w
 from scipy.spatial.transform import Rotation
 
 import configs
-from calib.conventions import dh_from_mdh, dh_name, mdh_from_dh, mdh_name
+from calib.conventions import com_to_mdh, dh_from_mdh, dh_name, mdh_from_dh, mdh_name
 from calib.kinematics import base_from_frames, tcp_position
 from calib.metrics import aligned_errors
-from calib.params import DH_KEYS, DH_NAMES
+from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees
 from errors import InputError
 from sim_fixtures.scenario import setup_dict
 from sim_fixtures.world import GaugeLine, Placement, Robot, World
@@ -70,6 +70,31 @@ def test_a_modified_table_places_joint_1_at_the_base(tmp_path):
     (tmp_path / "r.toml").write_text(text)
     with pytest.raises(InputError, match=r'joints.0: under convention = "mdh" its alpha_deg and a_mm'):
         load_robot(tmp_path / "r.toml")
+
+
+def test_link_masses_given_in_craigs_frames_sit_where_the_standard_ones_do(tmp_path):
+    """The UR10 (standard, with UR's link masses) written in Craig's convention, each centre of mass
+    in Craig's frame at its joint: in the base frame every link's centre lies where the standard
+    file puts it, at any reading, so the gravity torques and compliances are the same."""
+    ur10 = load_robot(configs.path("robots/ur10.toml"))
+    dh = dh_from_degrees(ur10.table_deg())
+    mdh, flange = mdh_from_dh(ur10.table_deg())
+    com_mdh = com_to_mdh(ur10.link_masses().com_mm, dh)
+    joints = [
+        {**dict(zip(DH_KEYS, map(float, row), strict=True)), "mass_kg": j.mass_kg, "com_mm": c.tolist()}
+        for row, j, c in zip(mdh, ur10.joints, com_mdh, strict=True)
+    ]
+    flange = {"a_mm": float(flange[0]), "alpha_deg": float(flange[1])}
+    data = {"name": "UR10 (mdh)", "convention": "mdh", "joints": joints, "flange": flange}
+    (tmp_path / "ur10_mdh.toml").write_text(tomli_w.dumps(data))
+    craig = load_robot(tmp_path / "ur10_mdh.toml")
+    q = np.random.default_rng(2).uniform(-180, 180, 6)
+    frames = base_from_frames(dh, np.radians(q)[None])[0]
+    for i in range(6):
+        standard = frames[i + 1] @ [*ur10.link_masses().com_mm[i], 1.0]
+        at_joint = craig_chain(mdh[: i + 1], q[: i + 1]) @ [*com_mdh[i], 1.0]
+        np.testing.assert_allclose(at_joint, standard, atol=1e-9)
+    np.testing.assert_allclose(craig.link_masses().com_mm, ur10.link_masses().com_mm, atol=1e-9)
 
 
 IRB_LINES = (
