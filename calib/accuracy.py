@@ -80,17 +80,43 @@ def workspace_error_modes(
     ndarray, shape (r,)
         Mode variances [mm^2], descending, >= 0; their sum is the expected squared RMS error.
     """
+    a_perp = _non_rigid_fields(dh, tool, q, terms, tool_fitted)
+    s, u = np.linalg.eigh(cov)
+    root = u * np.sqrt(np.clip(s, 0.0, None))
+    field = a_perp @ root
+    return np.clip(np.linalg.eigvalsh(field.T @ field / len(q))[::-1], 0.0, None)
+
+
+def parameter_workspace_rms(
+    dh: np.ndarray, tool: np.ndarray, q: np.ndarray, terms: JointTerms | None = None
+) -> np.ndarray:
+    """How far a unit change of each parameter alone moves the TCP, RMS over configurations, after
+    a rigid re-fit of the base (``J_perp``'s column norms over ``sqrt(N)``).
+
+    Parameters
+    ----------
+    dh, tool, q, terms
+        As ``workspace_error_modes``.
+
+    Returns
+    -------
+    ndarray, shape (24 + K,)
+        [mm per internal unit] for the table's parameters, then the terms'.
+    """
+    a_perp = _non_rigid_fields(dh, tool, q, terms, False)
+    return np.sqrt(np.sum(a_perp**2, axis=0) / len(q))
+
+
+def _non_rigid_fields(dh, tool, q, terms: JointTerms | None, tool_fitted: bool) -> np.ndarray:
+    """The TCP Jacobian (3N, 24 [+ 3] + K) by the table, the flange TCP (``tool_fitted``) and the
+    terms, with its part in the rigid motions of the base taken out."""
     terms = terms or JointTerms()
     basis = terms.basis(q)
     p, jac_table, jac_terms = terms.tcp_jacobian(dh, q, tool, np.zeros(len(terms)), basis)
     jac_tool = base_from_frames(dh, q)[:, -1, :3, :3] if tool_fitted else np.zeros((len(q), 3, 0))
-    a = np.concatenate([jac_table, jac_tool, jac_terms], axis=2).reshape(-1, cov.shape[0])
+    a = np.concatenate([jac_table, jac_tool, jac_terms], axis=2).reshape(3 * len(q), -1)
     q_rigid = np.linalg.qr(rigid_fields(p))[0]
-    a_perp = a - q_rigid @ (q_rigid.T @ a)
-    s, u = np.linalg.eigh(cov)
-    root = u * np.sqrt(np.clip(s, 0.0, None))
-    field = a_perp @ root
-    return np.clip(np.linalg.eigvalsh(field.T @ field / p.shape[0])[::-1], 0.0, None)
+    return a - q_rigid @ (q_rigid.T @ a)
 
 
 def predicted_workspace_rmse(modes: np.ndarray) -> float:

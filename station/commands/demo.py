@@ -309,11 +309,23 @@ def _verify(out: Path, inputs, seed: int) -> None:
         report = verification.verify_samples(samples, table, inputs.setup, table_where=label).report
         atomic_write(out / name, json.dumps(report.as_json(), indent=2) + "\n")
         likely = ", ".join(p.param for p in report.likely[:3])
+        missed = report.missed if report.verdict == "holds" else None
         print(
             f"verify:    {len(samples)} new poses on line {plan.line[0]} with the {label} table: "
             f"{report.verdict} "
             f"(RMSE {report.rmse_mm:.3f} mm, {report.test.noise_ratio:.2f} x the stated noise"
-            f"{'; most likely moved: ' + likely if likely else ''}) -> {out / name}",
+            f"{'; most likely moved: ' + likely if likely else ''}"
+            f"{_missed_text(missed) if missed else ''}) -> {out / name}",
             flush=True,
         )
     print(f"verify:    ({time.perf_counter() - t0:.1f} s)", flush=True)
+
+
+def _missed_text(missed) -> str:
+    """What a holding verification could let pass, in a few words."""
+    if missed.change is None:
+        return f"; does not see {missed.param}"
+    return (
+        f"; could miss {missed.param} up to {missed.change:.3g} {missed.unit}, "
+        f"{missed.workspace_mm:.2f} mm over the workspace"
+    )

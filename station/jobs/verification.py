@@ -15,17 +15,27 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from calib.accuracy import parameter_workspace_rms
 from calib.calibrate import DOWNWEIGHTED_BELOW, CalibrationOptions, hold_robot, robust_weights, setup_unknowns
 from calib.consistency import chi_square_sf
 from calib.joint_terms import JointTerms
+from calib.kinematics import dh_table
 from calib.metrics import error_metrics
 from calib.models import GROUP_PRIOR, MeasurementModel
 from calib.params import display_unit
-from calib.verification import Change, DriftTest, drift_test, likely_changes
+from calib.special import gammaincinv
+from calib.verification import Change, DriftTest, caught_changes, drift_test, likely_changes
 from errors import InputError
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
-from station.jobs.calibration import NOISE_DOUBT_RATIO, build_model, check_joint_limits, payload_of
+from station.jobs.calibration import (
+    NOISE_DOUBT_RATIO,
+    build_model,
+    check_joint_limits,
+    payload_of,
+    workspace_configurations,
+)
+from station.jobs.planning import USUALLY_MOVE
 
 DRIFT_P = 1e-3
 """The chi-square's p-value below which the residual is more than an unchanged robot leaves."""
@@ -38,12 +48,16 @@ LIKELY_SIGMAS = 3.0
 LIKELY_SHARE = 0.5
 """... and explains at least this share of what the best single parameter explains."""
 LIKELY_MAX = 5
+CAUGHT_POWER_Z = 1.2816
+"""A change counts as caught when its estimate clears the single-parameter test nine times in ten:
+its mean z-score is the test's threshold plus the normal's 90 % quantile."""
 
 MEANINGS = {
     "holds": (
         "these samples leave {ratio:.2f} times the stated noise, as an unchanged robot would "
         "({expected:.2f}: "
         "the noise the calibration itself left and the table's own uncertainty); keep using the table"
+        "{missed}"
     ),
     "drifted": (
         "these samples leave {ratio:.2f} times the stated noise against {expected:.2f} for an unchanged "
@@ -82,6 +96,29 @@ class Likely:
 
 
 @dataclass(frozen=True)
+class Missed:
+    """What the samples would let pass: of a joint's zero and a link's length and twist (what a crash
+    or wear changes), the single change (``change`` in display units) that these rows catch nine
+    times in ten and that moves the tool most over the workspace
+    (``workspace_mm`` RMS, after a rigid re-fit of the base); a smaller drift may pass as ``holds``.
+    ``change`` None: the rows do not see ``param`` at all."""
+
+    param: str
+    change: float | None
+    unit: str
+    workspace_mm: float | None
+
+    def text(self) -> str:
+        if self.change is None:
+            return f"; these samples do not see {self.param} at all: a change there would pass unseen"
+        return (
+            f"; these samples could miss a drift moving the tool up to {self.workspace_mm:.3f} mm RMS over "
+            f"the workspace ({self.param} by {self.change:.3g} {self.unit}); poses that turn the joints "
+            "further, or a second line, see more"
+        )
+
+
+@dataclass(frozen=True)
 class VerifyReport:
     """What ``station verify`` found (the contract's V.json, ``as_json``)."""
 
@@ -99,6 +136,7 @@ class VerifyReport:
     table: str
     samples: str
     time_s: float
+    missed: Missed | None = None
 
     def as_json(self) -> dict:
         return {
@@ -120,6 +158,7 @@ class VerifyReport:
             "table": self.table,
             "samples": self.samples,
             "time_s": self.time_s,
+            "missed": None if self.missed is None else asdict(self.missed),
         }
 
 
@@ -182,6 +221,10 @@ def verify_samples(
     )
     drifted = is_drifted(test, changes, scale)
     likely = tuple(_likely(model, c) for c in named(changes)) if drifted else ()
+    smallest = caught_changes(
+        weights, scale, jac[:, held], jac[:, candidates], sigma[candidates], _z_caught(candidates)
+    )
+    missed = _missed(model, table, x, candidates, smallest)
     errors = model.row_error_mm(x)
     overall = error_metrics(errors)
     verdict = "drifted" if drifted else "holds"
@@ -189,7 +232,7 @@ def verify_samples(
     downweighted = np.unique(model.rows[kept_low])
     report = VerifyReport(
         verdict=verdict,
-        meaning=meaning(verdict, test, likely),
+        meaning=meaning(verdict, test, likely, missed),
         kind=model.kind,
         **overall,
         test=test,
@@ -200,8 +243,48 @@ def verify_samples(
         table=table_where,
         samples=samples.path,
         time_s=round(time.perf_counter() - t0, 4),
+        missed=missed,
     )
     return VerifyOutcome(report, model, x)
+
+
+def _z_caught(candidates: np.ndarray) -> float:
+    """The mean z-score of a change the single-parameter test (``DRIFT_P``, Bonferroni over the
+    candidates) catches nine times in ten."""
+    p = DRIFT_P / max(len(candidates), 1)
+    return float(np.sqrt(2.0 * gammaincinv(0.5, 1.0 - p))) + CAUGHT_POWER_Z
+
+
+def _missed(
+    model: MeasurementModel, table: RobotFile, x: np.ndarray, candidates: np.ndarray, smallest: np.ndarray
+) -> Missed | None:
+    """Of the smallest changes the rows catch (``smallest``, internal units, per candidate column of
+    ``x``) of what a crash or wear changes (``USUALLY_MOVE``, what ``station plan --verify`` aims at)
+    and the calibration determined (a held parameter is as uncertain as its tolerance anyway, which
+    the predicted workspace error counts), the one that moves the tool most over the workspace."""
+    robot_cols = np.flatnonzero(~model.setup_mask)
+    tcp = model.tcp_in_flange(x)
+    reach = parameter_workspace_rms(dh_table(x), tcp, workspace_configurations(table), model.terms)
+    reach = reach[np.searchsorted(robot_cols, candidates)]
+    identified = (table.calibration or {}).get("identified")
+    usual = np.array(
+        [
+            model.names[k].partition(".")[2] in USUALLY_MOVE
+            and (not identified or table.param_name(model.names[k]) in identified)
+            for k in candidates
+        ],
+        bool,
+    )
+    moves = usual & (reach > 1e-9)  # a change the base's re-registration cannot take up
+    if not moves.any():
+        return None
+    blind = np.where(moves, smallest * np.where(moves, reach, 1.0), 0.0)
+    k = int(np.argmax(blind))
+    name = model.names[candidates[k]]
+    factor, unit = display_unit(name)
+    if not np.isfinite(blind[k]):
+        return Missed(name, None, unit, None)
+    return Missed(name, float(smallest[k] * factor), unit, float(blind[k]))
 
 
 def is_drifted(test: DriftTest, changes: list[Change], scale: np.ndarray) -> bool:
@@ -257,13 +340,16 @@ def per_line(errors: np.ndarray, placement: np.ndarray) -> tuple[LineResidual, .
     return tuple(out)
 
 
-def meaning(verdict: str, test: DriftTest, likely: tuple[Likely, ...]) -> str:
-    """What the verdict means, in one sentence."""
+def meaning(verdict: str, test: DriftTest, likely: tuple[Likely, ...], missed: Missed | None = None) -> str:
+    """What the verdict means, in one sentence; a ``holds`` says what the samples could miss."""
     p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
     what = ""
     if likely:
         what = "most likely moved: " + "; ".join(item.text() for item in likely) + "; "
-    return MEANINGS[verdict].format(ratio=test.noise_ratio, expected=test.expected_ratio, p=p, likely=what)
+    blind = "" if missed is None else missed.text()
+    return MEANINGS[verdict].format(
+        ratio=test.noise_ratio, expected=test.expected_ratio, p=p, likely=what, missed=blind
+    )
 
 
 def summary(report: VerifyReport) -> str:

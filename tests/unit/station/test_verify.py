@@ -70,6 +70,26 @@ def test_a_fresh_session_of_the_calibrated_cell_holds(cell, capsys):
     assert [ln["id"] for ln in report["lines"]] == [2]
 
 
+def test_what_a_holding_verification_could_miss_is_caught_when_it_happens(cell, capsys, tmp_path):
+    """A verification that holds names the drift it could let pass (the change it catches nine times
+    in ten that moves the tool most); the same cell with a quarter more than that change, measured
+    on the same plan, is caught."""
+    folder, args = cell
+    code, report, out = _verify(folder, args, "fresh.csv", folder / "table.toml", capsys)
+    missed = report["missed"]
+    assert code == 0 and missed["change"] > 0 and missed["workspace_mm"] > 0
+    assert f"could miss a drift moving the tool up to {missed['workspace_mm']:.3f} mm" in out
+    world, rng = World.create(SEED), np.random.default_rng([SEED, 7])
+    plan = verify_design(
+        load_robot(ROBOT), load_setup(configs.path("setups/sim.toml")), n_select=VERIFY_POSES
+    ).plan
+    changed = world.changed({missed["param"]: 1.25 * missed["change"]})
+    q, lines = changed.touch_lines(plan.q_deg, plan.line, rng)
+    changed.measure(q, lines, rng, readings=5).to_csv(tmp_path / "missed.csv")
+    code, report, out = _verify(tmp_path, args, "missed.csv", folder / "table.toml", capsys)
+    assert code == 3 and report["verdict"] == "drifted", out
+
+
 def test_the_cell_after_a_bent_link_drifts_and_names_it(cell, capsys):
     folder, args = cell
     code, report, out = _verify(folder, args, "changed.csv", folder / "table.toml", capsys)
