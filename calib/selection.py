@@ -63,6 +63,24 @@ series D's J3 first harmonic (-5.9 % blocked error) falls short."""
 HARM_SIGMAS = 2.0
 """A prior group is harmful when it raises the mean squared blocked cross-validated error by more
 than this many standard errors of the paired row differences."""
+UNDETERMINED = (
+    "it cuts the blocked cross-validated error by {gain:.1%}, but the data do not determine its "
+    "values (p {p:.2g}; five sigma for the best of {m} groups screened needs p below {need:.1e})"
+)
+"""Why a harmonic that earned its cut was left (``CandidateScore.reason``); the screen ends there."""
+SCREEN_ENDED = (
+    "it cuts the blocked cross-validated error by {gain:.1%}, but the screen ended at {best}, which "
+    "cut more and was not determined"
+)
+
+
+def _left_because(undetermined: str | None, is_best: bool, gain: float, min_gain: float, best: str):
+    """A screened group's reason when the round's best earned its cut but was not determined."""
+    if undetermined is None:
+        return None
+    if is_best:
+        return undetermined
+    return SCREEN_ENDED.format(gain=gain, best=best) if gain >= min_gain else None
 
 
 def kfold(placements: np.ndarray, k: int = FOLDS) -> list[np.ndarray]:
@@ -428,16 +446,27 @@ def select_terms(
         score = {g.label: rms(screened_errors(base, cal, _terms(pool, kept + [g]), folds)) for g in left}
         best = min(left, key=lambda g: score[g.label])
         accept = score[best.label] <= (1.0 - min_gain) * current
+        why = None
         if accept:  # the screen's pick, refitted from the nominal robot, must still earn its place
             wide = model.with_terms(_terms(pool, kept + [best]))
             err, refit = cross_validated_errors(wide, folds, options)
             score[best.label] = rms(err)
             # the best of len(left) screened: its p must pass for all of them (Bonferroni)
-            determined = determined_p(wide, refit, len(best.terms)) <= DISCOVERY_P / len(left)
-            accept = determined and score[best.label] <= (1.0 - min_gain) * current
+            p, need = determined_p(wide, refit, len(best.terms)), DISCOVERY_P / len(left)
+            earns = score[best.label] <= (1.0 - min_gain) * current
+            accept = earns and p <= need
+            if earns and not accept:
+                why = UNDETERMINED.format(gain=1.0 - score[best.label] / current, p=p, need=need, m=len(left))
         rnd = table[-1].round + 1
         table += [
-            CandidateScore(rnd, g.label, score[g.label], 1.0 - score[g.label] / current, accept and g is best)
+            CandidateScore(
+                rnd,
+                g.label,
+                score[g.label],
+                1.0 - score[g.label] / current,
+                accept and g is best,
+                _left_because(why, g is best, 1.0 - score[g.label] / current, min_gain, best.label),
+            )
             for g in left
         ]
         if not accept:
