@@ -48,11 +48,13 @@ from calib.joint_terms import (  # noqa: E402
     LinkMasses,
     gravity_torques,
 )
-from calib.kinematics import N_DH, base_from_frames, dh_table  # noqa: E402
+from calib.kinematics import N_DH, base_from_frames, dh_table, tcp_position  # noqa: E402
 from calib.position import N_SETUP, PositionModel, register  # noqa: E402
 from station.formats.tables import Payload, load_robot  # noqa: E402
 from station.jobs.calibration import calibrate_samples  # noqa: E402
 
+SPECTRUM_ORDERS = range(1, 41)
+"""Orders (cycles per joint turn) of the residual's spectrum (``--spectrum``)."""
 LOST_MOTION_PRIOR_URAD = 300.0
 """A strain-wave gear's lost motion, 1 sigma [urad]: about one arc minute."""
 BETA_PRIOR_URAD = 2000.0
@@ -112,6 +114,13 @@ class Deflection:
     basis: Callable[[Arm], np.ndarray] | None = None
     rotation: Callable[[Arm], np.ndarray] | None = None
     pivot: Callable[[Arm], np.ndarray] | None = None
+    shift: Callable[[Arm], np.ndarray] | None = None
+
+    def field(self, arm: Arm, p: np.ndarray) -> np.ndarray:
+        """What one unit of the candidate moves the TCPs ``p`` (N, 3) by [mm], base frame."""
+        if self.shift is not None:
+            return self.shift(arm)
+        return np.cross(self.rotation(arm), p - self.pivot(arm))
 
 
 class CandidateTerms(JointTerms):
@@ -142,8 +151,7 @@ class CandidateTerms(JointTerms):
         if rotations:
             arm, p = Arm(self.dh, q, self.links), p.copy()
             for k in rotations:
-                d = self.extra[k - len(self.base)]
-                jac_terms[:, :, k] = np.cross(d.rotation(arm), p - d.pivot(arm))
+                jac_terms[:, :, k] = self.extra[k - len(self.base)].field(arm, p)
             p += np.einsum("nik,k->ni", jac_terms[:, :, rotations], c[rotations])
         return p, jac_table, jac_terms
 
@@ -223,9 +231,16 @@ def _beta(joint: int) -> Deflection:
     )
 
 
-def _harmonic(joint: int, fun, name: str) -> Deflection:
-    return _joint(
-        f"J{joint + 1} {name}1 [rad]", joint, lambda arm: fun(arm.q[:, joint]), np.radians(HARMONIC_PRIOR_DEG)
+def _harmonic(joint: int, order: int) -> tuple[Deflection, Deflection]:
+    """Joint ``joint``'s angle error repeating ``order`` times a turn (sine and cosine)."""
+    return tuple(
+        _joint(
+            f"J{joint + 1} {name}{order} [rad]",
+            joint,
+            lambda arm, fun=fun: fun(order * arm.q[:, joint]),
+            np.radians(HARMONIC_PRIOR_DEG),
+        )
+        for fun, name in ((np.sin, "sin"), (np.cos, "cos"))
     )
 
 
@@ -248,9 +263,8 @@ CANDIDATES: dict[str, tuple[Deflection, ...]] = {
         _joint("J2 own link [urad/(N m)]", 1, lambda arm: MICRO * arm.own_torque(1), COMPLIANCE_PRIOR),
     ),
     "J2, J3 beta (non-parallel axes)": (_beta(1), _beta(2)),
-    "J2, J3 first harmonic (encoder eccentricity)": tuple(
-        _harmonic(j, fun, name) for j in (1, 2) for fun, name in ((np.sin, "sin"), (np.cos, "cos"))
-    ),
+    "J2, J3 first harmonic (encoder eccentricity)": _harmonic(1, 1) + _harmonic(2, 1),
+    "J2, J3 17th harmonic (order picked from every series' spectrum)": _harmonic(1, 17) + _harmonic(2, 17),
 }
 
 
@@ -325,12 +339,50 @@ def held_compliance_rows(data: Path, train_name: str, robot, held_values: dict[s
     return rows
 
 
+def residual_spectrum(data: Path, name: str, robot, joint: int) -> list[tuple[int, float, float, float]]:
+    """Per order k in ``SPECTRUM_ORDERS``: the share of ``--model compliance``'s residual on series
+    ``name`` (its part the identified unknowns cannot take) that an angle error ``a sin(k q) +
+    b cos(k q)`` of joint ``joint`` takes alone, its amplitude [arcsec] and phase ``atan2(b, a)``
+    [deg]."""
+    outcome = calibrate_samples(position_set(load(data, name)), robot, None, terms="compliance")
+    model, cal = outcome.model, outcome.calibration
+    r, jac = model.residuals_and_jacobian(cal.x)
+    basis, _ = np.linalg.qr(jac[:, cal.identified])
+    left = r - basis @ (basis.T @ r)
+    q = model.joints(cal.x)
+    frames = base_from_frames(model.dh(cal.x), q)
+    p = tcp_position(model.dh(cal.x), q, model.probe(cal.x))
+    rot, _ = model.tracker_from_base(cal.x)
+    turn = np.cross(frames[:, joint, :3, 2], p - frames[:, joint, :3, 3]) @ rot.T / model.sigma
+    out = []
+    for k in SPECTRUM_ORDERS:
+        waves = [fun(k * model.samples.q[:, joint]) for fun in (np.sin, np.cos)]
+        cols = np.column_stack([(turn * w[:, None]).ravel() for w in waves])
+        cols -= basis @ (basis.T @ cols)
+        (a, b), *_ = np.linalg.lstsq(cols, left, rcond=None)
+        share = 1.0 - np.sum((left - cols @ [a, b]) ** 2) / np.sum(left**2)
+        out.append(
+            (k, float(share), float(np.degrees(np.hypot(a, b)) * 3600), float(np.degrees(np.arctan2(b, a))))
+        )
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", type=Path, required=True, help="the ipa-robot-accuracy folder")
     p.add_argument("--train", nargs="+", default=sorted(SERIES), choices=sorted(SERIES))
+    p.add_argument("--spectrum", action="store_true", help="only the residual's spectrum in J1-J3's angles")
     args = p.parse_args(argv)
     robot = load_robot(ROOT / "configs/robots/ur10.toml")
+    if args.spectrum:
+        for name in args.train:
+            for joint in range(3):
+                top = sorted(residual_spectrum(args.data, name, robot, joint), key=lambda t: -t[1])[:5]
+                text = "; ".join(
+                    f'{k}: {share:.1%}, {amp:.0f}" at {phase:.0f} deg' for k, share, amp, phase in top
+                )
+                print(f"{name} J{joint + 1}, orders taking most of the residual: {text}", flush=True)
+        return 0
     results, held_values = {}, {}
     for name in args.train:
         results[name] = run_train(args.data, name, robot, held_values)
