@@ -21,7 +21,13 @@ Two more rows are not model terms: a probe's mass added to the arm's (a payload)
 compliances held at another series' values (which the benchmark may not do: it uses held-out data)
 to show how much of C's failure is its compliance estimate.
 
-Usage: ``python benchmarks/ipa_ur10_candidates.py --data DIR [--train A B C D]``
+``--spectrum`` prints, per series, the orders (cycles per turn) of J1-J3's angle error that take most
+of the compliance model's residual; ``--own-frequency LO HI`` trains each series with J2's and J3's
+cyclic error at the frequencies where its own residual's spectrum peaks in [LO, HI] (the other
+series never looked at) and prints the held-out figures.
+
+Usage: ``python benchmarks/ipa_ur10_candidates.py --data DIR [--train A B C D] [--spectrum |
+--own-frequency LO HI]``
 """
 
 from __future__ import annotations
@@ -231,11 +237,11 @@ def _beta(joint: int) -> Deflection:
     )
 
 
-def _harmonic(joint: int, order: int) -> tuple[Deflection, Deflection]:
+def _harmonic(joint: int, order: float) -> tuple[Deflection, Deflection]:
     """Joint ``joint``'s angle error repeating ``order`` times a turn (sine and cosine)."""
     return tuple(
         _joint(
-            f"J{joint + 1} {name}{order} [rad]",
+            f"J{joint + 1} {name}{order:g} [rad]",
             joint,
             lambda arm, fun=fun: fun(order * arm.q[:, joint]),
             np.radians(HARMONIC_PRIOR_DEG),
@@ -339,12 +345,11 @@ def held_compliance_rows(data: Path, train_name: str, robot, held_values: dict[s
     return rows
 
 
-def residual_spectrum(data: Path, name: str, robot, joint: int) -> list[tuple[int, float, float, float]]:
-    """Per order k in ``SPECTRUM_ORDERS``: the share of ``--model compliance``'s residual on series
-    ``name`` (its part the identified unknowns cannot take) that an angle error ``a sin(k q) +
+def residual_spectrum(outcome, joint: int, orders) -> list[tuple[float, float, float, float]]:
+    """Per order k of ``orders`` (cycles per turn): the share of the calibration ``outcome``'s
+    residual (its part the identified unknowns cannot take) that an angle error ``a sin(k q) +
     b cos(k q)`` of joint ``joint`` takes alone, its amplitude [arcsec] and phase ``atan2(b, a)``
     [deg]."""
-    outcome = calibrate_samples(position_set(load(data, name)), robot, None, terms="compliance")
     model, cal = outcome.model, outcome.calibration
     r, jac = model.residuals_and_jacobian(cal.x)
     basis, _ = np.linalg.qr(jac[:, cal.identified])
@@ -355,7 +360,7 @@ def residual_spectrum(data: Path, name: str, robot, joint: int) -> list[tuple[in
     rot, _ = model.tracker_from_base(cal.x)
     turn = np.cross(frames[:, joint, :3, 2], p - frames[:, joint, :3, 3]) @ rot.T / model.sigma
     out = []
-    for k in SPECTRUM_ORDERS:
+    for k in orders:
         waves = [fun(k * model.samples.q[:, joint]) for fun in (np.sin, np.cos)]
         cols = np.column_stack([(turn * w[:, None]).ravel() for w in waves])
         cols -= basis @ (basis.T @ cols)
@@ -367,17 +372,51 @@ def residual_spectrum(data: Path, name: str, robot, joint: int) -> list[tuple[in
     return out
 
 
+def own_frequency(data: Path, train_name: str, robot, band: tuple[float, float]) -> tuple[list[float], float]:
+    """Train on ``train_name`` with J2's and J3's cyclic error at the frequencies [cycles per turn]
+    where the training residual's spectrum peaks within ``band`` (steps of 0.1; nothing else looked
+    at): those frequencies and the pooled held-out RMSE [mm] on the other series."""
+    train = load(data, train_name)
+    tests = {n: load(data, n) for n in sorted(SERIES) if n != train_name}
+    outcome = calibrate_samples(position_set(train), robot, None, terms="compliance")
+    grid = np.arange(band[0], band[1] + 1e-9, 0.1)
+    freqs = [max(residual_spectrum(outcome, j, grid), key=lambda t: t[1])[0] for j in (1, 2)]
+    base = outcome.model
+    terms = CandidateTerms(base.terms, _harmonic(1, freqs[0]) + _harmonic(2, freqs[1]))
+    model = CandidateModel(base.samples, base.dh0, base.probe0, base.reference, base.sigma, terms)
+    cal = calibrate(model, CalibrationOptions())
+    return [float(f) for f in freqs], pooled_rmse(held_out(tests, terms, base.dh0, cal.x))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", type=Path, required=True, help="the ipa-robot-accuracy folder")
     p.add_argument("--train", nargs="+", default=sorted(SERIES), choices=sorted(SERIES))
     p.add_argument("--spectrum", action="store_true", help="only the residual's spectrum in J1-J3's angles")
+    p.add_argument(
+        "--own-frequency",
+        nargs=2,
+        type=float,
+        metavar=("LO", "HI"),
+        help="only: J2's and J3's cyclic error at the training series' own spectral peak in [LO, HI]",
+    )
     args = p.parse_args(argv)
     robot = load_robot(ROOT / "configs/robots/ur10.toml")
+    if args.own_frequency:
+        figures = []
+        for name in args.train:
+            freqs, rmse = own_frequency(args.data, name, robot, tuple(args.own_frequency))
+            figures.append(rmse)
+            print(
+                f"train {name}: J2 {freqs[0]:.1f}, J3 {freqs[1]:.1f} cycles per turn: {rmse:.3f}", flush=True
+            )
+        print(f"mean {np.mean(figures):.3f}")
+        return 0
     if args.spectrum:
         for name in args.train:
+            outcome = calibrate_samples(position_set(load(args.data, name)), robot, None, terms="compliance")
             for joint in range(3):
-                top = sorted(residual_spectrum(args.data, name, robot, joint), key=lambda t: -t[1])[:5]
+                top = sorted(residual_spectrum(outcome, joint, SPECTRUM_ORDERS), key=lambda t: -t[1])[:5]
                 text = "; ".join(
                     f'{k}: {share:.1%}, {amp:.0f}" at {phase:.0f} deg' for k, share, amp, phase in top
                 )
