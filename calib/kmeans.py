@@ -1,5 +1,5 @@
 """k-means clustering, label for label what ``scipy.cluster.vq.kmeans2(data, k, minit="++",
-rng=rng)`` returns, without importing ``scipy.cluster``: that pulls in ``scipy.spatial`` and
+rng=rng)`` returns, in numpy alone: ``scipy.cluster`` pulls in ``scipy.spatial`` and
 ``scipy.special``, about 0.1 s of a ``station calibrate`` that needs k-means only for its
 cross-validation's regions (``calib.selection.region_folds``).
 
@@ -7,13 +7,16 @@ The same arithmetic in the same order as scipy 1.17's ``_kpp``, ``_vq.vq`` and
 ``_vq.update_cluster_means``, so the same floating-point results and the same random draws: a
 k-means++ start (one ``rng.integers`` for the first centre, one ``rng.uniform`` per further one,
 drawn against the cumulated squared distances), then a fixed 10 Lloyd iterations (kmeans2 never
-stops early), an empty cluster keeping its previous centre.
+stops early), an empty cluster keeping its previous centre. From 5 features on scipy takes the
+products of rows and centres from BLAS (``dgemm``); numpy's ``matmul`` gives the same bits for 2
+or more centres with the wheels this project installs (numpy's OpenBLAS 0.3.31, scipy's 0.3.30;
+``tests/unit/calib/test_kmeans.py`` compares the products, and labels that only this rounding
+decides).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.blas import dgemm
 
 ITERATIONS = 10
 """Lloyd iterations: kmeans2's default ``iter``, all run."""
@@ -51,8 +54,8 @@ def _nearest(data: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """The index of each row's nearest centre (the first of equals)."""
     if data.shape[1] < _BLAS_FEATURES:
         d2 = _sum_of_squares(centres[None, :, :] - data[:, None, :])
-    else:  # |x|^2 + |c|^2 - 2 x.c, the product by the same BLAS call as scipy's
-        cross = dgemm(-2.0, centres.T, data.T, trans_a=1).T
+    else:  # |x|^2 + |c|^2 - 2 x.c, the product through BLAS as scipy's
+        cross = -2.0 * (data @ centres.T)
         d2 = (cross + _sum_of_squares(data)[:, None]) + _sum_of_squares(centres)[None, :]
     return np.argmin(d2, axis=1)
 

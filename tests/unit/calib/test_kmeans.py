@@ -54,6 +54,17 @@ def test_an_emptied_cluster_and_rounding_ties_as_scipys():
         np.testing.assert_array_equal(ours(data, 3, 67877)[0], want)
 
 
+def test_the_products_are_scipys_blas_products():
+    # scipy's vq: -2 x.c by dgemm (from 5 features on); ours by numpy's matmul: the same bits
+    from scipy.linalg.blas import dgemm
+
+    g = np.random.default_rng(0)
+    for _ in range(300):
+        n, features, k = int(g.integers(2, 2000)), int(g.integers(5, 10)), int(g.integers(2, 9))
+        data, centres = g.normal(size=(n, features)) * g.exponential(), g.normal(size=(k, features))
+        np.testing.assert_array_equal(-2.0 * (data @ centres.T), dgemm(-2.0, centres.T, data.T, trans_a=1).T)
+
+
 def test_region_folds_of_a_session_are_kmeans2s():
     rng = np.random.default_rng(5)
     q = np.concatenate([rng.normal(c, 0.05, size=(70, 6)) for c in (-1.0, 0.0, 0.8)])
