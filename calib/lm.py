@@ -10,8 +10,9 @@ problem (weights ``w_i = sqrt(rho'(z_i))``)::
     (J^T W^2 J + mu D^2) dx = -J^T W^2 r,     D = diag(max column norms of W J seen so far)
 
 by numpy's LU solve (``scipy.linalg``'s Cholesky would cost a command 0.2 s of import for a
-system of a few dozen unknowns, symmetric positive definite: both are backward stable; the
-calibrations agree to about 1e-13 relative), and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
+symmetric positive definite system of a few dozen unknowns; both are backward stable, and the
+calibrations agree to about 1e-13 relative, or to the stop tolerances where the rounding moves the
+stop by an iteration), and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
 ``damping_update``: Nielsen's rule): ``mu *= max(1/3, 1 - (2 gain - 1)^3)`` on success, else
 ``mu *= nu``, ``nu *= 2``.
 
