@@ -14,7 +14,11 @@
   ``--process-repeats`` runs each, interleaved so that the machine's load hits all alike, after an
   untimed run that leaves the byte-code cached); ``--process-only`` runs this part alone. The
   target (issue 26): ``station calibrate`` within 1.4x the bare import, by importing only what the
-  command uses (no scipy.optimize, no scipy.special on the default path).
+  command uses (no scipy module at all on the default path: ``calib.kmeans``, numpy's solve in
+  the LM step, ``calib.special``'s chi-square tails). The environment is passed on as it is: the
+  station sets one BLAS thread for itself (``station.cli.BLAS_THREADS``), the bare import keeps
+  OpenBLAS's default, whose threads cost it time on a loaded machine; run it again with
+  ``OPENBLAS_NUM_THREADS=1`` to compare both at one thread.
 """
 
 from __future__ import annotations

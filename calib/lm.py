@@ -9,7 +9,10 @@ problem (weights ``w_i = sqrt(rho'(z_i))``)::
 
     (J^T W^2 J + mu D^2) dx = -J^T W^2 r,     D = diag(max column norms of W J seen so far)
 
-by a Cholesky factorisation, and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
+by numpy's LU solve (``scipy.linalg``'s Cholesky would cost a command 0.2 s of import for a
+symmetric positive definite system of a few dozen unknowns; both are backward stable, and the
+calibrations agree to about 1e-13 relative, or to the stop tolerances where the rounding moves the
+stop by an iteration), and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
 ``damping_update``: Nielsen's rule): ``mu *= max(1/3, 1 - (2 gain - 1)^3)`` on success, else
 ``mu *= nu``, ``nu *= 2``.
 
@@ -33,7 +36,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
 
 TERMINATION_MESSAGES = {
     -1: "no step reduces the cost: the minimum is reached to machine precision",
@@ -336,10 +338,9 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
 
 
 def _damped_step(hess: np.ndarray, grad: np.ndarray, mu: float) -> np.ndarray:
-    """Solve ``(H + mu I) dx = -g`` for the column-scaled Gauss-Newton matrix ``H`` (Cholesky)."""
+    """Solve ``(H + mu I) dx = -g`` for the column-scaled Gauss-Newton matrix ``H``."""
     n = hess.shape[0]
-    factor = cho_factor(hess + mu * np.eye(n) + 1e-12 * np.trace(hess) / n * np.eye(n))
-    return -cho_solve(factor, grad)
+    return -np.linalg.solve(hess + mu * np.eye(n) + 1e-12 * np.trace(hess) / n * np.eye(n), grad)
 
 
 # -- input checks: once, at entry; the solver trusts what passes -----------------------------------

@@ -39,10 +39,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.cluster.vq import kmeans2
 
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate
 from calib.joint_terms import COMPLIANCE_PRIOR, JointTerms, TermGroup
+from calib.kmeans import kmeans_labels
 from calib.models import MeasurementModel
 from calib.special import gammaincc
 
@@ -109,8 +109,9 @@ def kfold(placements: np.ndarray, k: int = FOLDS) -> list[np.ndarray]:
 def region_folds(q: np.ndarray, k: int = FOLDS) -> list[np.ndarray]:
     """Rows grouped into ``k`` regions of joint space (fewer if a cluster comes out empty).
 
-    k-means (k-means++ start, fixed seed: the same rows give the same folds) on the cosine and
-    sine of the first ``REGION_JOINTS`` joint angles, each column scaled to unit variance.
+    k-means (k-means++ start, fixed seed: the same rows give the same folds; ``calib.kmeans``,
+    scipy's ``kmeans2`` label for label) on the cosine and sine of the first ``REGION_JOINTS``
+    joint angles, each column scaled to unit variance.
 
     Parameters
     ----------
@@ -131,7 +132,7 @@ def region_folds(q: np.ndarray, k: int = FOLDS) -> list[np.ndarray]:
     k = min(k, len(np.unique(f.round(9), axis=0)))  # no more regions than distinct poses
     if k < 2:
         return [np.arange(len(q))]
-    _, label = kmeans2(f, k, minit="++", rng=np.random.default_rng(0))
+    label = kmeans_labels(f, k, np.random.default_rng(0))
     return [np.flatnonzero(label == c) for c in range(k) if np.any(label == c)]
 
 

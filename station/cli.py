@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 from pathlib import Path
@@ -68,7 +69,17 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+"""Set to 1 unless the environment sets them: the station's matrices are a few dozen unknowns
+wide, and OpenBLAS threads spin waiting for a core that another process holds (the capture, the
+viewer: on a loaded 2-core machine ``station calibrate`` on 210 samples took 1.7 s with them, 0.6 s
+without, ``benchmarks/calibrate_speed.py``). Set ``OPENBLAS_NUM_THREADS`` for sets of millions of
+rows on an idle machine."""
+
+
 def main(argv: list[str] | None = None) -> int:
+    for key in BLAS_THREADS:  # before numpy is imported: the commands import it in ``run``
+        os.environ.setdefault(key, "1")
     parser = build_parser()
     args = parser.parse_args(argv)
     # a path with bytes that are not UTF-8 (a folder named on another system) prints as it is named

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes
-from calib.calibrate import DOWNWEIGHTED_BELOW, Calibration, CalibrationOptions, calibrate
+from calib.calibrate import DOWNWEIGHTED_BELOW, Calibration, CalibrationOptions, WithPrior, robust_steps
 from calib.consistency import DialGain, dial_gain
 from calib.kinematics import dh_table
 from calib.models import GROUP_LENGTH, MeasurementModel
@@ -25,6 +25,14 @@ disagrees: this much, or this many of the gain's standard errors where it is kno
 rows, readings that hardly spread)."""
 DIAL_GAIN_FOLLOWS = 0.5
 """A gain shorter than this: the dial does not read the tool's distance from the edge at all."""
+DIAL_FREE_STEPS = 4
+"""Robust Gauss-Newton steps from the calibration to the dial-free one (``line_dials``): each cuts
+the distance to a full dial-free calibration's TCPs about fivefold (a flipped dial: 1.8 mm at the
+start, 0.002 mm after 4, the stated line noise 0.01 mm). On 128 simulated cells (1-3 lines, clean
+or 3 % gross; a flipped, another or a shuffled dial) each line's gain came within 0.015 of its
+standard error of the full refit's (0.9 where the readings ran along another axis, a verdict many
+standard errors clear; at most 0.041 mm/mm against the tolerance's 0.3), every verdict the same,
+at 5 ms instead of 65 ms."""
 DOWNWEIGHTED_FINDING = 0.05
 """Down-weighted rows beyond this fraction of all, or most rows of one line, are a finding."""
 
@@ -61,7 +69,7 @@ def findings(model: MeasurementModel, cal: Calibration, weights: np.ndarray) -> 
     warnings = downweighted(model, cal, weights)
     if model.kind != "drawstring":
         return Findings(tuple(warnings))
-    dials = line_dials(model)
+    dials = line_dials(model, cal)
     refusal = next((_dial_text(d) for d in dials if d.verdict not in ("agrees", "inconclusive")), None)
     unread = unread_lines(model)
     lost = [lid for lid in unread if model.setup_values.dial_axis_of(lid) is not None]
@@ -76,16 +84,19 @@ def dial_mode(found: Findings, model: MeasurementModel) -> str | None:
 
 
 # -- the dial ------------------------------------------------------------------------------------
-def line_dials(model) -> list[LineDial]:
+def line_dials(model, cal: Calibration) -> list[LineDial]:
     """Each line with a stated dial axis and readings, judged by the gain its readings show on
-    the TCPs of a fit that does not use them (the dial-free refit)."""
+    the TCPs of a fit that does not use them: the calibration ``cal`` of ``model`` moved to the
+    rows without their dial readings by ``DIAL_FREE_STEPS`` robust Gauss-Newton steps (the same
+    robust cost as a refit's, from next to its optimum: a wrong dial moves the solution by a
+    fraction of a millimetre, over which the model is linear)."""
     axis_of = model.setup_values.dial_axis_of
     judged = [lid for lid in model.line_ids if _read(model, lid).any() and axis_of(lid) is not None]
     if not judged:
         return []
     samples = model.samples
     free = model.with_samples(dataclasses.replace(samples, dial=np.full(len(samples), np.nan)))
-    x = calibrate(free, CalibrationOptions()).x
+    x = robust_steps(WithPrior(free, free.x0), cal.x, cal.identified, DIAL_FREE_STEPS, CalibrationOptions())
     tcp = model.tcp(x)
     out = []
     for lid in judged:

@@ -65,3 +65,17 @@ def test_version_through_the_console_script():
     )
     assert proc.returncode == 0 and proc.stderr == ""
     assert re.fullmatch(r"station \d+\.\d+\.\d+\S*\n", proc.stdout)
+
+
+def test_calibrate_with_the_default_model_imports_no_scipy(three_lines, tmp_path):
+    # issue 26: scipy.linalg alone costs about 0.2 s of import, scipy.cluster and scipy.special more;
+    # the default calibration (k-means folds, LM steps, chi-square tails) needs none of them
+    code = (
+        "import json, sys; from station.cli import main\n"
+        f"code = main(['calibrate', {str(three_lines.samples)!r}, '--robot', {str(three_lines.robot)!r}, "
+        f"'--setup', {str(three_lines.setup)!r}, '--out', {str(tmp_path / 'c.toml')!r}, '--no-history'])\n"
+        "print(json.dumps([code, sorted({m.split('.')[0] for m in sys.modules if m.startswith('scipy')})]))"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout.splitlines()[-1]) == [0, []]

@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 
 import configs
-from calib.calibrate import CalibrationOptions, robust_weights
+from calib.calibrate import CalibrationOptions, WithPrior, calibrate, robust_steps, robust_weights
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
 from sim_fixtures.scenario import setup_dict, write_scenario
@@ -78,6 +78,30 @@ def test_dial_readings_that_do_not_follow_the_tool_are_refused(three_lines, tmp_
     check = outcome.report.fit_check
     assert [d.verdict for d in check.dial_lines] == ["agrees", "agrees", "does not follow"]
     assert "line 2's dial readings do not follow the tool's distance from the edge" in check.refusal
+
+
+def test_the_dial_free_tcps_are_those_of_a_dial_free_refit(three_lines):
+    # line 0's dial flipped pulls the calibration ~2 mm off the dial-free one; the robust steps
+    # line_dials takes from there must land on the refit's TCPs to well under the line noise
+    setup = load_setup(three_lines.setup)
+    flip = [
+        ln.model_copy(update={"dial_axis": [-v for v in ln.dial_axis]}) if ln.id == 0 else ln
+        for ln in setup.lines
+    ]
+    model = calibration.build_model(
+        load_samples(three_lines.samples),
+        load_robot(three_lines.robot),
+        setup.model_copy(update={"lines": flip}),
+        "",
+    )
+    cal = calibrate(model, CalibrationOptions())
+    free = model.with_samples(dataclasses.replace(model.samples, dial=np.full(len(model.samples), np.nan)))
+    refit = model.tcp(calibrate(free, CalibrationOptions()).x)
+    x = robust_steps(
+        WithPrior(free, free.x0), cal.x, cal.identified, absorbed.DIAL_FREE_STEPS, CalibrationOptions()
+    )
+    assert np.abs(model.tcp(cal.x) - refit).max() > 50 * setup.line_sigma_mm
+    assert np.abs(model.tcp(x) - refit).max() < 0.5 * setup.line_sigma_mm
 
 
 def test_a_dial_less_cells_95_percent_bound_covers_its_true_error_over_seeds():

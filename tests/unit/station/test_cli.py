@@ -2,6 +2,7 @@
 ``--version`` names the installed package's version."""
 
 import argparse
+import os
 from importlib.metadata import version
 
 import pytest
@@ -48,3 +49,14 @@ def test_version_prints_the_installed_package_version(capsys):
     assert done.value.code == 0 and err == ""
     assert out == f"station {version(DISTRIBUTION)}\n"
     assert version(DISTRIBUTION)[0].isdigit()
+
+
+def test_one_blas_thread_unless_the_environment_says_otherwise(monkeypatch, capsys):
+    # set before numpy loads (the commands import it in run): a user's own setting stands
+    for key in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+        monkeypatch.setenv(key, "x")  # recorded, so the test's changes are undone
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS")
+    monkeypatch.setenv("OMP_NUM_THREADS", "4")
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OMP_NUM_THREADS"] == "4"
