@@ -126,6 +126,8 @@ class Driver(abc.ABC):
 
     name: str
     fields: Mapping[str, Field]
+    no_channel: str | None = "a robot connection of this kind has none"
+    """Why :meth:`target_channel` gives None (where it does)."""
 
     @abc.abstractmethod
     def open(self) -> None:

@@ -331,11 +331,13 @@ class SimStation:
         address where ``elsewhere`` and the configured one is taken."""
         started = self.clock.start_monotonic
         try:
-            return RtdeServerProcess(self.robot, self.cfg.robot.host, start_monotonic=started).start()
+            return RtdeServerProcess(
+                self.robot, self.cfg.robot.host, start_monotonic=started, inbox=self.inbox
+            ).start()
         except OSError:
             if not elsewhere:
                 raise
-            return start_on_free_loopback(self.robot, start_monotonic=started)
+            return start_on_free_loopback(self.robot, start_monotonic=started, inbox=self.inbox)
 
     def address(self, name: str) -> dict:
         """Where device ``name`` is served, as printed by ``sim serve``."""

@@ -17,6 +17,11 @@ which says nothing about the reading. Guidance, once per gauge line: the line st
 ``SATURATION_SAMPLES`` samples improved the predicted workspace error by less than
 ``SATURATION_GAIN``; the message names the next placement (the plan's next line, else the
 planner's best new one, else the model's advice).
+
+Corrected targets: after each judged refit the worker also corrects every plan target for the
+model that refit found (``station.jobs.correction``; a job of its own, on the refit the worker
+holds), and the listener's ``corrected`` hears them: the session hands them to a running program
+(``station.acquire.targets``).
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import numpy as np
 from calib.kinematics import base_from_frames, tcp_position, tool_point
 from calib.params import dh_from_degrees
 from station.formats.tables import RobotFile, SetupFile
+from station.jobs.correction import TargetCorrection, correct_targets
 from station.jobs.planning import NextPlacement, next_placement
 from station.jobs.planning import vector_text as _vec
 from station.jobs.running import Refit, SessionSamples, refit
@@ -46,9 +52,12 @@ class FitFailed(Exception):
     """A job the worker could not finish; the message says why."""
 
 
-def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples):
+def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples, held: dict):
     if kind == "refit":
-        return refit(robot, setup, samples)
+        held["refit"] = refit(robot, setup, samples)
+        return held["refit"]
+    if kind == "correct":  # the plan's targets for the last refit (samples: the plan's joints)
+        return correct_targets(robot, held["refit"], samples)
     return next_placement(robot, setup, samples.q_deg, samples.line)
 
 
@@ -56,12 +65,13 @@ def _serve(conn, robot: RobotFile, setup: SetupFile) -> None:
     """The worker process: answer each ``(kind, samples)`` with ``(kind, result)`` until the pipe
     closes; a failed job answers with :class:`FitFailed`. Says ``("ready", None)`` first."""
     _yield_cpu()
+    held: dict = {}  # the last refit, which a correction job corrects the plan for
     try:
         conn.send(("ready", None))
         while True:
             kind, samples = conn.recv()
             try:
-                result = _job(kind, robot, setup, samples)
+                result = _job(kind, robot, setup, samples, held)
             except Exception as exc:  # noqa: BLE001 - reported to the session, which goes on
                 result = FitFailed(f"{type(exc).__name__}: {exc}")
             conn.send((kind, result))
@@ -84,10 +94,11 @@ def _yield_cpu() -> None:
 
 
 class FitWorker:
-    """Jobs (``"refit"``, ``"next"``) on a session's samples in a worker process, one at a time,
-    over the pipe ``conn`` to ``proc`` (:meth:`start` spawns them): :meth:`submit` never waits,
-    :meth:`poll` returns a finished ``(kind, result)`` or None. Once the process is gone (killed,
-    crashed) the worker has ``ended``: never busy, it drops every job."""
+    """Jobs (``"refit"``, ``"next"``; ``"correct"``: the plan's joints for the last refit) on a
+    session's samples in a worker process, one at a time, over the pipe ``conn`` to ``proc``
+    (:meth:`start` spawns them): :meth:`submit` never waits, :meth:`poll` returns a finished
+    ``(kind, result)`` or None. Once the process is gone (killed, crashed) the worker has
+    ``ended``: never busy, it drops every job."""
 
     def __init__(self, conn, proc):
         self._conn, self._proc = conn, proc
@@ -179,17 +190,20 @@ class LiveError:
 @dataclass
 class LiveListener:
     """What the running calibration reports: each ``refit``, ``message(text)`` for the operator,
-    and ``reached(text)`` once the ``until_mm`` goal is met."""
+    ``reached(text)`` once the ``until_mm`` goal is met, and each judged refit's corrected plan
+    targets (``corrected``)."""
 
     refit: Callable[[Refit], None] = lambda r: None
     message: Callable[[str], None] = lambda text: None
     reached: Callable[[str], None] = lambda text: None
+    corrected: Callable[[TargetCorrection], None] = lambda c: None
 
 
 class RunningCalibration:
     """The running calibration of a session on ``robot`` and ``setup`` following a plan with
     gauge lines ``plan_lines`` (M,), refitting with ``worker``; ``until_mm`` is the 95 % workspace
-    bound that ends the session."""
+    bound that ends the session; ``plan_q_deg`` (M, 6) [deg]: the plan's joints, corrected after
+    each judged refit (None: not corrected)."""
 
     def __init__(
         self,
@@ -199,6 +213,7 @@ class RunningCalibration:
         plan_lines: np.ndarray,
         listener: LiveListener | None = None,
         until_mm: float | None = None,
+        plan_q_deg: np.ndarray | None = None,
     ):
         self.robot, self.setup, self.worker = robot, setup, worker
         self.listener = listener or LiveListener()
@@ -214,6 +229,8 @@ class RunningCalibration:
         self.saturated: set[int] = set()
         self.goal_met = False
         self._want_next = False  # a planner suggestion is wanted and not yet started
+        self.plan_q_deg = plan_q_deg
+        self._want_correct = False  # the latest judged refit's corrected targets are wanted
         self._refit_n = 0  # samples in the latest refit started (a failed one is not retried on them)
         self._said_undetermined = False
         self._said_ended = False
@@ -265,6 +282,8 @@ class RunningCalibration:
             self.listener.message(f"running calibration: {kind} failed: {result}")
         elif kind == "next":
             self.listener.message(_next_text(result))
+        elif kind == "correct":
+            self.listener.corrected(result)
         else:
             self._take(result)
             return result
@@ -276,6 +295,9 @@ class RunningCalibration:
         if self._want_next:
             self.worker.submit("next", self.samples)
             self._want_next = False
+        elif self._want_correct:
+            self.worker.submit("correct", self.plan_q_deg)
+            self._want_correct = False
         elif len(self.samples) > self._refit_n:
             self.worker.submit("refit", self.samples)
             self._refit_n = len(self.samples)
@@ -302,6 +324,7 @@ class RunningCalibration:
             return
         if not self.history:
             self.listener.message(f"running calibration: the model is determined by {fit.n} samples")
+        self._want_correct = self.plan_q_deg is not None
         counts = _counts(self.samples.line[: fit.n])
         self.history.append((fit.workspace.predicted_rmse_mm, counts))
         self._saturation(fit, counts)
