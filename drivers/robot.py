@@ -27,9 +27,10 @@ Corrected targets (:meth:`RtdeJointSource.target_channel`): written to RTDE inpu
 ur_rtde's ``RTDEIOInterface`` in its upper range (clear of RTDEControlInterface's and of the lower
 range other programs use), which offers five double and five integer registers, 42 .. 46: joints
 1 .. 5 [rad] in ``input_double_register_42`` .. ``46``, joint 6 [urad] in
-``input_int_register_43``, and the target's index in ``input_int_register_42``, written last
-(``station program``'s URScript takes the joints when the index names its next target, and reads
-the index again after them). A controller that refuses those inputs (another client writes them)
+``input_int_register_43``, and the target's index plus one in ``input_int_register_42`` (0, the
+registers' value at power-on: none; set so when the channel opens), written last (``station
+program``'s URScript takes the joints when the index names its next target, and reads the index
+again after them). A controller that refuses those inputs (another client writes them)
 gives no channel (``no_channel`` says why).
 """
 
@@ -61,7 +62,7 @@ from drivers.modbus import ModbusRegisterDriver
 from drivers.registers import DataType, Encoding, RegisterLayout
 
 RTDE_PORT = 30004
-TARGET_INDEX_INPUT = 42  # input_int_register_42: the corrected target's index (module notes)
+TARGET_INDEX_INPUT = 42  # input_int_register_42: the corrected target's index + 1, 0: none (module notes)
 TARGET_JOINT_INPUTS = (42, 43, 44, 45, 46)  # input_double_register_*: joints 1 .. 5 [rad]
 TARGET_JOINT6_INPUT = 43  # input_int_register_43: joint 6 [urad]
 URAD = 1e6  # joint 6's register counts per radian
@@ -306,11 +307,12 @@ class RtdeTargets:
     def __init__(self, name: str, host: str):
         self.name, self.host = name, host
         self.where = (
-            f"RTDE {host}:{RTDE_PORT} input registers (int {TARGET_INDEX_INPUT}: index, double "
+            f"RTDE {host}:{RTDE_PORT} input registers (int {TARGET_INDEX_INPUT}: index + 1, double "
             f"{TARGET_JOINT_INPUTS[0]}..{TARGET_JOINT_INPUTS[-1]}: joints 1-5 rad, "
             f"int {TARGET_JOINT6_INPUT}: joint 6 urad)"
         )
         self._io = rtde_io.RTDEIOInterface(host, False, True)
+        self._io.setInputIntRegister(TARGET_INDEX_INPUT, 0)  # no target yet (not a previous session's)
 
     def close(self) -> None:
         if self._io.isConnected():
@@ -324,7 +326,7 @@ class RtdeTargets:
                 self._io.setInputDoubleRegister(r, v) for r, v in zip(TARGET_JOINT_INPUTS, q[:5], strict=True)
             )
             ok = ok and self._io.setInputIntRegister(TARGET_JOINT6_INPUT, round(q[5] * URAD))
-            ok = ok and self._io.setInputIntRegister(TARGET_INDEX_INPUT, int(target))
+            ok = ok and self._io.setInputIntRegister(TARGET_INDEX_INPUT, int(target) + 1)
         except RuntimeError as exc:
             raise DeviceUnreachable(
                 self.name, f"RTDE {self.host}:{RTDE_PORT}: writing target {target}: {exc}"

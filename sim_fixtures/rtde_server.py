@@ -316,15 +316,15 @@ class RtdeServer:
                 del self._owners[name]
 
     def set_inputs(self, values: dict[str, object]) -> None:
-        """Inputs a client wrote; writing the target index (>= 0) hands the registered target to
-        the program."""
+        """Inputs a client wrote; writing the target index register (the index + 1; 0: none)
+        hands the registered target to the program."""
         with self._inputs_lock:
             self.inputs.update(values)
             index = f"input_int_register_{TARGET_INDEX_INPUT}"
-            if self.inbox is None or index not in values or int(values[index]) < 0:
+            if self.inbox is None or index not in values or int(values[index]) < 1:
                 return
             q_deg = target_from_inputs(self.inputs)
-        self.inbox(int(values[index]), q_deg)
+        self.inbox(int(values[index]) - 1, q_deg)
 
     def outputs(self, at_monotonic: float) -> dict[str, object]:
         """Modelled output fields at monotonic time ``at_monotonic``."""
