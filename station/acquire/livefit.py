@@ -56,8 +56,8 @@ def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples,
     if kind == "refit":
         held["refit"] = refit(robot, setup, samples)
         return held["refit"]
-    if kind == "correct":  # the plan's targets for the last refit (samples: the plan's joints)
-        return correct_targets(robot, held["refit"], samples)
+    if kind == "correct":  # the plan's targets for the last refit (samples: the plan's joints, lines)
+        return correct_targets(robot, setup, held["refit"], *samples)
     return next_placement(robot, setup, samples.q_deg, samples.line)
 
 
@@ -229,7 +229,7 @@ class RunningCalibration:
         self.saturated: set[int] = set()
         self.goal_met = False
         self._want_next = False  # a planner suggestion is wanted and not yet started
-        self.plan_q_deg = plan_q_deg
+        self.plan_rows = None if plan_q_deg is None else (np.asarray(plan_q_deg), np.asarray(plan_lines))
         self._want_correct = False  # the latest judged refit's corrected targets are wanted
         self._refit_n = 0  # samples in the latest refit started (a failed one is not retried on them)
         self._said_undetermined = False
@@ -296,7 +296,7 @@ class RunningCalibration:
             self.worker.submit("next", self.samples)
             self._want_next = False
         elif self._want_correct:
-            self.worker.submit("correct", self.plan_q_deg)
+            self.worker.submit("correct", self.plan_rows)
             self._want_correct = False
         elif len(self.samples) > self._refit_n:
             self.worker.submit("refit", self.samples)
@@ -324,7 +324,7 @@ class RunningCalibration:
             return
         if not self.history:
             self.listener.message(f"running calibration: the model is determined by {fit.n} samples")
-        self._want_correct = self.plan_q_deg is not None
+        self._want_correct = self.plan_rows is not None
         counts = _counts(self.samples.line[: fit.n])
         self.history.append((fit.workspace.predicted_rmse_mm, counts))
         self._saturation(fit, counts)

@@ -1,11 +1,14 @@
 """Corrected targets during a session: the joints at which the running calibration's model puts the
 TCP on each planned contact pose, so a running program lands the remaining targets on the edge.
 
-The same maths as ``station compensate`` (``calib.compensation.compensate``): a plan row's contact
-pose is the nominal model's TCP pose at its joints (``station plan`` writes the plan's
-``x_mm..rz_deg`` so), and its corrected joints are where the calibrated model reaches that pose,
-found by damped Newton from the planned joints; a row that cannot be corrected (a joint limit, the
-wrist singularity, a large move) keeps its planned joints and is not corrected.
+A plan row's contact pose is the nominal model's TCP pose at its joints (``station plan`` writes the
+plan's ``x_mm..rz_deg`` so), in the frame the setup's lines were measured in. The calibrated model
+lives in a frame of its own, millimetres from that one (``calib.registration``): the fitted lines
+register it, and a target on a line the fit has placed is moved onto that fitted line (across it,
+the tool's orientation kept), a target elsewhere is the contact pose carried over. The corrected
+joints are where the calibrated model reaches that pose, by ``station compensate``'s maths
+(``calib.compensation.compensate``, damped Newton from the planned joints); a row that cannot be
+corrected (a joint limit, the wrist singularity, a large move) keeps its planned joints.
 """
 
 from __future__ import annotations
@@ -15,8 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.compensation import Status, compensate
+from calib.registration import register_lines
 from calib.robot_model import RobotModel
-from station.formats.tables import RobotFile
+from station.formats.tables import RobotFile, SetupFile
 from station.jobs.running import Refit
 
 
@@ -45,8 +49,40 @@ def calibrated_model(robot: RobotFile, fit: Refit) -> RobotModel:
     )
 
 
-def correct_targets(robot: RobotFile, fit: Refit, plan_q_deg: np.ndarray) -> TargetCorrection:
-    """The corrected joints of plan rows ``plan_q_deg`` (M, 6) [deg] written with ``robot``'s
-    nominal model, for the robot as ``fit`` models it (see the module notes)."""
-    comp = compensate(robot.model(), calibrated_model(robot, fit), np.radians(plan_q_deg))
+def fitted_lines(setup: SetupFile, fit: Refit) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """The lines the refit placed (point [mm], unit direction; calibrated frame), by id."""
+    return {lid: fit.model.line(fit.x, lid) for lid in getattr(fit.model, "line_ids", [])}
+
+
+def cell_from_calibrated(setup: SetupFile, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)`` taking the calibrated frame to the setup's (``calib.registration``) through the
+    fitted lines the setup places (``point_mm``, ``direction``); none: the identity."""
+    placed = {ln.id: ln for ln in setup.lines if ln.point_mm is not None and ln.direction is not None}
+    ids = [lid for lid in fitted if lid in placed]
+    if not ids:
+        return np.eye(3), np.zeros(3)
+    return register_lines(
+        np.array([fitted[lid][0] for lid in ids]),
+        np.array([fitted[lid][1] for lid in ids]),
+        np.array([placed[lid].point_mm for lid in ids], float),
+        np.array([placed[lid].direction for lid in ids], float),
+        np.array([placed[lid].length_mm for lid in ids], float),
+    )
+
+
+def correct_targets(
+    robot: RobotFile, setup: SetupFile, fit: Refit, plan_q_deg: np.ndarray, plan_lines: np.ndarray
+) -> TargetCorrection:
+    """The corrected joints of plan rows ``plan_q_deg`` (M, 6) [deg] on lines ``plan_lines`` (M,),
+    written with ``robot``'s nominal model, for the robot as ``fit`` models it (module notes)."""
+    nominal = robot.model()
+    q0 = np.radians(plan_q_deg)
+    p, rot = nominal.tool_frames(q0)  # the contact poses, the setup's frame
+    fitted = fitted_lines(setup, fit)
+    r_cell, t_cell = cell_from_calibrated(setup, fitted)
+    p_cal, rot_cal = (p - t_cell) @ r_cell, np.einsum("ji,njk->nik", r_cell, rot)
+    for lid, (point, direction) in fitted.items():  # onto the line the fit placed
+        rows = np.asarray(plan_lines) == lid
+        p_cal[rows] = point + np.outer((p_cal[rows] - point) @ direction, direction)
+    comp = compensate(nominal, calibrated_model(robot, fit), q0, meant=(p_cal, rot_cal))
     return TargetCorrection(fit.n, np.degrees(comp.q), comp.status == Status.OK, comp.shift)
