@@ -353,7 +353,10 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
             live.drain(FINAL_FIT_S, lambda: session.stop_requested)  # a signal now ends the wait
         if corrected := set(live.corrected_targets()):
             taken = sum(int(row["target"]) in corrected for row in inputs.folder.rows)
-            progress.message(f"{taken} samples measured at corrected targets ({len(corrected)} sent)")
+            progress.message(
+                f"corrected targets: {len(corrected)} sent before the program moved there, {taken} of "
+                "them measured (session.toml corrected_targets)"
+            )
         return state
     finally:
         for s, handler in previous.items():
