@@ -18,15 +18,16 @@ which says nothing about the reading. Guidance, once per gauge line: the line st
 ``SATURATION_GAIN``; the message names the next placement (the plan's next line, else the
 planner's best new one, else the model's advice).
 
-Corrected targets: after each judged refit the worker also corrects every plan target for the
-model that refit found (``station.jobs.correction``; a job of its own, on the refit the worker
-holds), and the listener's ``corrected`` hears them: the session hands them to a running program
-(``station.acquire.targets``).
+Corrected targets: a worker started with the plan's rows corrects every plan target for the model
+of each judged refit, in the same job (``station.jobs.correction``, milliseconds; a job of its own
+would cost a round trip between refits), and the listener's ``corrected`` hears them: the session
+hands them to a running program (``station.acquire.targets``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import multiprocessing
 import os
 from collections.abc import Callable
@@ -52,26 +53,26 @@ class FitFailed(Exception):
     """A job the worker could not finish; the message says why."""
 
 
-def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples, held: dict):
+def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples, plan_rows):
     if kind == "refit":
-        held["refit"] = refit(robot, setup, samples)
-        return held["refit"]
-    if kind == "correct":  # the plan's targets for the last refit (samples: the plan's joints, lines)
-        return correct_targets(robot, setup, held["refit"], *samples)
+        fit = refit(robot, setup, samples)
+        if plan_rows is None or not fit.judged:
+            return fit
+        return dataclasses.replace(fit, targets=correct_targets(robot, setup, fit, *plan_rows))
     return next_placement(robot, setup, samples.q_deg, samples.line)
 
 
-def _serve(conn, robot: RobotFile, setup: SetupFile) -> None:
+def _serve(conn, robot: RobotFile, setup: SetupFile, plan_rows=None) -> None:
     """The worker process: answer each ``(kind, samples)`` with ``(kind, result)`` until the pipe
-    closes; a failed job answers with :class:`FitFailed`. Says ``("ready", None)`` first."""
+    closes; a failed job answers with :class:`FitFailed`. Says ``("ready", None)`` first.
+    ``plan_rows``: the plan's joints (M, 6) [deg] and lines (M,), corrected with each judged refit."""
     _yield_cpu()
-    held: dict = {}  # the last refit, which a correction job corrects the plan for
     try:
         conn.send(("ready", None))
         while True:
             kind, samples = conn.recv()
             try:
-                result = _job(kind, robot, setup, samples, held)
+                result = _job(kind, robot, setup, samples, plan_rows)
             except Exception as exc:  # noqa: BLE001 - reported to the session, which goes on
                 result = FitFailed(f"{type(exc).__name__}: {exc}")
             conn.send((kind, result))
@@ -94,11 +95,10 @@ def _yield_cpu() -> None:
 
 
 class FitWorker:
-    """Jobs (``"refit"``, ``"next"``; ``"correct"``: the plan's joints for the last refit) on a
-    session's samples in a worker process, one at a time, over the pipe ``conn`` to ``proc``
-    (:meth:`start` spawns them): :meth:`submit` never waits, :meth:`poll` returns a finished
-    ``(kind, result)`` or None. Once the process is gone (killed, crashed) the worker has
-    ``ended``: never busy, it drops every job."""
+    """Jobs (``"refit"``, ``"next"``) on a session's samples in a worker process, one at a time,
+    over the pipe ``conn`` to ``proc`` (:meth:`start` spawns them): :meth:`submit` never waits,
+    :meth:`poll` returns a finished ``(kind, result)`` or None. Once the process is gone (killed,
+    crashed) the worker has ``ended``: never busy, it drops every job."""
 
     def __init__(self, conn, proc):
         self._conn, self._proc = conn, proc
@@ -106,10 +106,14 @@ class FitWorker:
         self.ended = False
 
     @classmethod
-    def start(cls, robot: RobotFile, setup: SetupFile) -> FitWorker:
+    def start(cls, robot: RobotFile, setup: SetupFile, plan_rows=None) -> FitWorker:
+        """A worker for ``robot`` and ``setup``; with ``plan_rows`` (joints (M, 6) [deg], lines (M,))
+        each judged refit carries the plan's corrected targets (``Refit.targets``)."""
         ctx = multiprocessing.get_context("spawn")  # no fork of a process with device threads
         conn, child = ctx.Pipe()
-        proc = ctx.Process(target=_serve, args=(child, robot, setup), daemon=True, name="station-refit")
+        proc = ctx.Process(
+            target=_serve, args=(child, robot, setup, plan_rows), daemon=True, name="station-refit"
+        )
         with _one_blas_thread():  # the spawned interpreter reads these as numpy loads
             proc.start()
         child.close()
@@ -201,9 +205,9 @@ class LiveListener:
 
 class RunningCalibration:
     """The running calibration of a session on ``robot`` and ``setup`` following a plan with
-    gauge lines ``plan_lines`` (M,), refitting with ``worker``; ``until_mm`` is the 95 % workspace
-    bound that ends the session; ``plan_q_deg`` (M, 6) [deg]: the plan's joints, corrected after
-    each judged refit (None: not corrected)."""
+    gauge lines ``plan_lines`` (M,), refitting with ``worker`` (its judged refits carry the plan's
+    corrected targets where it was started with the plan: ``listener.corrected``); ``until_mm`` is
+    the 95 % workspace bound that ends the session."""
 
     def __init__(
         self,
@@ -213,7 +217,6 @@ class RunningCalibration:
         plan_lines: np.ndarray,
         listener: LiveListener | None = None,
         until_mm: float | None = None,
-        plan_q_deg: np.ndarray | None = None,
     ):
         self.robot, self.setup, self.worker = robot, setup, worker
         self.listener = listener or LiveListener()
@@ -229,8 +232,6 @@ class RunningCalibration:
         self.saturated: set[int] = set()
         self.goal_met = False
         self._want_next = False  # a planner suggestion is wanted and not yet started
-        self.plan_rows = None if plan_q_deg is None else (np.asarray(plan_q_deg), np.asarray(plan_lines))
-        self._want_correct = False  # the latest judged refit's corrected targets are wanted
         self._refit_n = 0  # samples in the latest refit started (a failed one is not retried on them)
         self._said_undetermined = False
         self._said_ended = False
@@ -282,8 +283,6 @@ class RunningCalibration:
             self.listener.message(f"running calibration: {kind} failed: {result}")
         elif kind == "next":
             self.listener.message(_next_text(result))
-        elif kind == "correct":
-            self.listener.corrected(result)
         else:
             self._take(result)
             return result
@@ -295,9 +294,6 @@ class RunningCalibration:
         if self._want_next:
             self.worker.submit("next", self.samples)
             self._want_next = False
-        elif self._want_correct:
-            self.worker.submit("correct", self.plan_rows)
-            self._want_correct = False
         elif len(self.samples) > self._refit_n:
             self.worker.submit("refit", self.samples)
             self._refit_n = len(self.samples)
@@ -324,7 +320,8 @@ class RunningCalibration:
             return
         if not self.history:
             self.listener.message(f"running calibration: the model is determined by {fit.n} samples")
-        self._want_correct = self.plan_rows is not None
+        if fit.targets is not None:
+            self.listener.corrected(fit.targets)
         counts = _counts(self.samples.line[: fit.n])
         self.history.append((fit.workspace.predicted_rmse_mm, counts))
         self._saturation(fit, counts)

@@ -200,7 +200,8 @@ def run(
     calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
     progress to the messages. Devices are opened first: an unreachable one fails before anything
     else, and a new session's folder is made only once they all answered."""
-    worker = FitWorker.start(inputs.robot, inputs.setup)  # starts while the devices open
+    plan_rows = (inputs.plan.q_deg, inputs.plan.line)  # corrected with each judged refit
+    worker = FitWorker.start(inputs.robot, inputs.setup, plan_rows)  # starts while the devices open
     view = None
     try:
         devices = open_devices(inputs.cfg)
@@ -209,8 +210,7 @@ def run(
                 inputs.folder.make()
             view = LiveView(inputs.folder.rrd, viewer=viewer, web=web, resume=bool(inputs.folder.rows))
             progress = Progress(len(inputs.plan), len(inputs.folder.rows), stream, every_sample=every_sample)
-            plan = inputs.plan
-            live = Live(inputs.robot, inputs.setup, plan.line, worker, view, progress, until_mm, plan.q_deg)
+            live = Live(inputs.robot, inputs.setup, inputs.plan.line, worker, view, progress, until_mm)
             state = _run_session(inputs, devices, live)
         finally:
             devices.close()
@@ -230,19 +230,17 @@ def run(
 class Live:
     """The running calibration of a session on ``robot`` and ``setup`` following a plan with gauge
     lines ``plan_lines``, refitting with ``worker``, wired to the session (:meth:`listener`), the
-    view and the progress line; ``until_mm`` as in :func:`run`; the plan's joints ``plan_q_deg``
-    corrected after each judged refit, for the robot's target channel (:meth:`feed_targets`)."""
+    view and the progress line, its corrected targets to the robot's target channel
+    (:meth:`feed_targets`); ``until_mm`` as in :func:`run`."""
 
-    def __init__(
-        self, robot, setup, plan_lines, worker, view: LiveView, progress: Progress, until_mm, plan_q_deg=None
-    ):
+    def __init__(self, robot, setup, plan_lines, worker, view: LiveView, progress: Progress, until_mm):
         self.view, self.progress = view, progress
         self.ids: list[int] = []  # sample ids in the order the running calibration got them
         self.worst_mm: float | None = None
         self.session: Session | None = None
         self.feed: TargetFeed | None = None
         listener = LiveListener(self.refit, self.message, self.reached, self.corrected)
-        self.running = RunningCalibration(robot, setup, worker, plan_lines, listener, until_mm, plan_q_deg)
+        self.running = RunningCalibration(robot, setup, worker, plan_lines, listener, until_mm)
 
     def listener(self) -> Listener:
         """The session's listener: each sample judged and handed on; the worker looked in on at
