@@ -58,7 +58,11 @@ def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples,
         fit = refit(robot, setup, samples)
         if plan_rows is None or not fit.judged:
             return fit
-        return dataclasses.replace(fit, targets=correct_targets(robot, setup, fit, *plan_rows))
+        try:
+            targets = correct_targets(robot, setup, fit, *plan_rows)
+        except Exception as exc:  # noqa: BLE001 - the refit stands; the session says why once
+            targets = FitFailed(f"{type(exc).__name__}: {exc}")
+        return dataclasses.replace(fit, targets=targets)
     return next_placement(robot, setup, samples.q_deg, samples.line)
 
 
@@ -235,6 +239,7 @@ class RunningCalibration:
         self._refit_n = 0  # samples in the latest refit started (a failed one is not retried on them)
         self._said_undetermined = False
         self._said_ended = False
+        self._said_uncorrected = False
 
     def nominal_tcp_mm(self, q_deg) -> np.ndarray:
         """Nominal TCPs (N, 3) [mm] of configurations (N, 6) [deg]."""
@@ -320,7 +325,11 @@ class RunningCalibration:
             return
         if not self.history:
             self.listener.message(f"running calibration: the model is determined by {fit.n} samples")
-        if fit.targets is not None:
+        if isinstance(fit.targets, FitFailed):
+            if not self._said_uncorrected:
+                self._said_uncorrected = True
+                self.listener.message(f"running calibration: correcting the targets failed: {fit.targets}")
+        elif fit.targets is not None:
             self.listener.corrected(fit.targets)
         counts = _counts(self.samples.line[: fit.n])
         self.history.append((fit.workspace.predicted_rmse_mm, counts))

@@ -381,3 +381,34 @@ def test_a_worker_started_with_the_plan_corrects_it_with_every_judged_refit_and_
         assert heard[0].ok.all() and np.abs(heard[0].q_deg - q).max() < 2.0  # small corrections
     finally:
         running.close()
+
+
+def test_a_correction_that_fails_leaves_the_refit_standing_and_is_said_once(monkeypatch):
+    from station.acquire import livefit
+
+    world = World.create(0)
+    q, lines = world.line_configurations(12, np.random.default_rng(1))
+    s = world.measure(q, lines, np.random.default_rng(2))
+    samples = SimpleNamespace(q_deg=s.q_deg, length_mm=s.length_mm, dial_mm=s.dial_mm, line=s.line)
+
+    def broken(*args):
+        raise np.linalg.LinAlgError("singular matrix")
+
+    monkeypatch.setattr(livefit, "correct_targets", broken)
+    fit = livefit._job("refit", ROBOT, SETUP, livefit.SessionSamples(**vars(samples)), (q, lines))
+    assert fit.judged and isinstance(fit.targets, FitFailed)
+    said, heard = [], []
+    worker = SimpleNamespace(
+        busy=False, ended=False, poll=lambda t=0.0: ("refit", fit), submit=lambda *a: None
+    )
+    running = RunningCalibration(
+        ROBOT, SETUP, worker, lines, LiveListener(message=said.append, corrected=heard.append)
+    )
+    for k in range(len(s)):
+        running.add(s.q_deg[k], s.length_mm[k], s.dial_mm[k], s.line[k])
+    running.poll()
+    running.poll()
+    assert running.latest is fit and heard == []
+    assert [m for m in said if "correcting" in m] == [
+        "running calibration: correcting the targets failed: LinAlgError: singular matrix"
+    ]
