@@ -83,12 +83,15 @@ def compensate(
     calibrated: RobotModel,
     q_program: np.ndarray,
     options: CompensationOptions = CompensationOptions(),
+    meant: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Compensation:
     """Compensate program rows ``q_program`` (N, 6) [rad] written with ``nominal`` for the
-    ``calibrated`` robot (both with the same tool). See the module docstring."""
+    ``calibrated`` robot (both with the same tool). See the module docstring. ``meant``: the poses
+    to reach instead of the nominal model's at the rows' joints, positions (N, 3) [mm] and
+    orientations (N, 3, 3) in the calibrated model's frame (a frame other than the nominal's)."""
     q0 = np.asarray(q_program, float)
     n = len(q0)
-    p_meant, r_meant = nominal.tool_frames(q0)
+    p_meant, r_meant = nominal.tool_frames(q0) if meant is None else meant
     limit_joint = calibrated.first_outside_limits(q0)
     wrist = calibrated.wrist_angle(q0)
     status = np.full(n, Status.OK, int)
@@ -113,10 +116,11 @@ def compensate(
     ok = status == Status.OK
     q_out = np.where(ok[:, None], q_new, q0)
     p_out = nominal.tool_frames(q_out)[0]
+    p_row = p_meant if meant is None else nominal.tool_frames(q0)[0]
     return Compensation(
         q=q_out,
         status=status,
-        shift=np.linalg.norm(p_out - p_meant, axis=1),
+        shift=np.linalg.norm(p_out - p_row, axis=1),
         joint_change=change,
         position_error=position_error,
         orientation_error=orientation_error,

@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import abc
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 from errors import DeviceError
 
@@ -126,6 +126,8 @@ class Driver(abc.ABC):
 
     name: str
     fields: Mapping[str, Field]
+    no_channel: str | None = "a robot connection of this kind has none"
+    """Why :meth:`target_channel` gives None (where it does)."""
 
     @abc.abstractmethod
     def open(self) -> None:
@@ -143,12 +145,28 @@ class Driver(abc.ABC):
         """What :meth:`read` returns: field name -> units, shape, meaning."""
         return dict(self.fields)
 
+    def target_channel(self) -> TargetChannel | None:
+        """Where this (robot) device hands a running program corrected targets, once opened; None
+        where it has no such channel."""
+        return None
+
     def __enter__(self):
         self.open()
         return self
 
     def __exit__(self, *exc_info) -> None:
         self.close()
+
+
+class TargetChannel(Protocol):
+    """A robot controller's inputs that a running measurement program reads before it moves to a
+    target (``station program``): ``write`` hands it target ``target``'s corrected contact joints
+    ``q_deg`` (6,) [deg] (a :class:`DriverError` if the controller does not take them); ``where``
+    says which inputs, for the operator."""
+
+    where: str
+
+    def write(self, target: int, q_deg: Sequence[float]) -> None: ...
 
 
 @dataclass(frozen=True)

@@ -181,7 +181,8 @@ class RobotOpcUa(Section):
     """A controller's OPC UA server: the node ids of the axes' ``ActualPosition`` (the OPC UA
     Robotics companion specification's ``DeviceSet/<MotionDevice>/Axes/<Axis>/ParameterSet``) and
     ``ActualSpeed`` (empty: the change between reads), ``{axis}`` standing for 1 .. 6, in ``unit``
-    (per second for speeds)."""
+    (per second for speeds); the writable nodes a controller program reads corrected targets from
+    (``target_node`` per axis, ``target_index_node``; either empty: no in-session correction)."""
 
     kind: Literal["opcua"]
     url: Annotated[str, Field(pattern=r"^opc\.tcp://[^\x00/]+(/[^\x00]*)?$")] = "opc.tcp://127.0.0.1:4840"
@@ -189,6 +190,10 @@ class RobotOpcUa(Section):
     speed_node: NodeTemplate = f"{AXIS_PARAMETERS}/ActualSpeed"
     unit: Literal["deg", "rad"] = "deg"
     timeout_s: Timeout = 1.0
+    target_node: NodeTemplate = f"{AXIS_PARAMETERS}/TargetPosition"
+    target_index_node: Annotated[str, Field(max_length=4096, pattern=r"^[^\x00{}]*$")] = (
+        "ns=2;s=DeviceSet/Robot/TargetIndex"
+    )
 
     def nodes(self) -> tuple[list[str], list[str] | None]:
         """The six position node ids and the six speed node ids (None: no speed nodes)."""
@@ -199,7 +204,15 @@ class RobotOpcUa(Section):
     def build(self) -> Driver:
         from drivers.opcua import OpcUaJointSource
 
-        return OpcUaJointSource(self.url, *self.nodes(), unit=self.unit, timeout_s=self.timeout_s)
+        targets = [self.target_node.format(axis=i) for i in range(1, 7)] if self.target_node else None
+        return OpcUaJointSource(
+            self.url,
+            *self.nodes(),
+            unit=self.unit,
+            timeout_s=self.timeout_s,
+            target_nodes=targets,
+            target_index_node=self.target_index_node or None,
+        )
 
     def endpoint(self) -> str:
         """Where the joints are read, as a simulator announces the robot it serves."""

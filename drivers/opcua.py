@@ -6,6 +6,13 @@ axis of its motion device under ``DeviceSet/<MotionDevice>/Axes/<Axis>/Parameter
 server's own, so the config names them (six, joint 1 first). Without speed nodes the speed is the
 change of the positions between two reads over the time between them.
 
+Corrected targets (:meth:`OpcUaJointSource.target_channel`): the companion specification has no
+inputs for a running program, so a controller program or gateway that corrects targets offers
+writable nodes of its own, named in the config: six joint positions (``target_nodes``, ``unit``)
+and an Int32 index (``target_index_node``), written in one Write request, the positions first and
+the index last (the program takes the positions once the index names its next target). Nodes the
+server lacks, or will not let us write: no channel (``target_channel()`` None, ``no_channel`` why).
+
 The companion specification has no single "program running" flag, so ``robot_mode`` reads RUNNING
 (7, as over RTDE) while the server answers; a stopped controller shows as joints that stand still.
 Freshness: every read asks the server (a read, not a subscription), so a value is as old as the
@@ -56,6 +63,8 @@ class OpcUaJointSource(Driver):
         unit: str = "deg",
         timeout_s: float = 1.0,
         name: str = "robot",
+        target_nodes: Sequence[str] | None = None,
+        target_index_node: str | None = None,
     ):
         if len(position_nodes) != JOINTS or (speed_nodes is not None and len(speed_nodes) != JOINTS):
             raise ValueError(f"OPC UA joints need {JOINTS} position (and speed) node ids")
@@ -65,6 +74,11 @@ class OpcUaJointSource(Driver):
         self._client: Client | None = None
         self._nodes = []
         self._last: tuple[float, tuple[float, ...]] | None = None
+        self.target_ids = (
+            None if not (target_nodes and target_index_node) else [*target_nodes, target_index_node]
+        )
+        self._targets: OpcUaTargets | None = None
+        self.no_channel = "no target nodes configured" if self.target_ids is None else "not opened"
 
     def open(self) -> None:
         """Connect and read every node once (a node id the server lacks: DeviceReplyError naming it)."""
@@ -79,6 +93,35 @@ class OpcUaJointSource(Driver):
         self._client, self._last = client, None
         self._nodes = [client.get_node(n) for n in self.node_ids]
         self._read_values()
+        self._targets = self._find_targets()
+
+    def target_channel(self) -> OpcUaTargets | None:
+        return self._targets
+
+    def _find_targets(self) -> OpcUaTargets | None:
+        """The target nodes, if the server has every one and lets us write them (``no_channel``:
+        why not)."""
+        if self.target_ids is None:
+            return None
+        params = ua.ReadParameters()
+        for node_id in self.target_ids:
+            for attr in (ua.AttributeIds.Value, ua.AttributeIds.UserAccessLevel):
+                rv = ua.ReadValueId()
+                rv.NodeId, rv.AttributeId = ua.NodeId.from_string(node_id), attr
+                params.NodesToRead.append(rv)
+        results = self._client.tloop.post(self._client.aio_obj.uaclient.read(params))
+        for k, node_id in enumerate(self.target_ids):
+            value, access = results[2 * k], results[2 * k + 1]
+            if not value.StatusCode.is_good():
+                self.no_channel = f"node {node_id}: {value.StatusCode.name}"
+                return None
+            if (
+                not access.StatusCode.is_good()
+                or not int(access.Value.Value) & ua.AccessLevel.CurrentWrite.mask
+            ):
+                self.no_channel = f"node {node_id} is not writable"
+                return None
+        return OpcUaTargets(self, self.target_ids, UNIT_TO_DEG[self.unit])
 
     def close(self) -> None:
         client, self._client = self._client, None
@@ -139,3 +182,46 @@ class OpcUaJointSource(Driver):
                 ) from None
         stamp = results[0].SourceTimestamp or results[0].ServerTimestamp
         return out, stamp.timestamp() if stamp else math.nan
+
+
+class OpcUaTargets:
+    """The target channel of an :class:`OpcUaJointSource`: six position nodes and the index node."""
+
+    def __init__(self, source: OpcUaJointSource, node_ids: list[str], unit_to_deg: float):
+        self.source, self.node_ids, self.unit_to_deg = source, node_ids, unit_to_deg
+        self.where = f"OPC UA {source.url} nodes {node_ids[0]} .. and {node_ids[-1]}"
+
+    def write(self, target: int, q_deg) -> None:
+        """One Write request: the six positions (in the source's unit), then the index."""
+        values = [ua.Variant(float(v) / self.unit_to_deg, ua.VariantType.Double) for v in q_deg]
+        values.append(ua.Variant(int(target), ua.VariantType.Int32))
+        params = ua.WriteParameters()
+        for node_id, value in zip(self.node_ids, values, strict=True):
+            wv = ua.WriteValue()
+            wv.NodeId, wv.AttributeId = ua.NodeId.from_string(node_id), ua.AttributeIds.Value
+            wv.Value = ua.DataValue(value)
+            params.NodesToWrite.append(wv)
+        client = self.source._client
+        if client is None:
+            raise DeviceUnreachable(self.source.name, f"OPC UA {self.source.url} not connected")
+        try:
+            codes = client.tloop.post(client.aio_obj.uaclient.write(params))
+        except (
+            asyncio.TimeoutError,
+            TimeoutError,
+            OSError,
+            ConnectionError,
+            ThreadLoopNotRunning,
+            ua.UaError,
+        ) as exc:
+            raise DeviceUnreachable(
+                self.source.name,
+                f"OPC UA {self.source.url}: writing target {target}: {exc or type(exc).__name__}",
+            ) from exc
+        bad = next(((n, c) for n, c in zip(self.node_ids, codes, strict=True) if not c.is_good()), None)
+        if bad is not None:
+            raise DeviceReplyError(
+                self.source.name,
+                f"OPC UA {self.source.url}: writing node {bad[0]}: {bad[1].name}",
+                bad[1].name,
+            )

@@ -22,6 +22,16 @@ RTDE notes (ur_rtde 1.6):
   path is :func:`drivers.base.call_with_reconnect` (close, back off, open). It builds a fresh
   interface rather than calling ur_rtde's ``reconnect()``, which resets the frequency from the
   controller version and waits for the first package without checking the link.
+
+Corrected targets (:meth:`RtdeJointSource.target_channel`): written to RTDE input registers by
+ur_rtde's ``RTDEIOInterface`` in its upper range (clear of RTDEControlInterface's and of the lower
+range other programs use), which offers five double and five integer registers, 42 .. 46: joints
+1 .. 5 [rad] in ``input_double_register_42`` .. ``46``, joint 6 [urad] in
+``input_int_register_43``, and the target's index plus one in ``input_int_register_42`` (0, the
+registers' value at power-on: none; set so when the channel opens), written last (``station
+program``'s URScript takes the joints when the index names its next target, and reads the index
+again after them). A controller that refuses those inputs (another client writes them)
+gives no channel (``no_channel`` says why).
 """
 
 from __future__ import annotations
@@ -33,6 +43,7 @@ import time
 from dataclasses import dataclass
 from typing import ClassVar
 
+import rtde_io
 import rtde_receive
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
@@ -51,6 +62,10 @@ from drivers.modbus import ModbusRegisterDriver
 from drivers.registers import DataType, Encoding, RegisterLayout
 
 RTDE_PORT = 30004
+TARGET_INDEX_INPUT = 42  # input_int_register_42: the corrected target's index + 1, 0: none (module notes)
+TARGET_JOINT_INPUTS = (42, 43, 44, 45, 46)  # input_double_register_*: joints 1 .. 5 [rad]
+TARGET_JOINT6_INPUT = 43  # input_int_register_43: joint 6 [urad]
+URAD = 1e6  # joint 6's register counts per radian
 RTDE_VARIABLES = ("timestamp", "actual_q", "actual_qd", "robot_mode")
 JOINTS = 6
 
@@ -103,6 +118,8 @@ class RtdeJointSource(Driver):
         self._last_change = 0.0
         self._silent = False  # the last read found no new package for stale_s
         self._latency = (math.inf, 0.0)  # least (local - controller time) seen, and when [s]
+        self._targets: RtdeTargets | None = None
+        self.no_channel: str | None = None
 
     @property
     def _where(self) -> str:
@@ -211,11 +228,24 @@ class RtdeJointSource(Driver):
                 self.name, f"{self._where} sent a data package with values that are not numbers"
             )
 
+    def target_channel(self) -> RtdeTargets | None:
+        """The input registers (module notes), through a second RTDE connection opened at the
+        first ask; None if the controller refuses them (``no_channel``: why)."""
+        if self._targets is None and self.no_channel is None:
+            try:
+                self._targets = RtdeTargets(self.name, self.host)
+            except RuntimeError as exc:
+                self.no_channel = f"{self._where} refused its input registers: {exc}"
+        return self._targets
+
     def close(self) -> None:
         """Drop the interface; its destructor pauses the stream (if the link is up) and
         disconnects. After a silent controller, first let ur_rtde's read deadline (2.5 s) mark
         the link down: its pause request would otherwise wait for a reply that never comes."""
         rtde, self._rtde = self._rtde, None
+        targets, self._targets, self.no_channel = self._targets, None, None
+        if targets is not None:
+            targets.close()
         if rtde is not None and self._silent:
             deadline = time.monotonic() + 3.0
             while rtde.isConnected() and time.monotonic() < deadline:
@@ -268,6 +298,51 @@ class RtdeJointSource(Driver):
             if rtde.getTimestamp() == stamp:
                 break
         return sample
+
+
+class RtdeTargets:
+    """A UR controller's input registers for corrected targets (module notes), written by ur_rtde's
+    ``RTDEIOInterface`` (upper range)."""
+
+    def __init__(self, name: str, host: str):
+        self.name, self.host = name, host
+        self.where = (
+            f"RTDE {host}:{RTDE_PORT} input registers (int {TARGET_INDEX_INPUT}: index + 1, double "
+            f"{TARGET_JOINT_INPUTS[0]}..{TARGET_JOINT_INPUTS[-1]}: joints 1-5 rad, "
+            f"int {TARGET_JOINT6_INPUT}: joint 6 urad)"
+        )
+        self._io = rtde_io.RTDEIOInterface(host, False, True)
+        self._io.setInputIntRegister(TARGET_INDEX_INPUT, 0)  # no target yet (not a previous session's)
+
+    def close(self) -> None:
+        if self._io.isConnected():
+            self._io.disconnect()
+
+    def write(self, target: int, q_deg) -> None:
+        """The joints, then the index (the program reads the index before and after the joints)."""
+        q = [math.radians(v) for v in q_deg]
+        try:
+            ok = all(
+                self._io.setInputDoubleRegister(r, v) for r, v in zip(TARGET_JOINT_INPUTS, q[:5], strict=True)
+            )
+            ok = ok and self._io.setInputIntRegister(TARGET_JOINT6_INPUT, round(q[5] * URAD))
+            ok = ok and self._io.setInputIntRegister(TARGET_INDEX_INPUT, int(target) + 1)
+        except RuntimeError as exc:
+            raise DeviceUnreachable(
+                self.name, f"RTDE {self.host}:{RTDE_PORT}: writing target {target}: {exc}"
+            ) from exc
+        if not ok:
+            raise DeviceUnreachable(
+                self.name, f"RTDE {self.host}:{RTDE_PORT}: writing target {target} failed"
+            )
+
+
+def target_from_inputs(inputs) -> tuple[float, ...]:
+    """The corrected target's joints [deg] in a controller's input registers ``inputs`` (by RTDE
+    name: what :class:`RtdeTargets` writes)."""
+    q = [float(inputs.get(f"input_double_register_{r}", math.nan)) for r in TARGET_JOINT_INPUTS]
+    q.append(float(inputs.get(f"input_int_register_{TARGET_JOINT6_INPUT}", 0)) / URAD)
+    return tuple(math.degrees(v) for v in q)
 
 
 def _names() -> bytes:

@@ -6,12 +6,18 @@ Laid out as the OPC UA Robotics companion specification (OPC 40010-1) lays out a
 (:func:`position_node`, :func:`speed_node`). Every read computes the value from the robot program at
 that instant (a value callback), stamped with the time it was read. The server runs its own
 event loop in a thread; ``start()`` returns once it listens, ``stop()`` ends it.
+
+The target channel (no part of the companion specification: what a controller program or gateway
+offers a station that corrects targets in-session): writable ``TargetPosition`` (Double, deg)
+beside each axis's ``ActualPosition``, and ``DeviceSet/Robot/TargetIndex`` (Int32). Writing the
+index commits the positions written before it: ``hand(target, q_deg)``, the program's channel.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import threading
 from datetime import datetime, timezone
 
@@ -33,12 +39,22 @@ def speed_node(axis: int) -> str:
     return f"ns=2;s=DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/ActualSpeed"
 
 
+def target_node(axis: int) -> str:
+    """Node id of axis ``axis``'s (1..6) TargetPosition (writable, deg): a corrected target's joint."""
+    return f"ns=2;s=DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/TargetPosition"
+
+
+TARGET_INDEX_NODE = "ns=2;s=DeviceSet/Robot/TargetIndex"
+"""Node id of the corrected target's index (writable, Int32): writing it commits the positions."""
+
+
 class OpcUaRobotServer:
     """Serves ``state()`` (a callable returning joints [deg] and speeds [deg/s], (6,) each) at
-    ``opc.tcp://host:port``."""
+    ``opc.tcp://host:port``; ``hand(target, q_deg)`` hears each corrected target written."""
 
-    def __init__(self, state, host: str, port: int = 4840):
-        self.state, self.host, self.port = state, host, port
+    def __init__(self, state, host: str, port: int = 4840, hand=None):
+        self.state, self.host, self.port, self.hand = state, host, port, hand
+        self._target = [math.nan] * AXES
         self.url = f"opc.tcp://{host}:{port}"
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -86,6 +102,16 @@ class OpcUaRobotServer:
                 node_id = ua.NodeId(f"DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/{key}", ns)
                 await params.add_variable(node_id, key, 0.0, varianttype=ua.VariantType.Double)
                 server.set_attribute_value_callback(node_id, self._reader(axis - 1, index))
+            key = "TargetPosition"
+            node_id = ua.NodeId(f"DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/{key}", ns)
+            node = await params.add_variable(node_id, key, math.nan, varianttype=ua.VariantType.Double)
+            await node.set_writable()
+            server.set_attribute_value_setter(node_id, self._setter(axis - 1))
+        robot = server.get_node(ua.NodeId("DeviceSet/Robot", ns))
+        index_id = ua.NodeId("DeviceSet/Robot/TargetIndex", ns)
+        node = await robot.add_variable(index_id, "TargetIndex", -1, varianttype=ua.VariantType.Int32)
+        await node.set_writable()
+        server.set_attribute_value_setter(index_id, self._setter(None))
         async with server:
             self._ready.set()
             await self._stop.wait()
@@ -101,6 +127,18 @@ class OpcUaRobotServer:
             )
 
         return read
+
+    def _setter(self, joint: int | None):
+        """The value setter of one joint's TargetPosition, or (None) of TargetIndex, which commits."""
+
+        def write(node, attr, value: ua.DataValue) -> None:
+            node.attributes[attr].value = value
+            if joint is not None:
+                self._target[joint] = float(value.Value.Value)
+            elif self.hand is not None and int(value.Value.Value) >= 0:
+                self.hand(int(value.Value.Value), list(self._target))
+
+        return write
 
 
 def _path(folder) -> str:

@@ -25,6 +25,12 @@ Time: ``state(t_s)`` takes real seconds since the program started; the program r
 time ``t_s * time_scale`` (``time_scale > 1`` plays the session faster). Speeds and accelerations
 above, and the velocities reported, are per simulated second, as the controller would report them.
 
+Corrected targets (``retarget``): a program a station hands corrected targets (UR: RTDE input
+registers; OPC UA: writable nodes; ``sim_fixtures.target_channel``) asks, as it starts its move to
+target k, what the channel holds; corrected joints for k replace the target from then on (the
+move to it, and every later visit), so the joints the program reports are where the corrected
+command really takes the robot. Asked once per target, on the first cycle.
+
 Faults for tests (:class:`RobotFault`, windows in simulated seconds): a robot mode other than
 RUNNING (7) pauses the program (the joints stand still, as after a protective stop) and the
 program resumes where it was when the window ends; ``jitter_deg`` adds Gaussian noise of that
@@ -34,7 +40,8 @@ standard deviation to every joint reading, so the robot never looks settled.
 from __future__ import annotations
 
 import bisect
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,7 +130,9 @@ class SimRobot:
 
     ``speed_deg_s`` / ``accel_deg_s2`` bound every joint, ``dwell_s`` is the stay at each target
     (simulated s); ``once``: the program runs one cycle and stands at target 0 after it. ``rng`` (a
-    seeded ``numpy.random.Generator``) is needed only for jitter faults.
+    seeded ``numpy.random.Generator``) is needed only for jitter faults. ``retarget(k, prog_s)``:
+    the joints [deg] target k really takes if the program moves to a corrected target when its
+    move to k starts at program time ``prog_s`` [simulated s], else None (see the module notes).
     """
 
     def __init__(
@@ -138,8 +147,9 @@ class SimRobot:
         faults: Sequence[RobotFault] = (),
         rng: np.random.Generator | None = None,
         once: bool = False,
+        retarget: Callable[[int, float], np.ndarray | None] | None = None,
     ):
-        targets = np.asarray(targets_deg, dtype=float)
+        targets = np.array(targets_deg, dtype=float)  # a copy: corrected targets replace its rows
         if targets.ndim != 2 or targets.shape[1] != 6 or len(targets) == 0:
             raise ValueError(f"targets_deg must have shape (M, 6) with M >= 1, got {targets.shape}")
         for name, value in (
@@ -162,6 +172,18 @@ class SimRobot:
         self.time_scale = float(time_scale)
         self.faults = tuple(faults)
         self.rng = rng
+        self.retarget = retarget
+        self._asked = 1  # the next target whose move start asks ``retarget`` (the program starts at 0)
+        self._lock = threading.Lock()
+        self._reschedule()
+
+    def __getstate__(self) -> dict:  # a spawned RTDE server gets a copy: locks do not travel
+        return {k: v for k, v in self.__dict__.items() if k != "_lock"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state, _lock=threading.Lock())
+
+    def _reschedule(self) -> None:
         self._segments = self._schedule()
         self._starts = [s.start_s for s in self._segments]
         last = self._segments[-1]
@@ -200,6 +222,24 @@ class SimRobot:
 
     def _program_state(self, prog_s: float) -> tuple[np.ndarray, np.ndarray, int, bool]:
         """Joints, joint speeds, target index and dwelling flag at program time ``prog_s``."""
+        with self._lock:
+            self._corrections(prog_s)
+            return self._walk(prog_s)
+
+    def _corrections(self, prog_s: float) -> None:
+        """Ask ``retarget`` about every first-cycle move that has started by ``prog_s``, in order; a
+        corrected target changes the schedule from its move on (the moves before keep their times)."""
+        if self.retarget is None or self.hold:
+            return
+        while self._asked < len(self.targets_deg) and self._starts[2 * self._asked - 1] <= prog_s:
+            k = self._asked
+            q = self.retarget(k, self._starts[2 * k - 1])
+            if q is not None:
+                self.targets_deg[k] = q
+                self._reschedule()
+            self._asked += 1
+
+    def _walk(self, prog_s: float) -> tuple[np.ndarray, np.ndarray, int, bool]:
         if self.hold or self.cycle_s == 0.0 or prog_s < 0:  # before the program starts: at target 0
             return self.targets_deg[0].copy(), np.zeros(6), 0, True
         if self.once and prog_s >= self.cycle_s:  # a program run once ends back at target 0

@@ -2,10 +2,15 @@
 
 The server speaks protocol version 2 (:mod:`sim_fixtures.rtde_wire`): it answers ``V`` (accepts
 version 2 only), ``v`` (an e-Series version, so ur_rtde picks 500 Hz by default), ``O`` (the real
-output types, ``NOT_FOUND`` for names it does not offer), ``I`` (no inputs offered: all
-``NOT_FOUND``), ``S`` and ``P``; after ``S`` it streams ``U`` packages at the recipe's frequency
-until ``P`` or until the client goes away (EOF or reset is a normal end). It never sends a text
-message (``M``): ur_rtde reads exactly one reply per request during the handshake.
+output types, ``NOT_FOUND`` for names it does not offer), ``I`` (input recipes: the real input
+types, ``NOT_FOUND`` for names it does not take, ``IN_USE`` for an input another connection
+writes; a recipe with either is refused, id 0), ``S`` and ``P``; after ``S`` it streams ``U``
+packages at the recipe's frequency until ``P`` or until the client goes away (EOF or reset is a
+normal end). A client's ``U`` package of an accepted input recipe, of exactly the recipe's size,
+sets those inputs (any other is dropped and counted, :attr:`RtdeServer.input_errors`); writing
+the target index register (``drivers.robot``'s layout, as ``station program``'s URScript reads
+it) hands the registered target to the robot program (``inbox(target, q_deg)``). It never sends
+a text message (``M``): ur_rtde reads exactly one reply per request during the handshake.
 
 The streamed values come from a robot source, anything picklable whose ``state(t_s)`` gives
 ``q_deg``, ``qd_deg_s`` and ``robot_mode`` ``t_s`` real seconds after the program started (a
@@ -42,6 +47,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from drivers.robot import TARGET_INDEX_INPUT, target_from_inputs
 from sim_fixtures import rtde_wire as wire
 
 RTDE_PORT = 30004
@@ -141,15 +147,20 @@ class _Session:
         self.streaming = False
         self.next_send = 0.0
         self.sent = 0
+        self.inputs: dict[int, _Recipe] = {}  # accepted input recipes by id
 
     def run(self) -> None:
-        """Serve until the client leaves or the server stops; socket errors end the session."""
-        with contextlib.suppress(OSError), self.conn:
-            while not self.server.stopping.is_set():
-                if not self._receive(self._wait_s()):
-                    return  # EOF: the client hung up
-                if self.streaming and time.monotonic() >= self.next_send:
-                    self._send_data()
+        """Serve until the client leaves or the server stops; socket errors end the session (and
+        free the inputs it wrote)."""
+        try:
+            with contextlib.suppress(OSError), self.conn:
+                while not self.server.stopping.is_set():
+                    if not self._receive(self._wait_s()):
+                        return  # EOF: the client hung up
+                    if self.streaming and time.monotonic() >= self.next_send:
+                        self._send_data()
+        finally:
+            self.server.release(self)
 
     def _wait_s(self) -> float:
         """How long to wait for client bytes: until the next data package, at most 0.1 s."""
@@ -184,10 +195,9 @@ class _Session:
         elif kind == wire.SETUP_OUTPUTS:
             self.conn.sendall(self._setup_outputs(package.payload))
         elif kind == wire.SETUP_INPUTS:
-            names = [n for n in package.payload.decode("ascii").split(",") if n]
-            self.conn.sendall(
-                wire.pack(kind, b"\x00" + ",".join([wire.NOT_FOUND] * len(names)).encode("ascii"))
-            )
+            self.conn.sendall(self._setup_inputs(package.payload))
+        elif kind == wire.DATA_PACKAGE:
+            self._take_inputs(package.payload)
         elif kind == wire.START:
             started = self.recipe is not None
             self.streaming = started and self.server.faults.stall_at != "U"
@@ -207,6 +217,27 @@ class _Session:
             self.recipe = _Recipe(recipe_id, names, types, wire.data_format(types), 1.0 / frequency)
             self.next_recipe_id += 1
         return wire.setup_outputs_reply(recipe_id, types)
+
+    def _setup_inputs(self, payload: bytes) -> bytes:
+        """Accept an input recipe whose every name this controller takes and no other connection
+        writes; answer the types either way (recipe id 0: refused)."""
+        names = wire.parse_setup_inputs(payload)
+        types = self.server.claim(self, names, wire.input_types(names))
+        if not names or wire.NOT_FOUND in types or wire.IN_USE in types:
+            return wire.setup_inputs_reply(0, types)
+        recipe_id = len(self.inputs) + 1
+        self.inputs[recipe_id] = _Recipe(recipe_id, names, types, wire.data_format(types), 0.0)
+        return wire.setup_inputs_reply(recipe_id, types)
+
+    def _take_inputs(self, payload: bytes) -> None:
+        """A client's data package: the inputs of its recipe, if it is one of exactly that size."""
+        recipe = self.inputs.get(payload[0]) if payload else None
+        if recipe is None or len(payload) != recipe.fmt.size:
+            with self.server.input_errors.get_lock():
+                self.server.input_errors.value += 1
+            return
+        _, values = wire.unpack_data(payload, recipe.fmt, recipe.types)
+        self.server.set_inputs({name: values[k] for k, name in enumerate(recipe.names)})
 
     def _send_data(self) -> None:
         """Send the current state; if late by whole periods, skip them as the controller does."""
@@ -248,16 +279,52 @@ class RtdeServer:
         version: ControllerVersion = ControllerVersion(),
         skipped=None,
         faults: RtdeFaults = RtdeFaults(),
+        inbox=None,
+        input_errors=None,
     ):
         self.robot = robot
         self.faults = faults
         self.skipped = multiprocessing.Value("q", 0) if skipped is None else skipped
+        self.input_errors = multiprocessing.Value("q", 0) if input_errors is None else input_errors
+        self.inbox = inbox
+        self.inputs: dict[str, object] = {}  # the last value written to each input
+        self._owners: dict[str, _Session] = {}  # which connection writes each input
+        self._inputs_lock = threading.Lock()
         self.version = version
         self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
         self.stopping = threading.Event()
         self.sessions: list[_Session] = []
         self.sock = socket.create_server((host, port))  # SO_REUSEADDR: rebinds at once
         self.address = self.sock.getsockname()[:2]
+
+    def claim(self, session: _Session, names: list[str], types: list[str]) -> list[str]:
+        """``types`` with ``IN_USE`` for inputs another connection writes; if none is, the
+        inputs are ``session``'s from now on."""
+        with self._inputs_lock:
+            said = [
+                wire.IN_USE if t != wire.NOT_FOUND and self._owners.get(n, session) is not session else t
+                for n, t in zip(names, types, strict=True)
+            ]
+            if wire.IN_USE not in said and wire.NOT_FOUND not in said:
+                self._owners.update(dict.fromkeys(names, session))
+        return said
+
+    def release(self, session: _Session) -> None:
+        """A connection ended: its inputs are free for another (they keep their values)."""
+        with self._inputs_lock:
+            for name in [n for n, s in self._owners.items() if s is session]:
+                del self._owners[name]
+
+    def set_inputs(self, values: dict[str, object]) -> None:
+        """Inputs a client wrote; writing the target index register (the index + 1; 0: none)
+        hands the registered target to the program."""
+        with self._inputs_lock:
+            self.inputs.update(values)
+            index = f"input_int_register_{TARGET_INDEX_INPUT}"
+            if self.inbox is None or index not in values or int(values[index]) < 1:
+                return
+            q_deg = target_from_inputs(self.inputs)
+        self.inbox(int(values[index]) - 1, q_deg)
 
     def outputs(self, at_monotonic: float) -> dict[str, object]:
         """Modelled output fields at monotonic time ``at_monotonic``."""
@@ -284,7 +351,9 @@ class RtdeServer:
             t.join(timeout=1.0)
 
 
-def _serve_in_child(robot, host, port, start_monotonic, version, skipped, ready, stop, faults) -> None:
+def _serve_in_child(
+    robot, host, port, start_monotonic, version, skipped, ready, stop, faults, inbox, input_errors
+) -> None:
     """Child-process entry: bind, report the address (or the bind error), serve until stopped."""
     try:
         server = RtdeServer(
@@ -295,6 +364,8 @@ def _serve_in_child(robot, host, port, start_monotonic, version, skipped, ready,
             version=version,
             skipped=skipped,
             faults=faults,
+            inbox=inbox,
+            input_errors=input_errors,
         )
     except OSError as exc:
         ready.send(("error", f"cannot bind RTDE server to {host}:{port}: {exc}"))
@@ -322,15 +393,18 @@ class RtdeServerProcess:
         version: ControllerVersion = ControllerVersion(),
         timeout_s: float = 10.0,
         faults: RtdeFaults = RtdeFaults(),
+        inbox=None,
     ):
         self.robot = robot
         self.faults = faults
+        self.inbox = inbox  # picklable: it goes to the child (sim_fixtures.target_channel.TargetInbox)
         self.host, self.port = host, port
         self.start_monotonic = time.monotonic() if start_monotonic is None else start_monotonic
         self.version = version
         self.timeout_s = timeout_s
         self._ctx = multiprocessing.get_context("spawn")
         self._skipped = self._ctx.Value("q", 0)
+        self._input_errors = self._ctx.Value("q", 0)
         self._process = None
         self._stop = None
 
@@ -343,6 +417,11 @@ class RtdeServerProcess:
     def skipped(self) -> int:
         """Data packages skipped because the server was late (all connections, all starts)."""
         return self._skipped.value
+
+    @property
+    def input_errors(self) -> int:
+        """Client data packages dropped: no accepted input recipe of that id and size."""
+        return self._input_errors.value
 
     @property
     def running(self) -> bool:
@@ -369,6 +448,8 @@ class RtdeServerProcess:
                 sender,
                 self._stop,
                 self.faults,
+                self.inbox,
+                self._input_errors,
             ),
         )
         self._process.start()

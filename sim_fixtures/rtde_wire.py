@@ -13,9 +13,12 @@ type    client sends                     controller answers
 ``v``   nothing                          ``uint32 major, minor, bugfix, build``
 ``O``   ``double frequency_hz`` + names  ``uint8 recipe_id`` + comma-separated type names
         (comma-separated, ASCII)         (``NOT_FOUND`` for a name the controller lacks)
+``I``   names (comma-separated, ASCII)   ``uint8 recipe_id`` (0: refused) + the type names
+                                         (``NOT_FOUND``; ``IN_USE``: another client writes it)
 ``S``   nothing                          ``uint8 accepted``
 ``P``   nothing                          ``uint8 accepted``
-``U``   (controller -> client)           ``uint8 recipe_id`` + the recipe's values packed in
+``U``   (either way: outputs from the     ``uint8 recipe_id`` + the recipe's values packed in
+        controller, inputs from a client)
                                          order: DOUBLE ``d``, INT32 ``i``, UINT32 ``I``,
                                          UINT64 ``Q``, VECTOR6D ``6d``, VECTOR3D ``3d``,
                                          VECTOR6INT32 ``6i``, VECTOR6UINT32 ``6I``
@@ -46,6 +49,7 @@ PAUSE = ord("P")
 
 PROTOCOL_VERSION = 2
 NOT_FOUND = "NOT_FOUND"
+IN_USE = "IN_USE"
 
 #: struct format of each RTDE data type (without the byte-order prefix).
 TYPE_FORMATS: dict[str, str] = {
@@ -105,6 +109,28 @@ OUTPUT_TYPES: dict[str, str] = {
     "output_bit_registers32_to_63": "UINT32",
     **{f"output_int_register_{i}": "INT32" for i in range(48)},
     **{f"output_double_register_{i}": "DOUBLE" for i in range(48)},
+}
+
+
+#: Input fields a client may write and their RTDE types (UR's RTDE guide, "Controller inputs"):
+#: what ur_rtde's RTDEIOInterface sets up, and the general purpose registers.
+INPUT_TYPES: dict[str, str] = {
+    "standard_digital_output_mask": "UINT8",
+    "standard_digital_output": "UINT8",
+    "configurable_digital_output_mask": "UINT8",
+    "configurable_digital_output": "UINT8",
+    "tool_digital_output_mask": "UINT8",
+    "tool_digital_output": "UINT8",
+    "speed_slider_mask": "UINT32",
+    "speed_slider_fraction": "DOUBLE",
+    "standard_analog_output_mask": "UINT8",
+    "standard_analog_output_type": "UINT8",
+    "standard_analog_output_0": "DOUBLE",
+    "standard_analog_output_1": "DOUBLE",
+    "input_bit_registers0_to_31": "UINT32",
+    "input_bit_registers32_to_63": "UINT32",
+    **{f"input_int_register_{i}": "INT32" for i in range(48)},
+    **{f"input_double_register_{i}": "DOUBLE" for i in range(48)},
 }
 
 
@@ -175,6 +201,21 @@ def version_reply(major: int, minor: int, bugfix: int, build: int) -> bytes:
 def output_types(names: Sequence[str]) -> list[str]:
     """RTDE type of each name, ``NOT_FOUND`` for names this controller does not offer."""
     return [OUTPUT_TYPES.get(n, NOT_FOUND) for n in names]
+
+
+def parse_setup_inputs(payload: bytes) -> list[str]:
+    """Variable names of an ``I`` request (comma-separated; empty names dropped)."""
+    return [n for n in payload.decode("ascii", errors="replace").split(",") if n]
+
+
+def input_types(names: Sequence[str]) -> list[str]:
+    """RTDE type of each input name, ``NOT_FOUND`` for names this controller does not take."""
+    return [INPUT_TYPES.get(n, NOT_FOUND) for n in names]
+
+
+def setup_inputs_reply(recipe_id: int, types: Sequence[str]) -> bytes:
+    """Answer to ``I``: the recipe id (0: refused) and the types, comma-separated."""
+    return pack(SETUP_INPUTS, struct.pack(">B", recipe_id) + ",".join(types).encode("ascii"))
 
 
 def setup_outputs_reply(recipe_id: int, types: Sequence[str]) -> bytes:

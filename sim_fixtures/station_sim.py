@@ -38,6 +38,7 @@ from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.rtde_server import RtdeServerProcess, start_on_free_loopback
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, SimClock
+from sim_fixtures.target_channel import TargetChannel, TargetInbox
 from sim_fixtures.world import Placement, Robot, World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
@@ -49,11 +50,14 @@ SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the se
 @dataclass(frozen=True)
 class WorldCell:
     """The simulated world (true robot, anchor, gauge lines) with its plan: ``plan_deg`` (M, 6)
-    true configurations whose TCPs touch the lines, ``plan_lines`` (M,) their line ids."""
+    true configurations whose TCPs touch the lines, ``plan_lines`` (M,) their line ids. A program
+    that takes corrected targets (a rehearsal) has ``plan_targets`` (M,), the plan's target id of
+    each: a corrected target names it (:class:`Retarget`)."""
 
     world: World
     plan_deg: np.ndarray
     plan_lines: np.ndarray
+    plan_targets: np.ndarray | None = None
 
     def true_length_mm(self, q_deg) -> np.ndarray:
         return self.world.true_length_mm(q_deg)
@@ -85,28 +89,52 @@ def rehearsal_cell(
     seed: int,
     plan: tuple[np.ndarray, np.ndarray] | None = None,
     targets_per_line: int = 70,
+    targets: np.ndarray | None = None,
 ) -> WorldCell:
     """Your own cell rehearsed (``sim serve --robot R --setup S``): the true robot, anchor and lines
     drawn around ``nominal`` and ``placement`` (``World.around``), the robot program commanding the
     plan's joints, so the tool lands off the edge along the dial axis by the robot's error, as on a
-    real robot (``World.land``). ``plan`` (configurations (M, 6) [deg], line ids (M,)): the plan's;
-    None: the nominal model's own ``targets_per_line`` contacts along each line of the placement."""
+    real robot (``World.land``). ``plan`` (configurations (M, 6) [deg], line ids (M,)): the plan's,
+    ``targets`` (M,) its target ids (default 0 .. M-1); None: the nominal model's own
+    ``targets_per_line`` contacts along each line of the placement. The program takes corrected
+    targets (:class:`Retarget`)."""
     world = World.around(nominal, placement, seed)
     if plan is None:
         drawn = World(nominal, nominal, placement.anchor_mm, placement.length_offset_mm, placement.lines)
         plan = drawn.line_configurations(targets_per_line, np.random.default_rng([seed, 2]))
-    q, lines = world.land(np.asarray(plan[0], float).reshape(-1, 6), plan[1])
-    return WorldCell(world, q, lines)
+    lines = np.asarray(plan[1], int)
+    q, reached = world.landing(np.asarray(plan[0], float).reshape(-1, 6), lines)
+    ids = np.arange(len(lines)) if targets is None else np.asarray(targets, int)
+    return WorldCell(world, q[reached], lines[reached], ids[reached])
+
+
+@dataclass(frozen=True)
+class Retarget:
+    """Where the rehearsed program really takes its target k (``SimRobot``'s ``retarget``): if the
+    ``channel`` held corrected joints for that target (``cell.plan_targets[k]``) when the move began,
+    where the true robot lands commanded to them (``World.land``: brought onto the true line, off
+    it along the dial axis by what the correction left of the robot's miss); else None."""
+
+    channel: TargetChannel
+    cell: WorldCell
+
+    def __call__(self, k: int, prog_s: float) -> np.ndarray | None:
+        held = self.channel.at(prog_s)
+        if held is None or held[0] != int(self.cell.plan_targets[k]):
+            return None
+        q, _ = self.cell.world.land(held[1][None], self.cell.plan_lines[k : k + 1])
+        return q[0] if len(q) else None
 
 
 def opcua_robot(
-    section: RobotOpcUa, robot: SimRobot, clock: SimClock, play: bool = False
+    section: RobotOpcUa, robot: SimRobot, clock: SimClock, play: bool = False, hand=None
 ) -> OpcUaRobotServer:
     """The robot program's joints on an OPC UA server at the section's ``url``; the config's node
     ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout).
     ``play``: the program (waiting at its first target) starts at the station's third read of the
     joints (``PLAY_READS`` node reads: a session polling after its device check, not a one-off
-    ``station read``), as an operator presses play once the session waits for the robot."""
+    ``station read``), as an operator presses play once the session waits for the robot.
+    ``hand(target, q_deg)``: where corrected targets written to the server go (the program's channel)."""
     positions, speeds = section.nodes()
     if positions != [position_node(i) for i in range(1, 7)] or speeds not in (
         None,
@@ -126,7 +154,7 @@ def opcua_robot(
         now = robot.state(clock.now())
         return now.q_deg, now.qd_deg_s
 
-    return OpcUaRobotServer(state, url.hostname, url.port or 4840)
+    return OpcUaRobotServer(state, url.hostname, url.port or 4840, hand)
 
 
 def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock) -> RosbridgeServer:
@@ -210,6 +238,10 @@ class SimStation:
             cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
         elif cell is None:
             cell = planned_cell(cfg.sim.seed, *plan)
+        if cfg.sim.change:  # the robot changed after the plan was taught (a bent link)
+            cell = dataclasses.replace(cell, world=cell.world.changed(cfg.sim.change))
+        # a program that takes corrected targets reads them from this channel (the JR680's walks its own)
+        self.channel = None if cell.plan_targets is None else TargetChannel()
         self.robot = SimRobot(
             cell.plan_deg,
             speed_deg_s=cfg.sim.speed_deg_s,
@@ -220,9 +252,9 @@ class SimStation:
             faults=faults,
             rng=np.random.default_rng([cfg.sim.seed, 3]),
             once=once,
+            retarget=None if self.channel is None else Retarget(self.channel, cell),
         )
-        if cfg.sim.change:  # the robot changed after the plan was taught (a bent link)
-            cell = dataclasses.replace(cell, world=cell.world.changed(cfg.sim.change))
+        self.inbox = None if self.channel is None else TargetInbox(self.channel, self.robot, self.clock)
         self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
         self.source = CellSource(self.robot, cell)
         rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in (0, 1, 6)]
@@ -267,7 +299,9 @@ class SimStation:
         try:
             robot = self.cfg.robot
             if isinstance(robot, RobotOpcUa):
-                self.devices["robot"] = opcua_robot(robot, self.robot, self.clock, self.once).start()
+                self.devices["robot"] = opcua_robot(
+                    robot, self.robot, self.clock, self.once, self.inbox
+                ).start()
             elif isinstance(robot, RobotRos):
                 self.devices["robot"] = ros_robot(robot, self.robot, self.clock).start()
             else:
@@ -297,11 +331,13 @@ class SimStation:
         address where ``elsewhere`` and the configured one is taken."""
         started = self.clock.start_monotonic
         try:
-            return RtdeServerProcess(self.robot, self.cfg.robot.host, start_monotonic=started).start()
+            return RtdeServerProcess(
+                self.robot, self.cfg.robot.host, start_monotonic=started, inbox=self.inbox
+            ).start()
         except OSError:
             if not elsewhere:
                 raise
-            return start_on_free_loopback(self.robot, start_monotonic=started)
+            return start_on_free_loopback(self.robot, start_monotonic=started, inbox=self.inbox)
 
     def address(self, name: str) -> dict:
         """Where device ``name`` is served, as printed by ``sim serve``."""

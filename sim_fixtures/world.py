@@ -278,9 +278,7 @@ class World:
         return cls.around(nominal, cell, seed, noise)
 
     @classmethod
-    def around(
-        cls, nominal: Robot, placement: Placement, seed: int = 0, noise: Noise | None = None
-    ) -> World:
+    def around(cls, nominal: Robot, placement: Placement, seed: int = 0, noise: Noise | None = None) -> World:
         """Any robot and cell: the true robot drawn around ``nominal`` (``TOLERANCES``), the true
         anchor, offset and gauge lines around the ``placement`` a person measured."""
         rng = np.random.default_rng(seed)
@@ -372,12 +370,21 @@ class World:
         robot reaches there, brought across onto its true line (the edge guides the tool across it)
         but left off it along the dial axis by the robot's own miss, which the dial reads. Returns
         true configurations [deg] and the line ids of those reached."""
-        return self._onto_lines(q_plan_deg, line_ids, lambda ln, rel: (rel @ ln.dial_axis) * ln.dial_axis)
+        q_true, reached = self.landing(q_plan_deg, line_ids)
+        return q_true[reached], np.asarray(line_ids, int)[reached]
 
-    def _onto_lines(self, q_plan_deg, line_ids, off) -> tuple[np.ndarray, np.ndarray]:
+    def landing(self, q_plan_deg, line_ids) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`land` for every commanded configuration: the true configurations (N, 6) [deg] and
+        which of them (N,) the true robot reaches."""
+        return self._onto_lines(
+            q_plan_deg, line_ids, lambda ln, rel: (rel @ ln.dial_axis) * ln.dial_axis, True
+        )
+
+    def _onto_lines(self, q_plan_deg, line_ids, off, every: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The true robot's poses at planned configurations (N, 6) [deg] moved onto their true lines
         (orientation kept), then by ``off(line, pose - centre)`` [mm]; the true configurations [deg]
-        and the line ids of those the true robot reaches."""
+        and the line ids of those the true robot reaches (``every``: all configurations, and which
+        (N,) it reaches)."""
         by_id = {ln.id: ln for ln in self.lines}
         q_plan = np.atleast_2d(q_plan_deg)
         targets = np.empty((len(q_plan), 4, 4))
@@ -387,6 +394,8 @@ class World:
             rel = targets[k, :3, 3] - ln.centre
             targets[k, :3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + off(ln, rel)
         q_true, reached = self.true.ik(targets, q_plan)
+        if every:
+            return q_true, reached
         return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
 
     def _seed_for(self, ln: GaugeLine) -> np.ndarray:

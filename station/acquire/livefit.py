@@ -17,11 +17,17 @@ which says nothing about the reading. Guidance, once per gauge line: the line st
 ``SATURATION_SAMPLES`` samples improved the predicted workspace error by less than
 ``SATURATION_GAIN``; the message names the next placement (the plan's next line, else the
 planner's best new one, else the model's advice).
+
+Corrected targets: a worker started with the plan's rows corrects every plan target for the model
+of each judged refit, in the same job (``station.jobs.correction``, milliseconds; a job of its own
+would cost a round trip between refits), and the listener's ``corrected`` hears them: the session
+hands them to a running program (``station.acquire.targets``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import multiprocessing
 import os
 from collections.abc import Callable
@@ -32,6 +38,7 @@ import numpy as np
 from calib.kinematics import base_from_frames, tcp_position, tool_point
 from calib.params import dh_from_degrees
 from station.formats.tables import RobotFile, SetupFile
+from station.jobs.correction import TargetCorrection, correct_targets
 from station.jobs.planning import NextPlacement, next_placement
 from station.jobs.planning import vector_text as _vec
 from station.jobs.running import Refit, SessionSamples, refit
@@ -46,22 +53,30 @@ class FitFailed(Exception):
     """A job the worker could not finish; the message says why."""
 
 
-def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples):
+def _job(kind: str, robot: RobotFile, setup: SetupFile, samples: SessionSamples, plan_rows):
     if kind == "refit":
-        return refit(robot, setup, samples)
+        fit = refit(robot, setup, samples)
+        if plan_rows is None or not fit.judged:
+            return fit
+        try:
+            targets = correct_targets(robot, setup, fit, *plan_rows)
+        except Exception as exc:  # noqa: BLE001 - the refit stands; the session says why once
+            targets = FitFailed(f"{type(exc).__name__}: {exc}")
+        return dataclasses.replace(fit, targets=targets)
     return next_placement(robot, setup, samples.q_deg, samples.line)
 
 
-def _serve(conn, robot: RobotFile, setup: SetupFile) -> None:
+def _serve(conn, robot: RobotFile, setup: SetupFile, plan_rows=None) -> None:
     """The worker process: answer each ``(kind, samples)`` with ``(kind, result)`` until the pipe
-    closes; a failed job answers with :class:`FitFailed`. Says ``("ready", None)`` first."""
+    closes; a failed job answers with :class:`FitFailed`. Says ``("ready", None)`` first.
+    ``plan_rows``: the plan's joints (M, 6) [deg] and lines (M,), corrected with each judged refit."""
     _yield_cpu()
     try:
         conn.send(("ready", None))
         while True:
             kind, samples = conn.recv()
             try:
-                result = _job(kind, robot, setup, samples)
+                result = _job(kind, robot, setup, samples, plan_rows)
             except Exception as exc:  # noqa: BLE001 - reported to the session, which goes on
                 result = FitFailed(f"{type(exc).__name__}: {exc}")
             conn.send((kind, result))
@@ -95,10 +110,14 @@ class FitWorker:
         self.ended = False
 
     @classmethod
-    def start(cls, robot: RobotFile, setup: SetupFile) -> FitWorker:
+    def start(cls, robot: RobotFile, setup: SetupFile, plan_rows=None) -> FitWorker:
+        """A worker for ``robot`` and ``setup``; with ``plan_rows`` (joints (M, 6) [deg], lines (M,))
+        each judged refit carries the plan's corrected targets (``Refit.targets``)."""
         ctx = multiprocessing.get_context("spawn")  # no fork of a process with device threads
         conn, child = ctx.Pipe()
-        proc = ctx.Process(target=_serve, args=(child, robot, setup), daemon=True, name="station-refit")
+        proc = ctx.Process(
+            target=_serve, args=(child, robot, setup, plan_rows), daemon=True, name="station-refit"
+        )
         with _one_blas_thread():  # the spawned interpreter reads these as numpy loads
             proc.start()
         child.close()
@@ -179,17 +198,20 @@ class LiveError:
 @dataclass
 class LiveListener:
     """What the running calibration reports: each ``refit``, ``message(text)`` for the operator,
-    and ``reached(text)`` once the ``until_mm`` goal is met."""
+    ``reached(text)`` once the ``until_mm`` goal is met, and each judged refit's corrected plan
+    targets (``corrected``)."""
 
     refit: Callable[[Refit], None] = lambda r: None
     message: Callable[[str], None] = lambda text: None
     reached: Callable[[str], None] = lambda text: None
+    corrected: Callable[[TargetCorrection], None] = lambda c: None
 
 
 class RunningCalibration:
     """The running calibration of a session on ``robot`` and ``setup`` following a plan with
-    gauge lines ``plan_lines`` (M,), refitting with ``worker``; ``until_mm`` is the 95 % workspace
-    bound that ends the session."""
+    gauge lines ``plan_lines`` (M,), refitting with ``worker`` (its judged refits carry the plan's
+    corrected targets where it was started with the plan: ``listener.corrected``); ``until_mm`` is
+    the 95 % workspace bound that ends the session."""
 
     def __init__(
         self,
@@ -217,6 +239,7 @@ class RunningCalibration:
         self._refit_n = 0  # samples in the latest refit started (a failed one is not retried on them)
         self._said_undetermined = False
         self._said_ended = False
+        self._said_uncorrected = False
 
     def nominal_tcp_mm(self, q_deg) -> np.ndarray:
         """Nominal TCPs (N, 3) [mm] of configurations (N, 6) [deg]."""
@@ -302,6 +325,12 @@ class RunningCalibration:
             return
         if not self.history:
             self.listener.message(f"running calibration: the model is determined by {fit.n} samples")
+        if isinstance(fit.targets, FitFailed):
+            if not self._said_uncorrected:
+                self._said_uncorrected = True
+                self.listener.message(f"running calibration: correcting the targets failed: {fit.targets}")
+        elif fit.targets is not None:
+            self.listener.corrected(fit.targets)
         counts = _counts(self.samples.line[: fit.n])
         self.history.append((fit.workspace.predicted_rmse_mm, counts))
         self._saturation(fit, counts)

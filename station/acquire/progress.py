@@ -97,4 +97,3 @@ def _error_text(live) -> str:
 
 UNDETERMINED = "error: none until the model is determined"
 """What the progress shows before the live error starts, one phrase for every step of it."""
-

@@ -19,6 +19,7 @@ from station.acquire.capture import Devices, Rules
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
+from station.acquire.targets import TargetFeed
 from station.config import StationConfig, load_station_config, station_config, unreachable_hint
 from station.formats.announcement import announcement_path, running_simulator
 from station.formats.base import read_toml, validate
@@ -199,7 +200,8 @@ def run(
     calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
     progress to the messages. Devices are opened first: an unreachable one fails before anything
     else, and a new session's folder is made only once they all answered."""
-    worker = FitWorker.start(inputs.robot, inputs.setup)  # starts while the devices open
+    plan_rows = (inputs.plan.q_deg, inputs.plan.line)  # corrected with each judged refit
+    worker = FitWorker.start(inputs.robot, inputs.setup, plan_rows)  # starts while the devices open
     view = None
     try:
         devices = open_devices(inputs.cfg)
@@ -218,27 +220,57 @@ def run(
         raise
     finally:
         worker.close()
-    inputs.folder.update_header(last_state=state.value, samples=len(inputs.folder.rows))
+    corrected = sorted({*inputs.folder.header.get("corrected_targets", []), *live.corrected_targets()})
+    inputs.folder.update_header(
+        last_state=state.value, samples=len(inputs.folder.rows), corrected_targets=corrected
+    )
     return SessionRun(state, view, live.running.latest, live.worst_mm)
 
 
 class Live:
     """The running calibration of a session on ``robot`` and ``setup`` following a plan with gauge
     lines ``plan_lines``, refitting with ``worker``, wired to the session (:meth:`listener`), the
-    view and the progress line; ``until_mm`` as in :func:`run`."""
+    view and the progress line, its corrected targets to the robot's target channel
+    (:meth:`feed_targets`); ``until_mm`` as in :func:`run`."""
 
     def __init__(self, robot, setup, plan_lines, worker, view: LiveView, progress: Progress, until_mm):
         self.view, self.progress = view, progress
         self.ids: list[int] = []  # sample ids in the order the running calibration got them
         self.worst_mm: float | None = None
         self.session: Session | None = None
-        listener = LiveListener(self.refit, self.message, self.reached)
+        self.feed: TargetFeed | None = None
+        listener = LiveListener(self.refit, self.message, self.reached, self.corrected)
         self.running = RunningCalibration(robot, setup, worker, plan_lines, listener, until_mm)
 
     def listener(self) -> Listener:
         """The session's listener: each sample judged and handed on; the worker looked in on at
-        every checkpoint, never waited for."""
-        return Listener(self.sample, self.message, self.running.poll)
+        every checkpoint, never waited for; each settle at a plan target told to the target feed."""
+        return Listener(self.sample, self.message, self.running.poll, self.settled)
+
+    def feed_targets(self, plan: Plan, driver) -> None:
+        """Hand the corrected targets of ``plan`` to the robot ``driver``'s target channel (opened
+        now: a second connection of some controllers), or say once, when they start, that it has none."""
+        self.feed = TargetFeed(
+            plan,
+            driver.target_channel,
+            lambda: driver.no_channel,
+            lambda: self.session.pending if self.session is not None else [],
+            self.message,
+            self.view.message,
+        )
+        driver.target_channel()
+
+    def corrected(self, correction) -> None:
+        if self.feed is not None:
+            self.feed.corrected(correction)
+
+    def settled(self, index: int) -> None:
+        if self.feed is not None:
+            self.feed.settled(index)
+
+    def corrected_targets(self) -> list[int]:
+        """The target ids this run handed the program corrected."""
+        return [] if self.feed is None else [t for t, n in self.feed.sent.items() if n]
 
     def add(self, row: dict, q_deg, length_mm: float, dial_mm: float) -> None:
         self.ids.append(int(row["sample"]))
@@ -297,6 +329,8 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     )
     for note in (*view.notes, *inputs.notes):
         progress.message(note)
+    if "robot" in devices.drivers:
+        live.feed_targets(plan, devices.drivers["robot"])
     worker.wait_ready(WORKER_START_S)
     for row in inputs.folder.rows:
         dial = float(row["dial_mm"]) if row["dial_mm"] else float("nan")
@@ -315,6 +349,12 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
         state = session.run()
         if state is not State.STOPPED:
             live.drain(FINAL_FIT_S, lambda: session.stop_requested)  # a signal now ends the wait
+        if corrected := set(live.corrected_targets()):
+            taken = sum(int(row["target"]) in corrected for row in inputs.folder.rows)
+            progress.message(
+                f"corrected targets: {len(corrected)} sent before the program moved there, {taken} of "
+                "them measured (session.toml corrected_targets)"
+            )
         return state
     finally:
         for s, handler in previous.items():

@@ -91,12 +91,14 @@ class State(enum.Enum):
 @dataclass
 class Listener:
     """What a session reports: ``sample(row, capture)`` after each stored sample,
-    ``message(text)`` on every state change worth telling the operator, and ``tick()`` at every
-    checkpoint (between polls, also while suspended)."""
+    ``message(text)`` on every state change worth telling the operator, ``tick()`` at every
+    checkpoint (between polls, also while suspended), and ``settled(index)`` when the robot has
+    settled at plan row ``index`` (finished or not), before anything is captured there."""
 
     sample: Callable[[dict, Capture], None] = lambda row, cap: None
     message: Callable[[str], None] = lambda text: None
     tick: Callable[[], None] = lambda: None
+    settled: Callable[[int], None] = lambda index: None
 
 
 class Session:
@@ -186,6 +188,7 @@ class Session:
         if index is None:
             return False
         self._reached.add(index)
+        self.listener.settled(index)
         if index not in self.pending:
             new = index not in self._visited
             self._visited.add(index)

@@ -81,7 +81,7 @@ def run(args) -> int:
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
     joints = None if plan is None else (plan.q_deg, plan.line)
-    model, cell = _rehearsal(args, cfg, joints)
+    model, cell = _rehearsal(args, cfg, joints, None if plan is None else plan.target)
     once = cell is not None and cfg.robot.kind == "opcua"  # a program run once, started by the station
     station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell, once=once)
     publish_plan(Path(cfg.sim.plan_csv), plan or Plan.of(station.plan_deg, station.plan_lines))
@@ -106,9 +106,10 @@ def run(args) -> int:
     return 0
 
 
-def _rehearsal(args, cfg, joints):
+def _rehearsal(args, cfg, joints, targets):
     """The robot model's name and the cell to simulate: with ``--robot``/``--setup`` the user's
-    own (``station.jobs.rehearsal``), else the shipped JR680's (cell None)."""
+    own (``station.jobs.rehearsal``; ``targets``: the plan's target ids), else the shipped JR680's
+    (cell None)."""
     if args.robot is None and args.setup is None:
         return JR680_NAME, None
     if args.robot is None or args.setup is None:
@@ -118,7 +119,9 @@ def _rehearsal(args, cfg, joints):
     from station.formats.tables import load_robot, load_setup
 
     robot, setup = load_robot(args.robot), load_setup(args.setup)
-    cell = rehearsed_cell(robot, setup, str(args.setup), cfg.sim.seed, joints, cfg.sim.targets_per_line)
+    cell = rehearsed_cell(
+        robot, setup, str(args.setup), cfg.sim.seed, joints, cfg.sim.targets_per_line, targets
+    )
     return robot.name, cell
 
 
@@ -196,10 +199,11 @@ def rehearsed_cell(
     seed: int,
     plan: tuple[np.ndarray, np.ndarray] | None,
     targets_per_line: int,
+    targets: np.ndarray | None = None,
 ) -> WorldCell:
     """The rehearsed cell of ``robot`` and ``setup`` (``where`` names the setup in messages); the
-    simulated program walks ``plan`` (configurations [deg], line ids) or, None, the nominal
-    model's contacts along each line."""
+    simulated program walks ``plan`` (configurations [deg], line ids; ``targets`` its target ids)
+    or, None, the nominal model's contacts along each line."""
     import numpy as np
 
     from sim_fixtures.station_sim import rehearsal_cell
@@ -210,6 +214,6 @@ def rehearsed_cell(
         if unknown:
             raise InputError(f"--plan: line {unknown[0]} is not among {where}'s [[lines]]")
     try:
-        return rehearsal_cell(nominal_robot(robot), cell_placement, seed, plan, targets_per_line)
+        return rehearsal_cell(nominal_robot(robot), cell_placement, seed, plan, targets_per_line, targets)
     except RuntimeError as exc:  # a gauge line out of the nominal robot's reach
         raise InputError(f"{where}: {exc}") from None

@@ -8,6 +8,14 @@ robot's error, which the dial reads and its gate judges. ``urscript`` moves by j
 (the controller's own kinematics make the straight line between them), so no frame convention
 between this base frame and the controller's enters; ``poses-csv`` lists every pose and joint set
 for any other controller (position, rotation vector, quaternion).
+
+The URScript takes corrected targets from the station (``station sample`` corrects the remaining
+targets once its running calibration has determined the model): before it moves to target k it
+reads the RTDE input registers ur_rtde's ``RTDEIOInterface`` writes (``drivers.robot``: the index
+plus one in ``input_int_register_42``, 0 for none, joints 1-5 [rad] in
+``input_double_register_42..46``, joint 6 [urad] in ``input_int_register_43``); if the index names
+k (read before and after the joints, so a target being rewritten is not taken half), the contact
+is those joints and the stand-off moves by the same joint change, else the planned joints.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from calib import ik
+from drivers.robot import TARGET_INDEX_INPUT, TARGET_JOINT6_INPUT, TARGET_JOINT_INPUTS, URAD
 from errors import InputError
 from station.formats.plan import APPROACH_COLUMNS, POSE_COLUMNS, Plan
 from station.formats.samples import Q_COLUMNS
@@ -114,25 +123,56 @@ def urscript(m: Measurement, robot: RobotFile, source: str, motion: Motion = Mot
         f"# a {motion.dwell_s:g} s dwell (station sample captures there), movel back to the stand-off. "
         "Joints in rad; poses (comments) in mm/deg, base frame.",
         "# The contact poses are the nominal model's: the dial reads how far the real tool lands off it.",
+        "# Corrected targets: station sample writes target k's contact joints to the RTDE input registers",
+        f"# int {TARGET_INDEX_INPUT} (k + 1, written last; 0: none), "
+        f"double {TARGET_JOINT_INPUTS[0]}..{TARGET_JOINT_INPUTS[-1]} (joints 1-5, rad), "
+        f"int {TARGET_JOINT6_INPUT} (joint 6, urad);",
+        "# before target k the program takes them if the index names k (the stand-off moves with them).",
         "def station_measurement():",
         "  set_tcp(p[{:.6f}, {:.6f}, {:.6f}, 0, 0, 0])".format(*(np.asarray(robot.tool_mm) / 1000.0)),
+        *_CORRECTED,
     ]
     for k in range(len(m.plan)):
         q, q_off = deg(m.plan.q_deg[k]), deg(m.standoff_q_deg[k])
+        target = int(m.plan.target[k])
         if m.skipped[k]:
-            lines.append(f"  # target {int(m.plan.target[k])} left out: no stand-off within the joint limits")
+            lines.append(f"  # target {target} left out: no stand-off within the joint limits")
             continue
         lines += [
-            f"  # target {int(m.plan.target[k])}, line {int(m.plan.line[k])}: contact "
+            f"  # target {target}, line {int(m.plan.line[k])}: contact "
             f"{_numbers(m.pose[k], 3)}, approach {_numbers(m.approach[k], 4)}, "
             f"stand-off {m.distance_mm[k]:g} mm",
-            f"  movej({_numbers(q_off, 6)}, a={joint_a:.4f}, v={joint_v:.4f})",
-            f"  movel({_numbers(q, 6)}, a=0.1, v={motion.approach_mm_s / 1000.0:.4f})",
+            f"  q = station_target({target}, {_numbers(q, 6)})",
+            f"  q_off = station_standoff({_numbers(q_off, 6)}, {_numbers(q, 6)}, q)",
+            f"  movej(q_off, a={joint_a:.4f}, v={joint_v:.4f})",
+            f"  movel(q, a=0.1, v={motion.approach_mm_s / 1000.0:.4f})",
             f"  sleep({motion.dwell_s:g})",
-            f"  movel({_numbers(q_off, 6)}, a=0.5, v={motion.retreat_mm_s / 1000.0:.4f})",
+            f"  movel(q_off, a=0.5, v={motion.retreat_mm_s / 1000.0:.4f})",
         ]
     lines += ["end", "station_measurement()", ""]
     return "\n".join(lines)
+
+
+_INDEX = f"read_input_integer_register({TARGET_INDEX_INPUT})"
+_CORRECTED = (
+    "  def station_target(k, q):",
+    "    # target k's contact joints: the station's corrected ones if the registers name k, else q",
+    f"    if {_INDEX} == k + 1:",
+    "      c = ["
+    + ", ".join(f"read_input_float_register({r})" for r in TARGET_JOINT_INPUTS)
+    + f", read_input_integer_register({TARGET_JOINT6_INPUT}) / {URAD:.1f}]",
+    f"      if {_INDEX} == k + 1:",
+    "        return c",
+    "      end",
+    "    end",
+    "    return q",
+    "  end",
+    "  def station_standoff(q_off, q, c):",
+    "    # the stand-off moved by the contact's joint change",
+    "    return [" + ", ".join(f"q_off[{i}] + c[{i}] - q[{i}]" for i in range(6)) + "]",
+    "  end",
+)
+"""The URScript functions that take a corrected target (module notes)."""
 
 
 POSES_COLUMNS = (

@@ -56,7 +56,8 @@ class Refit:
     ``covariance`` of the ``free`` unknowns, the drawstring's noise ``noise_mm`` per sample (robust
     spread of its residuals), the predicted ``workspace`` error (None while the samples cannot
     determine the ``needed`` unknowns: then neither the covariance nor the noise mean anything), what
-    the model advises to measure next."""
+    the model advises to measure next, and the plan's ``targets`` corrected for this model (a
+    ``station.jobs.correction.TargetCorrection``, where the session's worker was asked for them)."""
 
     n: int
     model: MeasurementModel
@@ -67,6 +68,7 @@ class Refit:
     workspace: WorkspacePrediction | None
     needed: int
     advice: str
+    targets: object = None
 
     @property
     def judged(self) -> bool:

@@ -74,9 +74,9 @@ def test_the_program_backs_off_along_the_approach_and_comes_back_onto_the_contac
     assert (found.distance_mm == 20.0).all()
 
     script = measurement.urscript(found, robot, "plan.csv")
-    moves = re.findall(r"^  (movej|movel|sleep)\((.*)\)$", script, re.M)
+    moves = run_urscript(script, {}, {})  # registers at power-on: no corrected target
     assert [m[0] for m in moves] == ["movej", "movel", "sleep", "movel"] * len(plan)
-    joints = [np.degrees(np.array(eval(m[1].split("]")[0] + "]"))) for m in moves if m[0] != "sleep"]  # noqa: S307
+    joints = [np.degrees(m[1]) for m in moves if m[0] != "sleep"]
     for k in range(len(plan)):
         off, contact, back = joints[3 * k : 3 * k + 3]
         np.testing.assert_allclose(off, found.standoff_q_deg[k], atol=1e-4)  # 1e-6 rad written
@@ -99,6 +99,50 @@ def test_the_program_backs_off_along_the_approach_and_comes_back_onto_the_contac
     first = np.array(rows[1].split(","), float)
     w, x, y, z = first[8:12]
     np.testing.assert_allclose(Rotation.from_quat([x, y, z, w]).as_matrix(), r_contact[0], atol=1e-6)
+
+
+def run_urscript(script: str, ints: dict, floats: dict) -> list[tuple[str, object]]:
+    """Run a generated URScript as Python: its blocks are indented and closed by ``end`` lines
+    (dropped), ``p[...]`` is a pose (a list); the input registers read ``ints`` and ``floats`` (by
+    number, 0 where not set, as at power-on) and every move or sleep is recorded with its first
+    argument."""
+    moves = []
+
+    def record(name):
+        return lambda first, **_: moves.append((name, first))
+
+    env = {
+        "read_input_integer_register": lambda r: ints.get(r, 0),
+        "read_input_float_register": lambda r: floats.get(r, 0.0),
+        "set_tcp": lambda pose: None,
+        **{name: record(name) for name in ("movej", "movel", "sleep")},
+    }
+    lines = [line for line in script.splitlines() if line.strip() != "end"]
+    exec(re.sub(r"\bp\[", "[", "\n".join(lines)), env)  # noqa: S102 - the script under test
+    return moves
+
+
+def test_the_program_moves_to_the_corrected_target_the_registers_name_and_only_that(irb_plan):
+    robot, plan = irb_plan
+    found = measurement.measurement(plan, robot, "plan.csv")
+    script = measurement.urscript(found, robot, "plan.csv")
+    k = 3
+    change = np.radians([0.2, -0.1, 0.15, -0.3, 0.25, 0.35])  # a correction of a few tenths of a degree
+    corrected = np.radians(plan.q_deg[k]) + change
+    floats = {42 + i: float(v) for i, v in enumerate(corrected[:5])}
+    ints = {42: int(plan.target[k]) + 1, 43: round(corrected[5] * 1e6)}  # what RtdeTargets writes
+    moves = [m for m in run_urscript(script, ints, floats) if m[0] != "sleep"]
+    joints = np.degrees([m[1] for m in moves]).reshape(len(plan), 3, 6)
+    np.testing.assert_allclose(joints[k, 1], np.degrees(corrected), atol=1e-4)  # joint 6: 1 urad written
+    for step in (0, 2):  # the stand-off moves with the contact
+        np.testing.assert_allclose(joints[k, step], found.standoff_q_deg[k] + np.degrees(change), atol=1e-4)
+    others = np.arange(len(plan)) != k
+    np.testing.assert_allclose(joints[others, 1], plan.q_deg[others], atol=1e-4)
+    np.testing.assert_allclose(joints[others, 0], found.standoff_q_deg[others], atol=1e-4)
+    ints[42] = int(plan.target[k])  # the index register naming the target before (index + 1 = k)
+    moves = [m for m in run_urscript(script, ints, floats) if m[0] == "movel"]
+    np.testing.assert_allclose(np.degrees(moves[2 * k][1]), plan.q_deg[k], atol=1e-4)
+    assert np.degrees(np.abs(np.array(moves[2 * (k - 1)][1]) - np.radians(plan.q_deg[k - 1]))).max() > 0.1
 
 
 def test_a_plan_for_another_robot_is_refused_naming_the_target(irb_plan, tmp_path, capsys):

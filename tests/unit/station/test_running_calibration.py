@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import signal
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -354,3 +355,60 @@ def test_a_signal_ends_the_wait_for_the_final_refit_and_the_session_keeps_its_st
     assert runner._run_session(inputs, Devices({}, BACKOFF), live) is State.DONE
     view.close()
     assert worker.polls == 1  # the signal's stop request ended the wait at once
+
+
+def test_a_worker_started_with_the_plan_corrects_it_with_every_judged_refit_and_only_those():
+    """The real worker process: each judged refit carries the plan's corrected targets, heard by the
+    listener's ``corrected``; an undetermined one carries none."""
+    world = World.create(0)
+    q, lines = world.line_configurations(12, np.random.default_rng(1))
+    s = world.measure(q, lines, np.random.default_rng(2))
+    heard = []
+    listener = LiveListener(corrected=heard.append)
+    worker = FitWorker.start(ROBOT, SETUP, (q, lines))
+    running = RunningCalibration(ROBOT, SETUP, worker, lines, listener)
+    try:
+        assert worker.wait_ready(30.0)
+        for n in (10, len(s)):  # too few to determine the model, then all
+            for i in range(len(running.samples), n):
+                running.add(s.q_deg[i], s.length_mm[i], s.dial_mm[i], s.line[i])
+            deadline = time.monotonic() + 120.0
+            while (running.latest is None or running.latest.n < n) and time.monotonic() < deadline:
+                running.poll(1.0)  # a refit on the samples so far, then one on all of them
+            assert running.latest.n == n
+        assert len(running.history) == 1 and running.latest.judged  # one judged refit, the last
+        assert len(heard) == 1 and heard[0].n == len(s) and heard[0].q_deg.shape == q.shape
+        assert heard[0].ok.all() and np.abs(heard[0].q_deg - q).max() < 2.0  # small corrections
+    finally:
+        running.close()
+
+
+def test_a_correction_that_fails_leaves_the_refit_standing_and_is_said_once(monkeypatch):
+    from station.acquire import livefit
+
+    world = World.create(0)
+    q, lines = world.line_configurations(12, np.random.default_rng(1))
+    s = world.measure(q, lines, np.random.default_rng(2))
+    samples = SimpleNamespace(q_deg=s.q_deg, length_mm=s.length_mm, dial_mm=s.dial_mm, line=s.line)
+
+    def broken(*args):
+        raise np.linalg.LinAlgError("singular matrix")
+
+    monkeypatch.setattr(livefit, "correct_targets", broken)
+    fit = livefit._job("refit", ROBOT, SETUP, livefit.SessionSamples(**vars(samples)), (q, lines))
+    assert fit.judged and isinstance(fit.targets, FitFailed)
+    said, heard = [], []
+    worker = SimpleNamespace(
+        busy=False, ended=False, poll=lambda t=0.0: ("refit", fit), submit=lambda *a: None
+    )
+    running = RunningCalibration(
+        ROBOT, SETUP, worker, lines, LiveListener(message=said.append, corrected=heard.append)
+    )
+    for k in range(len(s)):
+        running.add(s.q_deg[k], s.length_mm[k], s.dial_mm[k], s.line[k])
+    running.poll()
+    running.poll()
+    assert running.latest is fit and heard == []
+    assert [m for m in said if "correcting" in m] == [
+        "running calibration: correcting the targets failed: LinAlgError: singular matrix"
+    ]

@@ -1,0 +1,88 @@
+"""Corrected targets during a session: the joints at which the running calibration's model puts the
+TCP on each planned contact pose, so a running program lands the remaining targets on the edge.
+
+A plan row's contact pose is the nominal model's TCP pose at its joints (``station plan`` writes the
+plan's ``x_mm..rz_deg`` so), in the frame the setup's lines were measured in. The calibrated model
+lives in a frame of its own, millimetres from that one (``calib.registration``): the fitted lines
+register it, and a target on a line the fit has placed is moved onto that fitted line (across it,
+the tool's orientation kept), a target elsewhere is the contact pose carried over. The corrected
+joints are where the calibrated model reaches that pose, by ``station compensate``'s maths
+(``calib.compensation.compensate``, damped Newton from the planned joints); a row that cannot be
+corrected (a joint limit, the wrist singularity, a large move) keeps its planned joints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.compensation import Status, compensate
+from calib.registration import register_lines
+from calib.robot_model import RobotModel
+from station.formats.tables import RobotFile, SetupFile
+from station.jobs.running import Refit
+
+
+@dataclass(frozen=True)
+class TargetCorrection:
+    """Every plan row's corrected joints ``q_deg`` (M, 6) [deg] by the refit on the first ``n``
+    samples, whether each could be corrected ``ok`` (M,), and how far the nominal model sees the
+    contact move, ``shift_mm`` (M,) [mm] (the robot's error there, as the refit sees it)."""
+
+    n: int
+    q_deg: np.ndarray
+    ok: np.ndarray
+    shift_mm: np.ndarray
+
+
+def calibrated_model(robot: RobotFile, fit: Refit) -> RobotModel:
+    """The robot as the refit ``fit`` models it: its table, the robot file's TCP and limits, and the
+    joint-space terms it fitted."""
+    model = fit.model
+    return RobotModel(
+        model.dh(fit.x),
+        np.asarray(robot.tool_mm, float),
+        np.radians(robot.limits_deg()),
+        model.terms,
+        model.term_values(fit.x),
+    )
+
+
+def fitted_lines(setup: SetupFile, fit: Refit) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """The lines the refit placed (point [mm], unit direction; calibrated frame), by id."""
+    return {lid: fit.model.line(fit.x, lid) for lid in getattr(fit.model, "line_ids", [])}
+
+
+def cell_from_calibrated(setup: SetupFile, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)`` taking the calibrated frame to the setup's (``calib.registration``) through the
+    fitted lines the setup places (``point_mm``, ``direction``); none: the identity."""
+    placed = {ln.id: ln for ln in setup.lines if ln.point_mm is not None and ln.direction is not None}
+    ids = [lid for lid in fitted if lid in placed]
+    if not ids:
+        return np.eye(3), np.zeros(3)
+    return register_lines(
+        np.array([fitted[lid][0] for lid in ids]),
+        np.array([fitted[lid][1] for lid in ids]),
+        np.array([placed[lid].point_mm for lid in ids], float),
+        np.array([placed[lid].direction for lid in ids], float),
+        np.array([placed[lid].length_mm for lid in ids], float),
+    )
+
+
+def correct_targets(
+    robot: RobotFile, setup: SetupFile, fit: Refit, plan_q_deg: np.ndarray, plan_lines: np.ndarray
+) -> TargetCorrection:
+    """The corrected joints of plan rows ``plan_q_deg`` (M, 6) [deg] on lines ``plan_lines`` (M,),
+    written with ``robot``'s nominal model, for the robot as ``fit`` models it (module notes)."""
+    nominal = robot.model()
+    q0 = np.radians(plan_q_deg)
+    p, rot = nominal.tool_frames(q0)  # the contact poses, the setup's frame
+    fitted = fitted_lines(setup, fit)
+    r_cell, t_cell = cell_from_calibrated(setup, fitted)
+    p_cal, rot_cal = (p - t_cell) @ r_cell, np.einsum("ji,njk->nik", r_cell, rot)
+    for lid, (point, direction) in fitted.items():  # onto the line the fit placed
+        rows = np.asarray(plan_lines) == lid
+        p_cal[rows] = point + np.outer((p_cal[rows] - point) @ direction, direction)
+    comp = compensate(nominal, calibrated_model(robot, fit), q0, meant=(p_cal, rot_cal))
+    return TargetCorrection(fit.n, np.degrees(comp.q), comp.status == Status.OK, comp.shift)

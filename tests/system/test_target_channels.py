@@ -1,0 +1,118 @@
+"""Corrected targets handed to a running program: the real ``ur_rtde`` RTDEIOInterface writes the
+RTDE input registers of the simulated controller, which hands them to its program; the simulated
+OPC UA server takes them in writable nodes; what a cell gets wrong (another client holding the
+registers, nodes the server lacks, a recipe of other types) leaves no channel, said by name."""
+
+import struct
+import time
+
+import numpy as np
+import pytest
+
+from drivers.opcua import OpcUaJointSource
+from drivers.robot import TARGET_INDEX_INPUT, RtdeJointSource
+from sim_fixtures import rtde_wire as wire
+from sim_fixtures.opcua_server import TARGET_INDEX_NODE, OpcUaRobotServer, position_node, target_node
+from sim_fixtures.robot_program import SimRobot
+from sim_fixtures.rtde_server import start_on_free_loopback
+from sim_fixtures.sources import SimClock
+from sim_fixtures.target_channel import TargetChannel, TargetInbox
+from tests.system.moving import free_address
+from tests.system.test_rtde_server import RawClient
+
+TARGETS = [[0.0, -50.0, -20.0, 0.0, -90.0, 0.0], [20.0, -40.0, -30.0, 5.0, -80.0, 10.0]]
+CORRECTED = [20.31, -39.87, -30.12, 5.21, -80.33, 10.47]  # target 1 a few tenths of a degree away
+
+
+@pytest.fixture
+def controller():
+    """A simulated UR controller whose program's channel records what its registers hand it."""
+    robot = SimRobot(TARGETS, speed_deg_s=40.0, accel_deg_s2=80.0, dwell_s=0.3, hold=True)
+    channel, clock = TargetChannel(), SimClock()
+    server = start_on_free_loopback(
+        robot, start_monotonic=clock.start_monotonic, inbox=TargetInbox(channel, robot, clock)
+    )
+    yield server, channel
+    server.stop()
+
+
+def _held(channel: TargetChannel, timeout_s: float = 2.0):
+    """What the channel holds once something arrived (the server is another process)."""
+    deadline = time.monotonic() + timeout_s
+    while (held := channel.at(1e12)) is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return held
+
+
+def test_ur_rtde_writes_the_target_registers_and_the_program_gets_the_target(controller):
+    server, channel = controller
+    with RtdeJointSource(server.host) as robot:
+        targets = robot.target_channel()
+        assert targets is not None and "int 42: index + 1" in targets.where
+        time.sleep(0.2)
+        assert channel.at(1e12) is None  # opening the channel names no target (0 in the index)
+        targets.write(1, CORRECTED)
+        held = _held(channel)
+        assert held is not None and held[0] == 1
+        np.testing.assert_allclose(held[1][:5], CORRECTED[:5], atol=1e-9)  # doubles, rad on the wire
+        np.testing.assert_allclose(held[1][5], CORRECTED[5], atol=1e-4)  # joint 6: 1 urad steps
+        assert robot.read().values["q_deg"] == pytest.approx(TARGETS[0])  # the stream goes on beside it
+    assert server.input_errors == 0
+
+
+def test_registers_another_client_writes_leave_no_channel_said_by_name(controller):
+    server, _ = controller
+    with RtdeJointSource(server.host) as first, RtdeJointSource(server.host) as second:
+        assert first.target_channel() is not None
+        assert second.target_channel() is None
+        assert second.no_channel.startswith(f"RTDE {server.host}:30004 refused its input registers")
+        assert "already in use" in second.no_channel
+
+
+def test_an_input_recipe_has_the_controllers_types_and_a_package_of_another_size_is_dropped(controller):
+    server, channel = controller
+    client = RawClient(server.host)
+    assert client.request(wire.REQUEST_PROTOCOL_VERSION, b"\x00\x02").payload == b"\x01"
+    index = f"input_int_register_{TARGET_INDEX_INPUT}"
+    refused = client.request(wire.SETUP_INPUTS, f"{index},input_double_register_42,joint_torque".encode())
+    assert refused.payload == b"\x00INT32,DOUBLE,NOT_FOUND"
+    setup = client.request(wire.SETUP_INPUTS, f"{index},input_double_register_42".encode())
+    assert setup.payload == b"\x01INT32,DOUBLE"
+    client.sock.sendall(wire.pack(wire.DATA_PACKAGE, struct.pack(">Bi", 1, 2)))  # the double missing
+    client.sock.sendall(wire.pack(wire.DATA_PACKAGE, struct.pack(">Bid", 9, 2, 0.5)))  # no such recipe
+    deadline = time.monotonic() + 2.0
+    while server.input_errors < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert server.input_errors == 2 and channel.at(1e12) is None
+    client.sock.sendall(wire.pack(wire.DATA_PACKAGE, struct.pack(">Bid", 1, 2, 0.5)))  # target 1
+    held = _held(channel)
+    assert held is not None and held[0] == 1 and held[1][0] == pytest.approx(np.degrees(0.5))
+    client.sock.close()
+
+
+def test_opcua_target_nodes_hand_the_program_its_target_and_missing_ones_leave_none():
+    handed = []
+    server = OpcUaRobotServer(
+        lambda: (TARGETS[0], [0.0] * 6), *free_address(), hand=lambda k, q: handed.append((k, q))
+    ).start()
+    try:
+        positions = [position_node(i) for i in range(1, 7)]
+        targets = [target_node(i) for i in range(1, 7)]
+        with OpcUaJointSource(
+            server.url, positions, target_nodes=targets, target_index_node=TARGET_INDEX_NODE
+        ) as s:
+            channel = s.target_channel()
+            assert channel is not None
+            channel.write(1, CORRECTED)
+            assert handed == [(1, pytest.approx(CORRECTED))]
+        wrong = "ns=2;s=DeviceSet/Robot/TargetIndx"
+        with OpcUaJointSource(server.url, positions, target_nodes=targets, target_index_node=wrong) as s:
+            assert s.target_channel() is None
+            assert s.no_channel == f"node {wrong}: BadNodeIdUnknown"
+        with OpcUaJointSource(
+            server.url, positions, target_nodes=positions, target_index_node=TARGET_INDEX_NODE
+        ) as s:
+            assert s.target_channel() is None  # the joints' own readings are not writable
+            assert s.no_channel == f"node {positions[0]} is not writable"
+    finally:
+        server.stop()
