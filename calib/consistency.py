@@ -178,13 +178,18 @@ class DialGain:
         sign is flipped, near zero where the dial does not read the tool's distance from this edge.
     sigma : float
         Its standard error (all three components together) [mm/mm].
+    dof : int
+        Rows less the three coefficients fitted: below a few, ``sigma`` itself is a guess.
     """
 
     gain: np.ndarray
     sigma: float
+    dof: int = 0
 
 
-def dial_gain(tcp: np.ndarray, point: np.ndarray, direction: np.ndarray, dial: np.ndarray) -> DialGain:
+def dial_gain(
+    tcp: np.ndarray, point: np.ndarray, direction: np.ndarray, dial: np.ndarray, noise_mm: float = 0.0
+) -> DialGain:
     """Regress a line's TCP offsets across it on the dial readings (with a constant and a term along
     the line, which a line's own fit absorbs).
 
@@ -196,6 +201,9 @@ def dial_gain(tcp: np.ndarray, point: np.ndarray, direction: np.ndarray, dial: n
         The fitted line [mm] and its unit direction.
     dial : ndarray, shape (n,)
         The rows' dial readings [mm].
+    noise_mm : float
+        The stated noise of a TCP's offset from its line, per direction across it [mm]: the
+        residual's floor (a few rows can fit each other far better than the tool sits).
 
     Returns
     -------
@@ -207,6 +215,6 @@ def dial_gain(tcp: np.ndarray, point: np.ndarray, direction: np.ndarray, dial: n
     design = np.column_stack([np.ones(len(dial)), along, dial])
     coef = np.linalg.lstsq(design, offset, rcond=None)[0]
     dof = max(len(dial) - 3, 1)
-    residual = float(np.sum((offset - design @ coef) ** 2)) / dof
+    residual = max(float(np.sum((offset - design @ coef) ** 2)) / dof, 2.0 * noise_mm**2)
     var = np.linalg.pinv(design.T @ design)[2, 2]
-    return DialGain(coef[2], float(np.sqrt(residual * var)))
+    return DialGain(coef[2], float(np.sqrt(residual * var)), len(dial) - 3)

@@ -25,6 +25,11 @@ disagrees: this much, or this many of the gain's standard errors where it is kno
 rows, readings that hardly spread)."""
 DIAL_GAIN_FOLLOWS = 0.5
 """A gain shorter than this: the dial does not read the tool's distance from the edge at all."""
+DIAL_MIN_DOF = 5
+"""A line's dial is judged from this many rows beyond the gain's three coefficients: with fewer,
+its residual (and the gain's sigma) rests on one or two numbers (a rehearsed IRB 2600 session that
+measured a line at 4 corrected targets, every reading within 0.08 mm of 0, was refused as 'does
+not follow')."""
 DIAL_FREE_STEPS = 4
 """Robust Gauss-Newton steps from the calibration to the dial-free one (``line_dials``): each cuts
 the distance to a full dial-free calibration's TCPs about fivefold (a flipped dial: 1.8 mm at the
@@ -42,7 +47,8 @@ class LineDial:
     """One gauge line's dial judged against its rows: ``line`` id, stated unit ``axis``, the
     ``gain`` its readings show (``calib.consistency.dial_gain``: the stated axis across the line
     where right) with its ``sigma``, and the ``verdict`` (``agrees``, ``flipped``, ``other axis``,
-    ``does not follow``, or ``inconclusive`` for an axis nearly along the line)."""
+    ``does not follow``, or ``inconclusive`` for an axis nearly along the line or fewer rows than
+    ``DIAL_MIN_DOF`` beyond the gain's three coefficients)."""
 
     line: int
     axis: tuple[float, float, float]
@@ -103,12 +109,15 @@ def line_dials(model, cal: Calibration) -> list[LineDial]:
         rows = np.flatnonzero((model.placement_ids() == lid) & ~np.isnan(samples.dial))
         point, direction = model.line(x, lid)
         axis = np.asarray(model.setup_values.dial_axis_of(lid), float)
-        found = dial_gain(tcp[rows], point, direction, samples.dial[rows])
+        noise = float(np.min(model.line_sigma(lid)))
+        found = dial_gain(tcp[rows], point, direction, samples.dial[rows], noise)
         out.append(LineDial(lid, _t(axis), _t(found.gain), found.sigma, _verdict(found, axis, direction)))
     return out
 
 
 def _verdict(found: DialGain, axis: np.ndarray, direction: np.ndarray) -> str:
+    if found.dof < DIAL_MIN_DOF:
+        return "inconclusive"  # too few rows to judge the dial by
     across = axis - (axis @ direction) * direction
     if np.linalg.norm(across) < 0.3:
         return "inconclusive"  # an axis nearly along the line: its readings barely move the TCP across it
