@@ -168,13 +168,14 @@ def test_a_web_bind_on_another_address_serves_there(tmp_path):
 
 
 def test_a_web_bind_beyond_this_machine_says_so(tmp_path):
-    from station.view.live import LiveView
+    from station.view.live import WRITERS, LiveView
 
     view = LiveView(tmp_path / "session.rrd", web="0.0.0.0")
     try:
         url, note = view.notes
         assert url.startswith(f"live view: http://{socket.gethostname()}:")
         assert note.startswith("note: --web-bind 0.0.0.0 serves the live view to every machine that reaches")
+        assert note.endswith(WRITERS)  # said plainly who else can write into the view
     finally:
         view.close()
 
