@@ -315,17 +315,8 @@ def _verify(out: Path, inputs, seed: int) -> None:
             f"{report.verdict} "
             f"(RMSE {report.rmse_mm:.3f} mm, {report.test.noise_ratio:.2f} x the stated noise"
             f"{'; most likely moved: ' + likely if likely else ''}"
-            f"{_missed_text(missed) if missed else ''}) -> {out / name}",
+            f"{missed.text(brief=True) if missed else ''}) -> {out / name}",
             flush=True,
         )
     print(f"verify:    ({time.perf_counter() - t0:.1f} s)", flush=True)
 
-
-def _missed_text(missed) -> str:
-    """What a holding verification could let pass, in a few words."""
-    if missed.change is None:
-        return f"; does not see {missed.param}"
-    return (
-        f"; could miss {missed.param} up to {missed.change:.3g} {missed.unit}, "
-        f"{missed.workspace_mm:.2f} mm over the workspace"
-    )

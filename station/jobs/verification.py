@@ -108,9 +108,16 @@ class Missed:
     unit: str
     workspace_mm: float | None
 
-    def text(self) -> str:
+    def text(self, brief: bool = False) -> str:
+        """The clause a verdict ends with (``brief``: the demo's few words)."""
         if self.change is None:
-            return f"; these samples do not see {self.param} at all: a change there would pass unseen"
+            unseen = "" if brief else " at all: a change there would pass unseen"
+            return f"; {'does' if brief else 'these samples do'} not see {self.param}{unseen}"
+        if brief:
+            return (
+                f"; could miss {self.param} up to {self.change:.3g} {self.unit}, "
+                f"{self.workspace_mm:.2f} mm over the workspace"
+            )
         return (
             f"; these samples could miss a drift moving the tool up to {self.workspace_mm:.3f} mm RMS over "
             f"the workspace ({self.param} by {self.change:.3g} {self.unit}); poses that turn the joints "
