@@ -11,7 +11,9 @@ robot that changed leaves more.
 
 Which parameters moved: each robot column's projection (the setup's part taken out) explains
 ``(p_k . u)^2 / |p_k|^2`` of the chi-square, with the change ``p_k . u / |p_k|^2`` and its standard
-deviation ``1 / |p_k|`` (the table's own sigma added in quadrature): the single changes that would
+deviation ``1 / |p_k|`` (with the table's own error along ``p_k``, ``|p_k^T P J_r C^1/2| / |p_k|^2``,
+added in quadrature: a parameter the table knows only together with a held one moves little
+there, whatever its own sigma): the single changes that would
 best explain the residual, the parameters a recalibration would most likely move. The same
 projection says what the rows would miss: a change ``delta`` of parameter k alone gives an estimate
 of mean ``delta`` and that sigma, so it is caught (most times) once ``delta`` is a few sigmas.
@@ -121,9 +123,7 @@ def drift_test(
     u = _project(basis, r / s)
     table = np.zeros(0)
     if robot_cov is not None:
-        value, vector = np.linalg.eigh(robot_cov)
-        root = vector * np.sqrt(np.clip(value, 0.0, None))
-        a = _project(basis, (jac_robot[kept] / s[:, None]) @ root)
+        a = _project(basis, (jac_robot[kept] / s[:, None]) @ _root(robot_cov))
         table = np.clip(np.linalg.eigvalsh(a.T @ a), 0.0, None)
     # |u|^2 = chi-square on dof plus sum_i table_i chi-square_1: matched in mean and variance by
     # c chi-square on nu (Satterthwaite)
@@ -142,7 +142,8 @@ def likely_changes(
     jac_setup: np.ndarray,
     jac_robot: np.ndarray,
     columns: np.ndarray,
-    table_sigma: np.ndarray,
+    jac_table: np.ndarray,
+    table_cov: np.ndarray | None,
 ) -> list[Change]:
     """Each robot parameter's change that best explains the residual alone (see the module
     docstring), by how much of the chi-square it explains, largest first.
@@ -155,27 +156,26 @@ def likely_changes(
         Jacobian by the candidate parameters.
     columns : ndarray of int, shape (k,)
         Their index in ``x`` (``Change.index``).
-    table_sigma : ndarray, shape (k,)
-        The calibration's standard deviation of each (0 where unknown), internal units.
+    jac_table, table_cov : ndarray
+        As ``drift_test``'s ``jac_robot`` and ``robot_cov``: the table's own error, whose part along
+        each candidate's column adds to its sigma (a parameter the table knows only with another,
+        held one moves little there).
 
     Returns
     -------
     list of Change
     """
-    kept = np.asarray(weights, float) ** 2 >= DOWNWEIGHTED_BELOW
-    s = scale[kept]
-    basis = setup_basis(jac_setup[kept] / s[:, None])
-    u = _project(basis, residuals[kept] / s)
-    cols = _project(basis, jac_robot[kept] / s[:, None])
-    norm2 = np.sum(cols**2, axis=0)
-    seen = norm2 > 1e-12 * max(float(norm2.max(initial=0.0)), 1e-300)
+    kept, cols, norm2, sigma = _candidates(weights, scale, jac_setup, jac_robot, jac_table, table_cov)
+    basis = setup_basis(jac_setup[kept] / scale[kept][:, None])
+    u = _project(basis, residuals[kept] / scale[kept])
     total = max(float(u @ u), 1e-300)
     out = []
-    for k in np.flatnonzero(seen):
+    for k in np.flatnonzero(np.isfinite(sigma)):
         a = float(cols[:, k] @ u)
         change = -a / norm2[k]  # the step that takes the residual away
-        sigma = float(np.hypot(1.0 / np.sqrt(norm2[k]), table_sigma[k]))
-        out.append(Change(int(columns[k]), change, sigma, a * a / norm2[k] / total, abs(change) / sigma))
+        out.append(
+            Change(int(columns[k]), change, float(sigma[k]), a * a / norm2[k] / total, abs(change) / sigma[k])
+        )
     return sorted(out, key=lambda c: -c.explains)
 
 
@@ -184,7 +184,8 @@ def caught_changes(
     scale: np.ndarray,
     jac_setup: np.ndarray,
     jac_robot: np.ndarray,
-    table_sigma: np.ndarray,
+    jac_table: np.ndarray,
+    table_cov: np.ndarray | None,
     z_caught: float,
 ) -> np.ndarray:
     """The smallest change of each robot parameter alone that these rows catch: a change whose
@@ -193,12 +194,8 @@ def caught_changes(
 
     Parameters
     ----------
-    weights, scale, jac_setup : ndarray
-        As ``drift_test``.
-    jac_robot : ndarray, shape (m, k)
-        Jacobian by the candidate parameters.
-    table_sigma : ndarray, shape (k,)
-        The calibration's standard deviation of each (0 where unknown), internal units.
+    weights, scale, jac_setup, jac_robot, jac_table, table_cov : ndarray
+        As ``likely_changes``.
     z_caught : float
         The change's mean z-score that counts as caught.
 
@@ -207,14 +204,31 @@ def caught_changes(
     ndarray, shape (k,)
         The change (internal units, >= 0); inf for a parameter these rows do not see.
     """
+    return z_caught * _candidates(weights, scale, jac_setup, jac_robot, jac_table, table_cov)[3]
+
+
+def _candidates(weights, scale, jac_setup, jac_robot, jac_table, table_cov):
+    """The kept rows, each candidate's column with the setup's part taken out (m, k), its squared
+    norm (k,) and the sigma of its change estimate (k,; inf where the rows do not see it): the
+    noise's ``1 / |c_k|`` and the table's own error along the column, ``|c_k^T A C^1/2| / |c_k|^2``."""
     kept = np.asarray(weights, float) ** 2 >= DOWNWEIGHTED_BELOW
     s = scale[kept]
     basis = setup_basis(jac_setup[kept] / s[:, None])
-    norm2 = np.sum(_project(basis, jac_robot[kept] / s[:, None]) ** 2, axis=0)
+    cols = _project(basis, jac_robot[kept] / s[:, None])
+    norm2 = np.sum(cols**2, axis=0)
     seen = norm2 > 1e-12 * max(float(norm2.max(initial=0.0)), 1e-300)
-    sigma = np.full(len(norm2), np.inf)
-    sigma[seen] = np.hypot(1.0 / np.sqrt(norm2[seen]), np.asarray(table_sigma, float)[seen])
-    return z_caught * sigma
+    var = np.full(len(norm2), np.inf)
+    var[seen] = 1.0 / norm2[seen]
+    if table_cov is not None:
+        field = _project(basis, (jac_table[kept] / s[:, None]) @ _root(table_cov))
+        var[seen] += np.sum((cols[:, seen].T @ field) ** 2, axis=1) / norm2[seen] ** 2
+    return kept, cols, norm2, np.sqrt(var)
+
+
+def _root(cov: np.ndarray) -> np.ndarray:
+    """A square root ``R`` of a covariance (``R R^T = C``), its negative eigenvalues clipped."""
+    value, vector = np.linalg.eigh(cov)
+    return vector * np.sqrt(np.clip(value, 0.0, None))
 
 
 def sensitive_rows(

@@ -220,17 +220,11 @@ def verify_samples(
     cov = table.covariance(table_where)
     test = drift_test(r, weights, scale, jac[:, held], jac[:, robot_cols], cov)
     candidates = np.array([k for k in robot_cols if model.names[k] not in model.gauges()], int)
-    sigma = np.zeros(len(model.names))
-    if cov is not None:
-        sigma[robot_cols] = np.sqrt(np.diag(cov))
-    changes = likely_changes(
-        r, weights, scale, jac[:, held], jac[:, candidates], candidates, sigma[candidates]
-    )
+    basis = (weights, scale, jac[:, held], jac[:, candidates])
+    changes = likely_changes(r, *basis, candidates, jac[:, robot_cols], cov)
     drifted = is_drifted(test, changes, scale)
     likely = tuple(_likely(model, c) for c in named(changes)) if drifted else ()
-    smallest = caught_changes(
-        weights, scale, jac[:, held], jac[:, candidates], sigma[candidates], _z_caught(candidates)
-    )
+    smallest = caught_changes(*basis, jac[:, robot_cols], cov, _z_caught(candidates))
     missed = _missed(model, table, x, candidates, smallest)
     errors = model.row_error_mm(x)
     overall = error_metrics(errors)

@@ -37,7 +37,7 @@ def test_a_changed_parameter_is_named_first_with_its_change_and_sigma(rng):
     for _ in range(50):
         r = rng.normal(size=M) - jac_r @ delta  # residual = model - measurement
         r -= jac_s @ np.linalg.lstsq(jac_s, r, rcond=None)[0]
-        changes = likely_changes(r, np.ones(M), np.ones(M), jac_s, jac_r, np.arange(K), np.zeros(K))
+        changes = likely_changes(r, np.ones(M), np.ones(M), jac_s, jac_r, np.arange(K), jac_r, None)
         best = changes[0]
         assert best.index == 3
         hits += abs(best.change - 2.0) < 3 * best.sigma
@@ -75,7 +75,8 @@ def test_the_smallest_caught_change_is_caught_nine_times_in_ten(rng):
     jac_s, jac_r = _model(rng)
     table_sigma = np.full(K, 0.05)
     z_test, k = 3.0, 2
-    caught = caught_changes(np.ones(M), np.ones(M), jac_s, jac_r, table_sigma, z_test + 1.2816)
+    table_cov = np.diag(table_sigma**2)
+    caught = caught_changes(np.ones(M), np.ones(M), jac_s, jac_r, jac_r, table_cov, z_test + 1.2816)
     assert np.all(np.isfinite(caught)) and np.all(caught > 0)
     rates = []
     for size in (caught[k], caught[k] / 2):
@@ -85,7 +86,7 @@ def test_the_smallest_caught_change_is_caught_nine_times_in_ten(rng):
             delta[k] += size
             r = rng.normal(size=M) - jac_r @ delta
             r -= jac_s @ np.linalg.lstsq(jac_s, r, rcond=None)[0]
-            found = likely_changes(r, np.ones(M), np.ones(M), jac_s, jac_r, np.arange(K), table_sigma)
+            found = likely_changes(r, np.ones(M), np.ones(M), jac_s, jac_r, np.arange(K), jac_r, table_cov)
             hits += next(c for c in found if c.index == k).z >= z_test
         rates.append(hits / 400)
     assert abs(rates[0] - 0.9) < 0.045 and rates[1] < 0.5
@@ -96,5 +97,30 @@ def test_a_parameter_the_rows_do_not_see_is_never_caught():
     jac_r = np.zeros((M, 2))
     jac_r[:, 0] = 1.0
     jac_r[:S, 1] = 1.0  # entirely within the setup's columns: the setup fit takes it up
-    caught = caught_changes(np.ones(M), np.ones(M), jac_s, jac_r, np.zeros(2), 4.0)
+    caught = caught_changes(np.ones(M), np.ones(M), jac_s, jac_r, jac_r, None, 4.0)
     assert np.isfinite(caught[0]) and caught[1] == np.inf
+
+
+def test_a_parameter_known_only_with_another_is_judged_by_what_the_rows_see_of_the_table(rng):
+    """Two parameters that move these rows alike (a J5 zero and J5's offset on a line whose tool
+    barely turns): the table knows their sum to 0.01 and each alone only to 1. Their change
+    estimates scatter by the sum's uncertainty, not by each one's own sigma: the sigma said is the
+    scatter seen (within 10 %), mostly the rows' noise, and far under each one's own sigma (which
+    the old hypot with the own sigma gave)."""
+    jac_s = rng.normal(size=(M, S))
+    col = rng.normal(size=M)
+    jac_r = np.column_stack([col, col])
+    along, across = np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)
+    table_cov = 0.01**2 / 2 * np.outer(along, along) + 1.0**2 * np.outer(across, across)
+    changes, said = [], None
+    for _ in range(400):
+        d = rng.multivariate_normal(np.zeros(2), table_cov)
+        r = rng.normal(size=M) - jac_r @ d
+        r -= jac_s @ np.linalg.lstsq(jac_s, r, rcond=None)[0]
+        found = likely_changes(r, np.ones(M), np.ones(M), jac_s, jac_r, np.arange(2), jac_r, table_cov)
+        first = next(c for c in found if c.index == 0)
+        changes.append(first.change)
+        said = first.sigma
+    seen = float(np.std(changes))
+    assert abs(said / seen - 1.0) < 0.1
+    assert said < np.sqrt(table_cov[0, 0]) / 5
