@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
+
+from station.commands.flags import number
+
+_angle = number(float, "a number", lambda v: 0.0 <= v < 90.0, "{:g} must lie in [0, 90) deg")
 
 
 def register(sub) -> None:
@@ -62,13 +65,3 @@ def run(args) -> int:
     print(compensation.summary(outcome.report))
     print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
     return 0
-
-
-def _angle(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0.0 <= value < 90.0:
-        raise argparse.ArgumentTypeError(f"{value:g} must lie in [0, 90) deg")
-    return value

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import argparse
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from errors import InputError, ParameterError
@@ -16,3 +17,19 @@ def parameters_as_flags(flags: dict[str, str]) -> Iterator[None]:
         yield
     except ParameterError as exc:
         raise InputError(exc.named(flags)) from None
+
+
+def number(parse: Callable[[str], float], what: str, valid: Callable[[float], bool], rule: str):
+    """An argparse ``type``: ``parse(text)`` (a ``ValueError``: the text is not ``what``), kept if
+    ``valid``, else refused with ``rule`` formatted with the value."""
+
+    def convert(text: str):
+        try:
+            value = parse(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+        if not valid(value):
+            raise argparse.ArgumentTypeError(rule.format(value))
+        return value
+
+    return convert

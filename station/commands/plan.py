@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 from errors import InputError
-from station.commands.flags import parameters_as_flags
+from station.commands.flags import number, parameters_as_flags
+
+_positive = number(int, "a whole number", lambda v: v >= 1, "{} must be at least 1")
 
 FLAGS = {"per_line": "--per-line", "n_select": "--select"}
 """The flag that sets each parameter of the plan design."""
@@ -113,13 +114,3 @@ def _readings(args) -> int:
         if station is not None:
             return station_config(station, f"{where} [station]").session.readings
     return load_station_config(configs.path("station.toml")).session.readings
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
-    return value

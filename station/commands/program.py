@@ -3,8 +3,11 @@ program that brings the tool onto each planned contact (``station.jobs.measureme
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
+
+from station.commands.flags import number
+
+_positive = number(float, "a number", lambda v: 0 < v < 1e4, "{:g} must be above 0 and below 10000")
 
 FORMATS = ("urscript", "poses-csv")
 
@@ -74,13 +77,3 @@ def run(args) -> int:
         print(f"{short} targets near a joint limit get a shorter stand-off (down to {least:g} mm)")
     print(f"{len(plan)} targets, contact poses from {source}; wrote {args.out}")
     return 0
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0 < value < 1e4:
-        raise argparse.ArgumentTypeError(f"{value:g} must be above 0 and below 10000")
-    return value

@@ -12,11 +12,13 @@ timeout (the samples taken so far are kept: continue with ``--resume DIR``).
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import configs
 from errors import InputError, OutputError
+from station.commands.flags import number
+
+_positive_mm = number(float, "a number (mm)", lambda v: v > 0, "{:g} must be above 0 mm")
 
 EXIT = {"done": 0, "stopped": 130, "timed out": 1}
 """Exit code by the state the session ended in."""
@@ -115,13 +117,3 @@ def resuming_text(folder, inputs, until_mm: float | None) -> str:
             "not carried over: give --until-mm again to stop at a goal)"
         )
     return f"{text}; measuring the rest of the plan"
-
-
-def _positive_mm(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number (mm)") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"{value:g} must be above 0 mm")
-    return value
