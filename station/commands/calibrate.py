@@ -47,8 +47,9 @@ def register(sub) -> None:
         default=DEFAULT_TERM_MODEL,
         choices=TERM_MODELS,
         help="terms beside the D-H table: geometric (none), compliance (load-bearing joints under "
-        "gravity), full (plus 1st and 2nd harmonics of every joint), auto (those of full that cut "
-        "the cross-validated error of the training rows by >= 5 %%; default)",
+        "gravity), full (plus 1st and 2nd harmonics of every joint), auto (default: the compliances "
+        "where the rows determine them and they do not raise the error at poses left out by region, "
+        "a harmonic only where it cuts that error by >= 5 %%)",
     )
     p.add_argument("--report", type=Path, help="report JSON to write")
     p.add_argument(
