@@ -18,7 +18,7 @@ from errors import DeviceError, InputError
 from station.acquire.capture import Devices, Rules
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
-from station.acquire.session import Listener, Session, State
+from station.acquire.session import OFFLINE_REMEDY, Listener, Session, State
 from station.acquire.targets import TargetFeed
 from station.config import StationConfig, load_station_config, station_config, unreachable_hint
 from station.formats.announcement import announcement_path, running_simulator
@@ -245,16 +245,18 @@ class Live:
     def listener(self) -> Listener:
         """The session's listener: each sample judged and handed on; the worker looked in on at
         every checkpoint, never waited for; each settle at a plan target told to the target feed."""
-        return Listener(self.sample, self.message, self.running.poll, self.settled)
+        return Listener(self.sample, self.message, self.running.poll, self.settled, self.remedy)
 
-    def feed_targets(self, plan: Plan, driver) -> None:
+    def feed_targets(self, plan: Plan, driver, finished: set[int]) -> None:
         """Hand the corrected targets of ``plan`` to the robot ``driver``'s target channel (opened
-        now: a second connection of some controllers), or say once, when they start, that it has none."""
+        now: a second connection of some controllers), or say once, when they start, that it has
+        none; ``finished``: the target ids measured before (a resumed session's, corrected at once)."""
+        before = [i for i, t in enumerate(plan.target) if int(t) not in finished]
         self.feed = TargetFeed(
             plan,
             driver.target_channel,
             lambda: driver.no_channel,
-            lambda: self.session.pending if self.session is not None else [],
+            lambda: self.session.pending if self.session is not None else before,
             self.message,
             self.view.message,
         )
@@ -267,6 +269,13 @@ class Live:
     def settled(self, index: int) -> None:
         if self.feed is not None:
             self.feed.settled(index)
+
+    def remedy(self) -> str:
+        """What to do about the targets left when the robot stood off the edge too long: run the
+        program again where the channel corrects them, else the offline route."""
+        folder = self.session.folder.path if self.session is not None else "DIR"
+        where = None if self.feed is None else self.feed.remedy(f"station sample --resume {folder}")
+        return where or OFFLINE_REMEDY
 
     def corrected_targets(self) -> list[int]:
         """The target ids this run handed the program corrected."""
@@ -330,7 +339,7 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     for note in (*view.notes, *inputs.notes):
         progress.message(note)
     if "robot" in devices.drivers:
-        live.feed_targets(plan, devices.drivers["robot"])
+        live.feed_targets(plan, devices.drivers["robot"], inputs.folder.finished_targets)
     worker.wait_ready(WORKER_START_S)
     for row in inputs.folder.rows:
         dial = float(row["dial_mm"]) if row["dial_mm"] else float("nan")

@@ -74,9 +74,13 @@ class OffEdge(Exception):
 
 OFF_EDGE_TIMEOUT = (
     "no capture for {s:g} s: the dial reads outside its gate where the robot stands (the tool off the "
-    "edge): correct the remaining targets (station calibrate, then station compensate the plan) or "
-    "widen [session] dial_range_mm"
+    "edge): {remedy}"
 )
+OFFLINE_REMEDY = (
+    "correct the remaining targets (station calibrate, then station compensate the plan) or widen "
+    "[session] dial_range_mm"
+)
+"""What to do about targets the robot cannot bring onto the edge, where nothing corrects them in-session."""
 
 
 class State(enum.Enum):
@@ -92,13 +96,15 @@ class State(enum.Enum):
 class Listener:
     """What a session reports: ``sample(row, capture)`` after each stored sample,
     ``message(text)`` on every state change worth telling the operator, ``tick()`` at every
-    checkpoint (between polls, also while suspended), and ``settled(index)`` when the robot has
-    settled at plan row ``index`` (finished or not), before anything is captured there."""
+    checkpoint (between polls, also while suspended), ``settled(index)`` when the robot has
+    settled at plan row ``index`` (finished or not), before anything is captured there, and
+    ``remedy()``: what to do about the targets left when the robot stood off the edge too long."""
 
     sample: Callable[[dict, Capture], None] = lambda row, cap: None
     message: Callable[[str], None] = lambda text: None
     tick: Callable[[], None] = lambda: None
     settled: Callable[[int], None] = lambda index: None
+    remedy: Callable[[], str] = lambda: OFFLINE_REMEDY
 
 
 class Session:
@@ -166,7 +172,8 @@ class Session:
                     self._suspended(why)
                 except OffEdge:
                     waited = self.rules.target_timeout_s * self.rules.time_scale
-                    return self._end(State.TIMED_OUT, OFF_EDGE_TIMEOUT.format(s=waited))
+                    text = OFF_EDGE_TIMEOUT.format(s=waited, remedy=self.listener.remedy())
+                    return self._end(State.TIMED_OUT, text)
                 self.settle.reset()
                 # an attempt is progress; else waiting out a condition is not idling
                 last_progress = self.clock() if self._attempted else last_progress + self.clock() - since

@@ -7,9 +7,10 @@ registers, OPC UA nodes: ``drivers.base.TargetChannel``): if the channel names t
 moves to the joints there instead of the planned ones. So whenever the robot settles at a plan
 target, the station writes the next unfinished target after it, corrected by the latest refit,
 once per target; the first correction is written at once (the robot may be on its way already,
-then that one arrives too late and the next is in time). A robot without a channel (a ROS topic,
-Modbus registers, a controller that refuses the inputs) is told once: the offline route corrects
-the remaining targets then.
+then that one arrives too late and the next is in time), before the robot has settled anywhere the
+plan's first unfinished target (a program run again starts at the plan's beginning). A robot
+without a channel (a ROS topic, Modbus registers, a controller that refuses the inputs) is told
+once: the offline route corrects the remaining targets then.
 """
 
 from __future__ import annotations
@@ -71,11 +72,31 @@ class TargetFeed:
         self.at = index
         self._next()
 
+    def remedy(self, resume: str) -> str | None:
+        """What to do about the targets left when the robot stood off the edge too long, where the
+        channel corrects them (None where it does not): ``resume`` is the command that continues."""
+        if self.stopped or self.correction is None:
+            return None
+        target = None if self.at is None else int(self.plan.target[self.at])
+        if self.sent.get(target):
+            return (
+                f"target {target}'s corrected joints missed the edge too (model of {self.sent[target]} "
+                "samples): calibrate what was measured (station calibrate) and follow its next step, or "
+                "widen [session] dial_range_mm"
+            )
+        left = len(self.unfinished())
+        return (
+            f"run the robot program again with {resume}: the model of {self.correction.n} samples "
+            f"corrects the {left} target{'s' if left != 1 else ''} left as the program reaches them"
+        )
+
     def _next(self) -> None:
-        """Write the next unfinished target after the one the robot is at, once."""
-        if self.stopped or self.correction is None or self.at is None:
+        """Write the next unfinished target after the one the robot is at (before it has settled
+        anywhere: from the plan's beginning), once."""
+        if self.stopped or self.correction is None:
             return
-        later = [i for i in self.unfinished() if i > self.at]
+        at = -1 if self.at is None else self.at
+        later = [i for i in self.unfinished() if i > at]
         if not later or int(self.plan.target[min(later)]) in self.sent:
             return
         index = min(later)

@@ -488,7 +488,20 @@ def test_a_robot_standing_off_the_edge_times_out_saying_so(tmp_path, clock):
     assert cell.targets() == [0, 1]
     assert cell.said("suspended: dial reads -3.500 mm, outside its gate")
     assert cell.messages[-1].startswith("timed out: no capture for 10 s: the dial reads outside its gate")
+    assert "correct the remaining targets (station calibrate, then station compensate" in cell.messages[-1]
     assert clock() < 5.0 + RULES.target_timeout_s + 5.0
+
+
+def test_a_robot_off_the_edge_is_told_the_remedy_its_session_knows(tmp_path, clock):
+    """Where the targets are corrected in-session, the remedy is the listener's (run the program
+    again), not the offline route."""
+    q = PLAN.q_deg
+    cell = Cell(tmp_path, clock, timeline(*walk(q[:1]), (1e9, still(q[1]))))
+    cell.dial.script = lambda t: {"dial_mm": 0.25 if t < 2.0 else -3.5}
+    listener = Listener(message=cell.messages.append, remedy=lambda: "run the robot program again")
+    assert cell.session(listener).run() is State.TIMED_OUT
+    assert cell.messages[-1].startswith("timed out: no capture for 10 s: the dial reads outside its gate")
+    assert "(the tool off the edge): run the robot program again; 1 samples in" in cell.messages[-1]
 
 
 def teleports_during_the_first_capture(cell: Cell, to_q, *, values=None) -> None:

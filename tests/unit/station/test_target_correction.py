@@ -104,6 +104,25 @@ def test_the_next_unfinished_target_goes_to_the_program_once_when_the_robot_sett
     assert feed.sent == {11: 30, 12: 0, 14: 30}
 
 
+def test_before_the_robot_settles_anywhere_the_first_unfinished_target_goes_to_the_program():
+    """A resumed session's model is determined before the program starts: the program's first
+    target (the plan's first unfinished) is corrected in time."""
+    channel = Channel()
+    feed, correction, said, _ = _feed(channel, [1, 2, 4, 5])
+    assert feed.remedy("station sample --resume s") is None  # nothing corrected yet
+    feed.corrected(correction)
+    assert channel.written == [(11, list(correction.q_deg[1]))]
+    assert feed.remedy("station sample --resume s") == (
+        "run the robot program again with station sample --resume s: the model of 30 samples "
+        "corrects the 4 targets left as the program reaches them"
+    )
+    feed.settled(1)  # the robot stands at target 11, sent corrected: it missed the edge all the same
+    assert feed.remedy("station sample --resume s").startswith(
+        "target 11's corrected joints missed the edge too (model of 30 samples): calibrate what was "
+        "measured (station calibrate) and follow its next step"
+    )
+
+
 def test_a_robot_without_a_channel_is_told_the_offline_route_once_and_a_failed_write_stops_it():
     feed, correction, said, _ = _feed(None, [1, 2], why="a robot connection of this kind has none")
     feed.settled(0)
@@ -118,6 +137,7 @@ def test_a_robot_without_a_channel_is_told_the_offline_route_once_and_a_failed_w
     feed.settled(0)
     feed.corrected(correction)
     assert said[-1] == "robot: the controller went away; targets are no longer corrected in-session"
+    assert feed.remedy("station sample --resume s") is None  # the offline route, then
     channel.fail = False
     feed.settled(1)
     assert channel.written == []
