@@ -29,7 +29,10 @@ Corrected targets (``retarget``): a program a station hands corrected targets (U
 registers; OPC UA: writable nodes; ``sim_fixtures.target_channel``) asks, as it starts its move to
 target k, what the channel holds; corrected joints for k replace the target from then on (the
 move to it, and every later visit), so the joints the program reports are where the corrected
-command really takes the robot. Asked once per target, on the first cycle.
+command really takes the robot. Asked once per target, on the first cycle. A program run once
+(``once``) waits for play at ``home_deg`` (off the plan: target 0's joints with joint 2 lifted by
+``HOME_LIFT_DEG``), asks for target 0 too as it starts and moves there first, to the corrected
+joints if the channel holds them (the schedule runs that much later).
 
 Faults for tests (:class:`RobotFault`, windows in simulated seconds): a robot mode other than
 RUNNING (7) pauses the program (the joints stand still, as after a protective stop) and the
@@ -45,6 +48,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+HOME_LIFT_DEG = 10.0
+"""Where a program run once waits for play: joint 2 this far from target 0 (beyond a session's
+``match_deg``, so the station does not take it for a target)."""
 
 #: UR ``robot_mode`` values (RTDE guide): the program runs only in RUNNING.
 POWER_OFF = 3
@@ -129,7 +136,8 @@ class SimRobot:
     """The program: targets (M, 6) in degrees, visited in order, cyclically.
 
     ``speed_deg_s`` / ``accel_deg_s2`` bound every joint, ``dwell_s`` is the stay at each target
-    (simulated s); ``once``: the program runs one cycle and stands at target 0 after it. ``rng`` (a
+    (simulated s); ``once``: the program waits at home (see the module notes) until it starts, runs
+    one cycle and stands at target 0 after it. ``rng`` (a
     seeded ``numpy.random.Generator``) is needed only for jitter faults. ``retarget(k, prog_s)``:
     the joints [deg] target k really takes if the program moves to a corrected target when its
     move to k starts at program time ``prog_s`` [simulated s], else None (see the module notes).
@@ -174,6 +182,8 @@ class SimRobot:
         self.rng = rng
         self.retarget = retarget
         self._asked = 1  # the next target whose move start asks ``retarget`` (the program starts at 0)
+        self._lead_s: float | None = None  # a once-program's first move (home to target 0) [simulated s]
+        self.home_deg = targets[0] + HOME_LIFT_DEG * np.eye(6)[1]
         self._lock = threading.Lock()
         self._reschedule()
 
@@ -223,17 +233,45 @@ class SimRobot:
     def _program_state(self, prog_s: float) -> tuple[np.ndarray, np.ndarray, int, bool]:
         """Joints, joint speeds, target index and dwelling flag at program time ``prog_s``."""
         with self._lock:
-            self._corrections(prog_s)
-            return self._walk(prog_s)
+            if not self.once or self.hold:
+                self._corrections(prog_s)
+                return self._walk(prog_s)
+            if prog_s < 0:  # waiting for play
+                return self.home_deg.copy(), np.zeros(6), 0, True
+            lead_s = self._first_move()
+            if prog_s < lead_s:
+                return self._lead_state(prog_s)
+            self._corrections(prog_s - lead_s, lead_s)
+            return self._walk(prog_s - lead_s)
 
-    def _corrections(self, prog_s: float) -> None:
-        """Ask ``retarget`` about every first-cycle move that has started by ``prog_s``, in order; a
-        corrected target changes the schedule from its move on (the moves before keep their times)."""
+    def _first_move(self) -> float:
+        """A program run once starts with a move from home to target 0, asking for its correction
+        as it starts: that move's duration [simulated s]."""
+        if self._lead_s is None:
+            q = None if self.retarget is None else self.retarget(0, 0.0)
+            if q is not None:
+                self.targets_deg[0] = q
+                self._reschedule()
+            length = float(np.max(np.abs(self.targets_deg[0] - self.home_deg)))
+            self._lead_s = move_duration(length, self.speed_deg_s, self.accel_deg_s2)
+        return self._lead_s
+
+    def _lead_state(self, prog_s: float) -> tuple[np.ndarray, np.ndarray, int, bool]:
+        """On the first move, from home to target 0."""
+        way = self.targets_deg[0] - self.home_deg
+        length = float(np.max(np.abs(way)))
+        s, sd = trapezoid(length, prog_s, self.speed_deg_s, self.accel_deg_s2)
+        return self.home_deg + way * (s / length), way * (sd / length), 0, False
+
+    def _corrections(self, prog_s: float, lead_s: float = 0.0) -> None:
+        """Ask ``retarget`` about every first-cycle move that has started by ``prog_s`` (schedule
+        time; the program's is ``lead_s`` later), in order; a corrected target changes the schedule
+        from its move on (the moves before keep their times)."""
         if self.retarget is None or self.hold:
             return
         while self._asked < len(self.targets_deg) and self._starts[2 * self._asked - 1] <= prog_s:
             k = self._asked
-            q = self.retarget(k, self._starts[2 * k - 1])
+            q = self.retarget(k, self._starts[2 * k - 1] + lead_s)
             if q is not None:
                 self.targets_deg[k] = q
                 self._reschedule()

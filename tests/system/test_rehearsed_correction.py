@@ -91,3 +91,43 @@ def test_the_running_calibration_corrects_the_remaining_targets_onto_the_edge(tm
         return float(np.sqrt(np.mean(aligned_errors(p, p_true) ** 2)))
 
     assert true_error(tmp_path / "corrected.toml") <= bound < true_error(tmp_path / "robot.toml") / 3
+
+
+def test_targets_passed_before_the_model_was_determined_are_measured_by_the_program_run_again(
+    tmp_path, monkeypatch
+):
+    """Seed 1's robot puts the plan's first line off the edge: the program passes its targets before
+    the model is determined, and the session ends saying to run the program again with ``--resume``.
+    Run again, the resumed session (its model determined before the program starts) corrects them
+    from the program's first target on."""
+    monkeypatch.chdir(tmp_path)
+    for name, src in (("robot.toml", "robots/abb_irb2600.toml"), ("setup.toml", "setups/irb2600.toml")):
+        (tmp_path / name).write_text(configs.path(src).read_text())
+    planned = run_cli(
+        "plan", "--robot", "robot.toml", "--setup", "setup.toml", "--out", "plan.csv",
+        "--per-line", "60", "--select", "120", "--no-suggest",
+    )  # fmt: skip
+    assert planned.returncode == 0, planned.stderr
+    flags = ("--robot", "robot.toml", "--setup", "setup.toml", "--plan", "plan.csv", "--time-scale", "40")
+    cell = CELL.replace("seed = 14", "seed = 1")
+    with serving(tmp_path, *flags, config_text=cell) as (_, config, _):
+        first = run_cli("sample", "--config", str(config), "--out", "session", timeout=180)
+    assert first.returncode == 1, first.stderr
+    said = re.search(
+        r"\(the tool off the edge\): run the robot program again with station sample --resume session: the "
+        r"model of \d+ samples corrects the (\d+) targets left as the program reaches them",
+        first.stdout,
+    )
+    assert said, first.stdout[-2000:]
+    plan = load_plan(tmp_path / "plan.csv")
+    rows = tmp_path / "session" / "samples.csv"
+    left = set(plan.target) - {int(r["target"]) for r in csv.DictReader(open(rows))}
+    assert len(left) == int(said.group(1)) and 0 in left
+
+    with serving(tmp_path, *flags, config_text=cell) as (_, config, _):
+        again = run_cli("sample", "--config", str(config), "--resume", "session", timeout=180)
+    assert again.returncode in (0, 1), again.stderr  # 1: a capture a loaded machine rejected
+    sent = re.findall(r"^target (\d+): corrected target sent", again.stdout, re.M)
+    assert sent[:1] == ["0"], again.stdout[:2000]  # the program's first target, written before it starts
+    taken = left & {int(r["target"]) for r in csv.DictReader(open(rows))}
+    assert 0 in taken and len(taken) >= 0.9 * len(left), (sorted(left - taken), len(left))

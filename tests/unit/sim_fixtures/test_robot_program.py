@@ -140,14 +140,40 @@ def test_bad_arguments_are_named(kw, message):
         SimRobot(np.zeros((3, 5)), speed_deg_s=1, accel_deg_s2=1, dwell_s=1)
 
 
-def test_a_program_run_once_stands_at_its_first_target_after_the_cycle():
-    from sim_fixtures.robot_program import SimRobot
+def test_a_program_run_once_waits_at_home_and_stands_at_its_first_target_after_the_cycle():
+    from sim_fixtures.robot_program import HOME_LIFT_DEG, SimRobot, move_duration
 
     targets = [[0.0] * 6, [10.0] * 6]
     robot = SimRobot(targets, speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0, once=True)
-    assert robot.state(robot.cycle_s * 0.4).target_index == 1  # going round the first time
-    for t in (robot.cycle_s + 0.01, 3 * robot.cycle_s + 0.5):
+    waiting = robot.state(-1.0)  # before play: home, off the plan (no session takes it for target 0)
+    assert np.allclose(waiting.q_deg, [0.0, HOME_LIFT_DEG, 0, 0, 0, 0]) and not waiting.qd_deg_s.any()
+    assert HOME_LIFT_DEG > 2.0  # the session's default match_deg
+    lead = move_duration(HOME_LIFT_DEG, 30.0, 60.0)
+    first = robot.state(lead / 2)  # on its way to target 0
+    assert first.target_index == 0 and not first.dwelling and first.qd_deg_s[1] < 0
+    assert robot.state(lead + robot.cycle_s * 0.4).target_index == 1  # going round the first time
+    for t in (lead + robot.cycle_s + 0.01, lead + 3 * robot.cycle_s + 0.5):
         state = robot.state(t)
         assert state.target_index == 0 and state.dwelling and not state.qd_deg_s.any()
+        assert np.allclose(state.q_deg, 0.0)
     again = SimRobot(targets, speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0)
-    assert again.state(robot.cycle_s * 1.4).target_index == 1  # round and round
+    assert again.state(again.cycle_s * 1.4).target_index == 1  # round and round
+
+
+def test_a_program_run_once_asks_for_its_first_target_as_it_starts_and_goes_where_it_is_corrected():
+    from sim_fixtures.robot_program import SimRobot
+
+    asked = []
+
+    def retarget(k, prog_s):
+        asked.append((k, prog_s))
+        return np.full(6, 1.0) if k == 0 else None
+
+    targets = [[0.0] * 6, [10.0] * 6]
+    robot = SimRobot(targets, speed_deg_s=30.0, accel_deg_s2=60.0, dwell_s=1.0, once=True, retarget=retarget)
+    robot.state(-1.0)
+    assert asked == []  # not before play
+    for t in (1.0, robot.cycle_s + 5.0):  # dwelling at target 0 (the corrected joints), and after the cycle
+        state = robot.state(t)
+        assert state.target_index == 0 and state.dwelling and np.allclose(state.q_deg, 1.0)
+    assert asked[0] == (0, 0.0) and [k for k, _ in asked] == [0, 1]  # each asked once, target 0 at the start
