@@ -18,7 +18,7 @@ from errors import DeviceError, InputError
 from station.acquire.capture import Devices, Rules
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
-from station.acquire.session import OFFLINE_REMEDY, Listener, Session, State
+from station.acquire.session import Listener, Session, State
 from station.acquire.targets import TargetFeed
 from station.config import StationConfig, load_station_config, station_config, unreachable_hint
 from station.formats.announcement import announcement_path, running_simulator
@@ -270,12 +270,11 @@ class Live:
         if self.feed is not None:
             self.feed.settled(index)
 
-    def remedy(self) -> str:
-        """What to do about the targets left when the robot stood off the edge too long: run the
-        program again where the channel corrects them, else the offline route."""
+    def remedy(self) -> str | None:
+        """What to do about the targets left when the session times out, where the channel corrects
+        them (``TargetFeed.remedy``); None otherwise."""
         folder = self.session.folder.path if self.session is not None else "DIR"
-        where = None if self.feed is None else self.feed.remedy(f"station sample --resume {folder}")
-        return where or OFFLINE_REMEDY
+        return None if self.feed is None else self.feed.remedy(f"station sample --resume {folder}")
 
     def corrected_targets(self) -> list[int]:
         """The target ids this run handed the program corrected."""

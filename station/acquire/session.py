@@ -80,7 +80,7 @@ OFFLINE_REMEDY = (
     "correct the remaining targets (station calibrate, then station compensate the plan) or widen "
     "[session] dial_range_mm"
 )
-"""What to do about targets the robot cannot bring onto the edge, where nothing corrects them in-session."""
+"""What to do about targets the robot cannot bring onto the edge where nothing corrects them in-session."""
 
 
 class State(enum.Enum):
@@ -98,13 +98,14 @@ class Listener:
     ``message(text)`` on every state change worth telling the operator, ``tick()`` at every
     checkpoint (between polls, also while suspended), ``settled(index)`` when the robot has
     settled at plan row ``index`` (finished or not), before anything is captured there, and
-    ``remedy()``: what to do about the targets left when the robot stood off the edge too long."""
+    ``remedy()``: what to do about the targets left when the session times out, where the session's
+    owner knows better than the offline route (None: it does not)."""
 
     sample: Callable[[dict, Capture], None] = lambda row, cap: None
     message: Callable[[str], None] = lambda text: None
     tick: Callable[[], None] = lambda: None
     settled: Callable[[int], None] = lambda index: None
-    remedy: Callable[[], str] = lambda: OFFLINE_REMEDY
+    remedy: Callable[[], str | None] = lambda: None
 
 
 class Session:
@@ -172,7 +173,7 @@ class Session:
                     self._suspended(why)
                 except OffEdge:
                     waited = self.rules.target_timeout_s * self.rules.time_scale
-                    text = OFF_EDGE_TIMEOUT.format(s=waited, remedy=self.listener.remedy())
+                    text = OFF_EDGE_TIMEOUT.format(s=waited, remedy=self.listener.remedy() or OFFLINE_REMEDY)
                     return self._end(State.TIMED_OUT, text)
                 self.settle.reset()
                 # an attempt is progress; else waiting out a condition is not idling
@@ -321,6 +322,8 @@ class Session:
                 f"every attempt at target{'s' if len(tried) > 1 else ''} {_listed(tried)} was rejected or "
                 "suspended (see above)"
             )
+            if remedy := self.listener.remedy():
+                why += f": {remedy}"
         else:
             why = "the robot settled only at finished targets or away from the plan"
             never = [int(self.plan.target[i]) for i in self.pending if i not in self._reached]

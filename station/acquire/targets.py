@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
+
 from drivers.base import DriverError, TargetChannel
 from station.formats.plan import Plan
 from station.jobs.correction import TargetCorrection
@@ -73,8 +75,8 @@ class TargetFeed:
         self._next()
 
     def remedy(self, resume: str) -> str | None:
-        """What to do about the targets left when the robot stood off the edge too long, where the
-        channel corrects them (None where it does not): ``resume`` is the command that continues."""
+        """What to do about the targets left when the session times out, where the channel corrects
+        them (None where it does not): ``resume`` is the command that continues."""
         if self.stopped or self.correction is None:
             return None
         target = None if self.at is None else int(self.plan.target[self.at])
@@ -84,11 +86,18 @@ class TargetFeed:
                 "samples): calibrate what was measured (station calibrate) and follow its next step, or "
                 "widen [session] dial_range_mm"
             )
-        left = len(self.unfinished())
-        return (
-            f"run the robot program again with {resume}: the model of {self.correction.n} samples "
-            f"corrects the {left} target{'s' if left != 1 else ''} left as the program reaches them"
+        left = self.unfinished()
+        fixable = int(np.sum(self.correction.ok[left]))
+        model = f"the model of {self.correction.n} samples"
+        if not fixable:
+            return (
+                f"{model} cannot correct the {_targets(len(left))} left (station compensate says why, "
+                "e.g. a joint limit): widen [session] dial_range_mm or calibrate without them"
+            )
+        which = (
+            f"the {_targets(fixable)}" if fixable == len(left) else f"{fixable} of the {_targets(len(left))}"
         )
+        return f"run the robot program again with {resume}: {model} corrects {which} left as it reaches them"
 
     def _next(self) -> None:
         """Write the next unfinished target after the one the robot is at (before it has settled
@@ -120,3 +129,7 @@ class TargetFeed:
             f"target {target}: corrected target sent ({self.correction.shift_mm[index]:.2f} mm from the "
             f"planned contact, model of {self.correction.n} samples)"
         )
+
+
+def _targets(n: int) -> str:
+    return f"{n} target{'s' if n != 1 else ''}"

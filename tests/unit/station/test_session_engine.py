@@ -665,9 +665,11 @@ def test_a_stream_lagging_steadily_is_waited_for_not_rejected(tmp_path, clock):
     assert cell.targets() == [0, 1, 2]
 
 
-def test_captures_rejected_at_a_target_each_round_end_the_session_naming_it(tmp_path, clock):
+@pytest.mark.parametrize("remedy", [None, "run the robot program again"])
+def test_captures_rejected_at_a_target_each_round_end_the_session_naming_it(tmp_path, clock, remedy):
     """The drawstring jumps in every capture at target 2 while the robot cycles: each attempt is
-    progress until ``ATTEMPTS_PER_TARGET`` of them, then the session ends saying why."""
+    progress until ``ATTEMPTS_PER_TARGET`` of them, then the session ends saying why, and what to do
+    where the listener knows (the session's target channel corrects what is left)."""
     q = PLAN.q_deg
     cell = Cell(tmp_path, clock, timeline(*walk(list(q) * 100)))
     reads = iter(range(10**9))
@@ -679,8 +681,10 @@ def test_captures_rejected_at_a_target_each_round_end_the_session_naming_it(tmp_
         return {"length_mm": value["length_mm"] + (next(reads) % 2) * at_2}
 
     cell.drawstring.script = jumps_at_target_2
-    session = cell.session()
+    session = cell.session(Listener(message=cell.messages.append, remedy=lambda: remedy))
     assert session.run() is State.TIMED_OUT
     assert cell.targets() == [0, 1]
     assert cell.messages[-1].startswith("timed out: no capture for 10 s: every attempt at target 2 was")
+    told = f"rejected or suspended (see above){f': {remedy}' if remedy else ''}; 2 samples in"
+    assert cell.messages[-1].endswith(f"{told} {cell.folder.path}")
     assert session.rejected > ATTEMPTS_PER_TARGET

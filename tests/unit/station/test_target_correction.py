@@ -112,9 +112,15 @@ def test_before_the_robot_settles_anywhere_the_first_unfinished_target_goes_to_t
     assert feed.remedy("station sample --resume s") is None  # nothing corrected yet
     feed.corrected(correction)
     assert channel.written == [(11, list(correction.q_deg[1]))]
-    assert feed.remedy("station sample --resume s") == (
+    assert feed.remedy("station sample --resume s") == (  # plan row 2 cannot be corrected
         "run the robot program again with station sample --resume s: the model of 30 samples "
-        "corrects the 4 targets left as the program reaches them"
+        "corrects 3 of the 4 targets left as it reaches them"
+    )
+    unfixable, _, _, _ = _feed(Channel(), [2])
+    unfixable.corrected(correction)
+    assert unfixable.remedy("station sample --resume s").startswith(
+        "the model of 30 samples cannot correct the 1 target left (station compensate says why, e.g. a "
+        "joint limit): widen [session] dial_range_mm"
     )
     feed.settled(1)  # the robot stands at target 11, sent corrected: it missed the edge all the same
     assert feed.remedy("station sample --resume s").startswith(
