@@ -36,6 +36,9 @@ TRACKER_NAMES = ("tracker.rot_x_deg", "tracker.rot_y_deg", "tracker.rot_z_deg")
 TRACKER_NAMES += ("tracker.x_mm", "tracker.y_mm", "tracker.z_mm")
 PROBE_NAMES = ("probe.x_mm", "probe.y_mm", "probe.z_mm")
 N_SETUP = len(TRACKER_NAMES) + len(PROBE_NAMES)
+ONE_ORIENTATION_DEG = 5.0
+"""Poses whose tool axes all lie within this angle of one direction [deg] barely determine where
+along that axis the probe sits (a shift along it is nearly a shift of the tracker)."""
 ON_AXIS_MM = 1.0
 """A probe closer than this to joint 6's axis gives J5's tilt and turn a lever too short to see:
 1 mrad moves it by less than 1 um."""
@@ -289,11 +292,19 @@ class PositionModel:
 
     def measurement_advice(self, x: np.ndarray) -> MeasurementAdvice:
         """More configurations, spread over the joints' ranges: a tracker sees every direction of
-        the measured point, so what is missing is variety of poses."""
-        return MeasurementAdvice(
-            f"its {len(self.samples)} poses",
-            "measure more configurations, spread over every joint's range",
-        )
+        the measured point, so what is missing is variety of poses; first of all of the tool's
+        direction where it hardly turns (an ISO 9283 cube keeps one orientation), as then nothing
+        tells where along its axis the probe sits."""
+        axis = base_from_frames(self.dh(x), self.joints(x))[:, -1, :3, 2]
+        mean = axis.mean(axis=0)
+        spread = np.degrees(np.arccos(np.clip(axis @ (mean / np.linalg.norm(mean)), -1.0, 1.0))).max()
+        advice = "measure more configurations, spread over every joint's range"
+        if spread < ONE_ORIENTATION_DEG:
+            advice = (
+                f"turn the tool between poses (its axis stays within {spread:.1f} deg of one direction, "
+                f"so where the probe sits along it is not determined); {advice}"
+            )
+        return MeasurementAdvice(f"its {len(self.samples)} poses", advice)
 
     # -- residuals ---------------------------------------------------------------------------
     def predicted_mm(self, x: np.ndarray) -> np.ndarray:

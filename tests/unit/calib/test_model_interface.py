@@ -80,6 +80,7 @@ def test_a_position_model_answers_the_station():
     np.testing.assert_array_equal(model.tcp_in_flange(model.x0), probe)
     advice = model.measurement_advice(model.x0)
     assert advice.cover == "its 30 poses" and "more configurations" in advice.next_measurement
+    assert "turn the tool" not in advice.next_measurement  # poses in every orientation
     held_out = model.with_samples(model.samples.subset(np.arange(10)))
     assert held_out.row_error_mm(model.x0).shape == (10,)
     x = model.x0.copy()
@@ -87,3 +88,26 @@ def test_a_position_model_answers_the_station():
     np.testing.assert_allclose(
         np.linalg.norm(model.row_residuals(x), axis=1) * model.sigma, model.row_error_mm(x), rtol=1e-9
     )
+
+
+def test_poses_that_keep_one_tool_orientation_are_told_to_turn_it():
+    """An ISO 9283 cube keeps the tool at one orientation: a shift of the probe along the tool's axis
+    is then a shift of the tracker, which the advice names (poses in every orientation do not get it)."""
+    from calib import ik
+
+    dh, probe = nominal("ur10"), np.array([0.0, 0.0, 100.0])
+    corners = np.array(np.meshgrid(*[[-150.0, 0.0, 150.0]] * 3)).reshape(3, -1).T
+    seed = np.radians([0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
+    start = ik.tool_frames(dh, seed[None], probe)
+    rotation = np.repeat(start[1], len(corners), axis=0)
+    q, err = ik.solve(dh, probe, start[0] + corners, rotation, np.repeat(seed[None], len(corners), 0))
+    assert np.max(err) < 1e-6
+    model = PositionModel(PositionSamples(q, tcp_position(dh, q, probe)), dh, probe)
+    advice = model.measurement_advice(model.x0).next_measurement
+    assert advice.startswith("turn the tool between poses (its axis stays within 0.0 deg of one direction")
+    # the truth it names: the probe's axial column lies in the tracker translations' span
+    _, jac = model.residuals_and_jacobian(model.x0)
+    shift = jac[:, [model.names.index(f"tracker.{c}_mm") for c in "xyz"]]
+    axial = jac[:, model.names.index("probe.z_mm")]
+    left = axial - shift @ np.linalg.lstsq(shift, axial, rcond=None)[0]
+    assert np.linalg.norm(left) < 1e-6 * np.linalg.norm(axial)
