@@ -153,17 +153,19 @@ def load_inputs(args) -> Inputs:
 
 def summary(report: CalibrationReport) -> str:
     """A short human summary: before -> after on training and hold-out, time, what was held."""
+    from station.jobs.report import ERROR_HEADER, error_row
+
     lines = [
         f"{report.kind} calibration, method {report.method}: "
         f"{report.iterations} solver iteration{'' if report.iterations == 1 else 's'}, {report.time_s:.3f} s",
-        f"{'':18}{'RMSE':>8}{'MEAN':>8}{'MAX':>8}  mm",
+        ERROR_HEADER,
     ]
     parts = (("train", report.before.train, report.after.train),)
     parts += (("holdout", report.before.holdout, report.after.holdout),)
     for part, before, after in parts:
         for when, m in (("before", before), ("after", after)):
             if m is not None:
-                lines.append(f"{part + ' ' + when:18}{m.rmse_mm:8.3f}{m.mean_mm:8.3f}{m.max_mm:8.3f}")
+                lines.append(error_row(f"{part} {when}", m.rmse_mm, m.mean_mm, m.max_mm))
     from calib.joint_terms import TERM_KINDS
     from station.jobs.calibration import HOLDOUT_SCOPES
 

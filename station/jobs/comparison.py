@@ -108,12 +108,12 @@ def table(report: dict) -> str:
     """The paper's Tables III-IV in one: RMSE / MEAN / MAX [mm] on training and hold-out rows, wall
     time and iterations, one row per method after the "before" row."""
     parts = ("train", "holdout") if "holdout" in report["before"] else ("train",)
-    head = f"{'method':22}" + "".join(f"{p + ' RMSE':>14}{'MEAN':>8}{'MAX':>8}" for p in parts)
+    head = f"{'method':22}" + "".join(f"{p + ' RMSE':>14}{'MEAN':>9}{'MAX':>9}" for p in parts)
     lines = [head + f"{'time s':>10}{'iters':>7}"]
     rows = [{"name": "before", **report["before"]}] + report["methods"]
     for row in rows:
         cells = "".join(
-            f"{row[p]['rmse_mm']:14.4f}{row[p]['mean_mm']:8.4f}{row[p]['max_mm']:8.4f}" for p in parts
+            f"{row[p]['rmse_mm']:14.4f} {row[p]['mean_mm']:8.4f} {row[p]['max_mm']:8.4f}" for p in parts
         )
         tail = f"{row['time_s']:10.2f}{row['iterations']:7d}" if "time_s" in row else ""
         lines.append(f"{LABELS.get(row['name'], row['name']):22}{cells}{tail}")

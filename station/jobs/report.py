@@ -166,6 +166,16 @@ class Provenance:
         }
 
 
+ERROR_HEADER = f"{'':18}{'RMSE':>9}{'MEAN':>9}{'MAX':>9}  mm"
+"""The column heads of a summary's row errors (``error_row``)."""
+
+
+def error_row(label: str, rmse_mm: float, mean_mm: float, max_mm: float) -> str:
+    """A summary's row of errors [mm] under ``ERROR_HEADER``: a space before each figure, so a wild
+    one (a 100 m reading) does not run into the next."""
+    return f"{label:18}" + "".join(f" {v:8.3f}" for v in (rmse_mm, mean_mm, max_mm))
+
+
 def now_utc() -> str:
     """The time now, UTC, ISO 8601 to the second."""
     return datetime.now(timezone.utc).isoformat(timespec="seconds")

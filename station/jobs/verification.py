@@ -36,6 +36,7 @@ from station.jobs.calibration import (
     workspace_configurations,
 )
 from station.jobs.planning import USUALLY_MOVE
+from station.jobs.report import ERROR_HEADER, error_row
 
 DRIFT_P = 1e-3
 """The chi-square's p-value below which the residual is more than an unchanged robot leaves."""
@@ -357,12 +358,11 @@ def summary(report: VerifyReport) -> str:
     """A short human summary: the residual overall and per line, the test, the verdict."""
     lines = [
         f"{report.kind} verification of {report.table} on {report.rows} samples ({report.time_s:.2f} s)",
-        f"{'':18}{'RMSE':>8}{'MEAN':>8}{'MAX':>8}  mm",
-        f"{'all rows':18}{report.rmse_mm:8.3f}{report.mean_mm:8.3f}{report.max_mm:8.3f}",
+        ERROR_HEADER,
+        error_row("all rows", report.rmse_mm, report.mean_mm, report.max_mm),
     ]
     for line in report.lines:
-        label = f"line {line.id} ({line.rows})"
-        lines.append(f"{label:18}{line.rmse_mm:8.3f}{line.mean_mm:8.3f}{line.max_mm:8.3f}")
+        lines.append(error_row(f"line {line.id} ({line.rows})", line.rmse_mm, line.mean_mm, line.max_mm))
     t = report.test
     lines.append(
         f"residual {t.noise_ratio:.2f} x the stated noise, {t.expected_ratio:.2f} expected of an "
