@@ -3,14 +3,14 @@
 Once the running calibration has determined the model, every judged refit corrects the plan's
 targets (``station.jobs.correction``). The program (``station program``) moves through the plan in
 order and, before it moves to a target, reads the robot controller's target channel (RTDE input
-registers, OPC UA nodes: ``drivers.base.TargetChannel``): if the channel names that target, it
-moves to the joints there instead of the planned ones. So whenever the robot settles at a plan
+registers, OPC UA nodes, a ROS topic: ``drivers.base.TargetChannel``): if the channel names that
+target, it moves to the joints there instead of the planned ones. So whenever the robot settles at a plan
 target, the station writes the next unfinished target after it, corrected by the latest refit,
 once per target; the first correction is written at once (the robot may be on its way already,
 then that one arrives too late and the next is in time), before the robot has settled anywhere the
 plan's first unfinished target (a program run again starts at the plan's beginning). A robot
-without a channel (a ROS topic, Modbus registers, a controller that refuses the inputs) is told
-once: the offline route corrects the remaining targets then.
+without a channel (Modbus registers, ROS without a target topic, a controller that refuses the
+inputs) is told once: the offline route corrects the remaining targets then.
 """
 
 from __future__ import annotations
@@ -79,14 +79,14 @@ class TargetFeed:
         them (None where it does not): ``resume`` is the command that continues."""
         if self.stopped or self.correction is None:
             return None
+        left = self.unfinished()
         target = None if self.at is None else int(self.plan.target[self.at])
-        if self.sent.get(target):
+        if self.at in left and self.sent.get(target):  # standing at it, corrected, not measured
             return (
                 f"target {target}'s corrected joints missed the edge too (model of {self.sent[target]} "
                 "samples): calibrate what was measured (station calibrate) and follow its next step, or "
                 "widen [session] dial_range_mm"
             )
-        left = self.unfinished()
         fixable = int(np.sum(self.correction.ok[left]))
         model = f"the model of {self.correction.n} samples"
         if not fixable:

@@ -122,6 +122,14 @@ def test_before_the_robot_settles_anywhere_the_first_unfinished_target_goes_to_t
         "the model of 30 samples cannot correct the 1 target left (station compensate says why, e.g. a "
         "joint limit): widen [session] dial_range_mm"
     )
+    left = [1, 2]
+    finished, _, _, _ = _feed(Channel(), left)
+    finished.corrected(correction)  # target 11 (row 1) sent
+    left.remove(1)  # and measured: the robot standing there says nothing of a miss
+    finished.settled(1)
+    assert finished.remedy("station sample --resume s").startswith(
+        "the model of 30 samples cannot correct the 1 target left"
+    )
     feed.settled(1)  # the robot stands at target 11, sent corrected: it missed the edge all the same
     assert feed.remedy("station sample --resume s").startswith(
         "target 11's corrected joints missed the edge too (model of 30 samples): calibrate what was "
