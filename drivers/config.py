@@ -221,12 +221,14 @@ class RobotOpcUa(Section):
 
 class RobotRos(Section):
     """A ROS ``sensor_msgs/JointState`` topic through rosbridge (its WebSocket at ``host:port``),
-    the six ``joint_names`` as the message names them, joint 1 first."""
+    the six ``joint_names`` as the message names them, joint 1 first; ``target_topic``: where
+    corrected targets are published for a measurement node (empty: no in-session correction)."""
 
     kind: Literal["ros"]
     host: Name = "127.0.0.1"
     port: int = Field(9090, gt=0, le=65535)
     topic: Annotated[str, Field(pattern=r"^/[A-Za-z0-9_/]*$")] = "/joint_states"
+    target_topic: Annotated[str, Field(pattern=r"^(/[A-Za-z0-9_/]*)?$")] = "/station/target"
     joint_names: Annotated[list[Name], Field(min_length=6, max_length=6)] = [
         f"joint_{i}" for i in range(1, 7)
     ]
@@ -235,7 +237,14 @@ class RobotRos(Section):
     def build(self) -> Driver:
         from drivers.ros import RosJointSource
 
-        return RosJointSource(self.host, self.port, self.topic, self.joint_names, timeout_s=self.timeout_s)
+        return RosJointSource(
+            self.host,
+            self.port,
+            self.topic,
+            self.joint_names,
+            timeout_s=self.timeout_s,
+            target_topic=self.target_topic or None,
+        )
 
     def endpoint(self) -> str:
         """Where the joints are read, as a simulator announces the robot it serves."""

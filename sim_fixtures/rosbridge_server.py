@@ -7,7 +7,10 @@ client binds it to twisted): a client's
 "msg": JointState}`` messages at ``rate_hz`` on that connection until it unsubscribes or closes.
 The message: ``header.stamp`` (secs, nsecs of the wall clock), ``name`` (``JOINT_NAMES``: the
 ROS-Industrial ``joint_1`` .. ``joint_6``), ``position`` [rad], ``velocity`` [rad per simulated s].
-Other operations are ignored (a bridge answers them; the station sends none).
+A client's ``{"op": "publish", "topic": target_topic, "msg": JointState}`` (the station's corrected
+targets: ``header.frame_id`` the target id, ``position`` [rad] in ``JOINT_NAMES``' order) goes to
+``hand(target, q_deg)``, the program's channel. Other operations are ignored (``advertise``: a
+bridge answers it; the station sends no others).
 """
 
 from __future__ import annotations
@@ -26,12 +29,20 @@ JOINT_NAMES = tuple(f"joint_{i}" for i in range(1, 7))
 
 class RosbridgeServer:
     """Serves ``state()`` (joints [deg] and speeds [deg/s], (6,) each) as JointState on ``topic``
-    at ``ws://host:port``."""
+    at ``ws://host:port``; targets published on ``target_topic`` go to ``hand`` (None: dropped)."""
 
     def __init__(
-        self, state, host: str, port: int = 9090, topic: str = "/joint_states", rate_hz: float = 100.0
+        self,
+        state,
+        host: str,
+        port: int = 9090,
+        topic: str = "/joint_states",
+        rate_hz: float = 100.0,
+        target_topic: str = "/station/target",
+        hand=None,
     ):
         self.state, self.host, self.port, self.topic, self.rate_hz = state, host, port, topic, rate_hz
+        self.target_topic, self.hand = target_topic, hand
         self.url = f"ws://{host}:{port}"
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server = None
@@ -111,6 +122,8 @@ class RosbridgeServer:
                 if opcode != 0x1:
                     continue
                 op = json.loads(payload.decode("utf8"))
+                if op.get("op") == "publish" and op.get("topic") == self.target_topic:
+                    self._take_target(op.get("msg", {}))
                 if op.get("topic") != self.topic:
                     continue
                 if op.get("op") == "subscribe" and publishing is None:
@@ -124,6 +137,14 @@ class RosbridgeServer:
             if publishing is not None:
                 publishing.cancel()
             writer.close()
+
+    def _take_target(self, msg: dict) -> None:
+        """A corrected target published by the station, to the program's channel."""
+        if self.hand is None:
+            return
+        names, positions = msg.get("name", []), msg.get("position", [])
+        q_deg = [math.degrees(positions[names.index(n)]) for n in JOINT_NAMES]
+        self.hand(int(msg["header"]["frame_id"]), q_deg)
 
     async def _publish(self, writer: asyncio.StreamWriter) -> None:
         while True:

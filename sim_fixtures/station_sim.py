@@ -157,9 +157,10 @@ def opcua_robot(
     return OpcUaRobotServer(state, url.hostname, url.port or 4840, hand)
 
 
-def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock) -> RosbridgeServer:
+def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock, hand=None) -> RosbridgeServer:
     """The robot program's joints as ``sensor_msgs/JointState`` on a rosbridge at the section's
-    host and port; its ``joint_names`` must be the ones published (``JOINT_NAMES``)."""
+    host and port; its ``joint_names`` must be the ones published (``JOINT_NAMES``). ``hand(target,
+    q_deg)``: where corrected targets published on its ``target_topic`` go (the program's channel)."""
     if list(section.joint_names) != list(JOINT_NAMES):
         raise InputError(
             f"[robot] joint_names: the simulated rosbridge publishes {list(JOINT_NAMES)}: name those"
@@ -169,7 +170,9 @@ def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock) -> RosbridgeS
         now = robot.state(clock.now())
         return now.q_deg, now.qd_deg_s
 
-    return RosbridgeServer(state, section.host, section.port, section.topic)
+    return RosbridgeServer(
+        state, section.host, section.port, section.topic, target_topic=section.target_topic, hand=hand
+    )
 
 
 def _pty_link(port: str, section: str, elsewhere: Path | None = None) -> Path:
@@ -303,7 +306,7 @@ class SimStation:
                     robot, self.robot, self.clock, self.once, self.inbox
                 ).start()
             elif isinstance(robot, RobotRos):
-                self.devices["robot"] = ros_robot(robot, self.robot, self.clock).start()
+                self.devices["robot"] = ros_robot(robot, self.robot, self.clock, self.inbox).start()
             else:
                 self.devices["robot"] = self._rtde(elsewhere is not None)
             with _links_claimed(self.cfg, elsewhere):

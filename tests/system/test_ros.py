@@ -1,13 +1,14 @@
 """Joints from ROS (``[robot] kind = "ros"``): ``roslibpy`` against a small rosbridge-protocol
 server publishing the simulated robot program's ``sensor_msgs/JointState``; a joint name the
 message lacks is named, a publisher gone is retryable, and ``sim serve``'s station reads its robot
-through it."""
+through it and hands a rehearsed program corrected targets on its target topic."""
 
 import time
 
 import numpy as np
 import pytest
 
+import configs
 from drivers.base import DeviceReplyError
 from drivers.ros import RosJointSource
 from errors import InputError
@@ -84,3 +85,36 @@ def test_sim_serve_publishes_its_robot_over_rosbridge_for_the_station(tmp_path):
         SimStation(other, hold=True).start()
     with pytest.raises(InputError, match="robot.topic: String should match pattern"):
         station_config({**raw, "robot": {"kind": "ros", "topic": "joint states"}}, "station.toml")
+
+
+def test_a_rehearsed_ros_robot_takes_the_stations_corrected_targets_on_its_topic(tmp_path):
+    """``sim serve --robot R --setup S`` over ROS: what the station publishes on ``target_topic``
+    reaches the simulated program's channel (the target id and its joints)."""
+    from station.commands.sim import rehearsed_cell
+    from station.formats.tables import load_robot, load_setup
+
+    robot = load_robot(configs.path("robots/abb_irb2600.toml"))
+    setup = load_setup(configs.path("setups/irb2600.toml"))
+    cell = rehearsed_cell(robot, setup, "setup.toml", 14, None, 5)
+    host, port = free_address()
+    _, ds_port = free_address()
+    raw = {
+        "robot": {"kind": "ros", "host": host, "port": port},
+        "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": ds_port},
+        "sim": {"plan_csv": str(tmp_path / "plan.csv")},
+    }
+    cfg = station_config(raw, "test")
+    station = SimStation(cfg, hold=True, cell=cell)
+    try:
+        station.start()
+        target, q = int(cell.plan_targets[3]), cell.plan_deg[3] + 0.25
+        with cfg.robot.build() as source:
+            source.target_channel().write(target, q)
+            deadline = time.monotonic() + 2.0
+            while station.channel.at(1e12) is None and time.monotonic() < deadline:
+                time.sleep(0.01)
+        held = station.channel.at(1e12)
+        assert held is not None and held[0] == target
+        np.testing.assert_allclose(held[1], q, atol=1e-9)
+    finally:
+        station.stop()

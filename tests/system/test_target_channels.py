@@ -1,7 +1,8 @@
 """Corrected targets handed to a running program: the real ``ur_rtde`` RTDEIOInterface writes the
 RTDE input registers of the simulated controller, which hands them to its program; the simulated
-OPC UA server takes them in writable nodes; what a cell gets wrong (another client holding the
-registers, nodes the server lacks, a recipe of other types) leaves no channel, said by name."""
+OPC UA server takes them in writable nodes, the simulated rosbridge on a topic (``roslibpy``
+publishing); what a cell gets wrong (another client holding the registers, nodes the server lacks,
+a recipe of other types, no target topic) leaves no channel, said by name."""
 
 import struct
 import time
@@ -11,9 +12,11 @@ import pytest
 
 from drivers.opcua import OpcUaJointSource
 from drivers.robot import TARGET_INDEX_INPUT, RtdeJointSource
+from drivers.ros import RosJointSource
 from sim_fixtures import rtde_wire as wire
 from sim_fixtures.opcua_server import TARGET_INDEX_NODE, OpcUaRobotServer, position_node, target_node
 from sim_fixtures.robot_program import SimRobot
+from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.rtde_server import start_on_free_loopback
 from sim_fixtures.sources import SimClock
 from sim_fixtures.target_channel import TargetChannel, TargetInbox
@@ -114,5 +117,27 @@ def test_opcua_target_nodes_hand_the_program_its_target_and_missing_ones_leave_n
         ) as s:
             assert s.target_channel() is None  # the joints' own readings are not writable
             assert s.no_channel == f"node {positions[0]} is not writable"
+    finally:
+        server.stop()
+
+
+def test_a_ros_target_topic_hands_the_program_its_target_and_none_configured_leaves_none():
+    handed = []
+    server = RosbridgeServer(
+        lambda: (TARGETS[0], [0.0] * 6), *free_address(), hand=lambda k, q: handed.append((k, q))
+    ).start()
+    try:
+        with RosJointSource(
+            server.host, server.port, server.topic, JOINT_NAMES, target_topic=server.target_topic
+        ) as s:
+            channel = s.target_channel()
+            assert channel is not None and channel.where.startswith(f"ROS topic {server.target_topic} on")
+            channel.write(1, CORRECTED)
+            deadline = time.monotonic() + 2.0
+            while not handed and time.monotonic() < deadline:  # the bridge is another thread
+                time.sleep(0.01)
+            assert handed == [(1, pytest.approx(CORRECTED))]
+        with RosJointSource(server.host, server.port, server.topic, JOINT_NAMES) as s:
+            assert s.target_channel() is None and s.no_channel == "no [robot] target_topic"
     finally:
         server.stop()

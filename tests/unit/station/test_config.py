@@ -78,6 +78,10 @@ def test_ascii_drawstring_and_mitutoyo_dial(tmp_path):
             ("[drawstring]", "[session]\ndial_range_mm = [2.0, -2.0]\n[drawstring]"),
             r"session: dial_range_mm: the low end 2 must be below the high end -2",
         ),
+        (
+            ('kind = "rtde"', 'kind = "ros"\ntarget_topic = "station target"'),
+            r"robot\.target_topic: String should match pattern",
+        ),
     ],
 )
 def test_bad_key_names_file_and_key(tmp_path, edit, message):
@@ -94,6 +98,17 @@ def test_unreadable_or_broken_file(tmp_path):
     (tmp_path / "bad.toml").write_text("[robot\n")
     with pytest.raises(InputError, match="bad.toml: not valid TOML"):
         load_station_config(tmp_path / "bad.toml")
+
+
+def test_a_ros_robot_publishes_targets_on_its_target_topic_unless_it_is_empty(tmp_path):
+    path = tmp_path / "station.toml"
+    for line, topic in (("", "/station/target"), ('\ntarget_topic = "/cell_1/target"', "/cell_1/target")):
+        path.write_text(MINIMAL.replace('kind = "rtde"', f'kind = "ros"{line}'))
+        assert load_station_config(path).robot.build().target_topic == topic
+    path.write_text(MINIMAL.replace('kind = "rtde"', 'kind = "ros"\ntarget_topic = ""'))
+    robot = load_station_config(path).robot.build()
+    assert robot.target_topic is None and robot.target_channel() is None
+    assert robot.no_channel == "no [robot] target_topic"
 
 
 def test_modbus_joint_robot_section_builds_its_driver(tmp_path):
