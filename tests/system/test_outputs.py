@@ -4,6 +4,7 @@ not) ends in one line and exit 2, with none of the outputs left and no temporary
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 
@@ -67,7 +68,16 @@ def test_a_stop_signal_between_the_renames_leaves_every_output_or_none(sig, cell
     head, outputs = _commands(cell, out)["calibrate"]
     # the signal arrives right after the table is renamed into place, before the report and plot
     inject = [sys.executable, "-m", "tests.system.inject", sig, "after", "os:replace", "t.toml", "--"]
-    proc = subprocess.run([*inject, *head, *outputs], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    # as a terminal's foreground command gets it: a runner that starts the tests in the background
+    # hands on SIGINT ignored, and a command started so ignores Ctrl-C (Python installs no handler)
+    proc = subprocess.run(
+        [*inject, *head, *outputs],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     assert proc.returncode == 130, proc.stderr
     assert proc.stderr.splitlines()[-1] == "station: interrupted"
     assert sorted(p.name for p in out.iterdir()) == ["p.png", "r.json", "t.toml"]  # all, no temporary
