@@ -41,7 +41,9 @@ GATE_MM = 2.0  # [session] dial_range_mm's default: +-2 mm
 SLACK_MM = 0.05  # the dial's noise (2 um) and the operator-free landing: a capture's reading of the truth
 
 
-def test_the_running_calibration_corrects_the_remaining_targets_onto_the_edge(tmp_path, monkeypatch):
+def _walkthrough(tmp_path, monkeypatch) -> tuple[str, ...]:
+    """The README walk-through's folder made the working one: the IRB 2600 and its setup copied in,
+    the 120-target plan made; the ``sim serve`` flags that rehearse it at time scale 40."""
     monkeypatch.chdir(tmp_path)
     for name, src in (("robot.toml", "robots/abb_irb2600.toml"), ("setup.toml", "setups/irb2600.toml")):
         (tmp_path / name).write_text(configs.path(src).read_text())
@@ -50,7 +52,11 @@ def test_the_running_calibration_corrects_the_remaining_targets_onto_the_edge(tm
         "--per-line", "60", "--select", "120", "--no-suggest",
     )  # fmt: skip
     assert planned.returncode == 0, planned.stderr
-    flags = ("--robot", "robot.toml", "--setup", "setup.toml", "--plan", "plan.csv", "--time-scale", "40")
+    return ("--robot", "robot.toml", "--setup", "setup.toml", "--plan", "plan.csv", "--time-scale", "40")
+
+
+def test_the_running_calibration_corrects_the_remaining_targets_onto_the_edge(tmp_path, monkeypatch):
+    flags = _walkthrough(tmp_path, monkeypatch)
     with serving(tmp_path, *flags, config_text=CELL) as (_, config, _):
         sampled = run_cli("sample", "--config", str(config), "--out", "session", timeout=180)
     assert sampled.returncode in (0, 1), sampled.stderr  # 1: the program ended with targets off the edge
@@ -100,15 +106,7 @@ def test_targets_passed_before_the_model_was_determined_are_measured_by_the_prog
     the model is determined, and the session ends saying to run the program again with ``--resume``.
     Run again, the resumed session (its model determined before the program starts) corrects them
     from the program's first target on."""
-    monkeypatch.chdir(tmp_path)
-    for name, src in (("robot.toml", "robots/abb_irb2600.toml"), ("setup.toml", "setups/irb2600.toml")):
-        (tmp_path / name).write_text(configs.path(src).read_text())
-    planned = run_cli(
-        "plan", "--robot", "robot.toml", "--setup", "setup.toml", "--out", "plan.csv",
-        "--per-line", "60", "--select", "120", "--no-suggest",
-    )  # fmt: skip
-    assert planned.returncode == 0, planned.stderr
-    flags = ("--robot", "robot.toml", "--setup", "setup.toml", "--plan", "plan.csv", "--time-scale", "40")
+    flags = _walkthrough(tmp_path, monkeypatch)
     cell = CELL.replace("seed = 14", "seed = 1")
     with serving(tmp_path, *flags, config_text=cell) as (_, config, _):
         first = run_cli("sample", "--config", str(config), "--out", "session", timeout=180)
