@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from drivers.base import DeviceUnreachable
 from drivers.opcua import OpcUaJointSource
 from drivers.robot import TARGET_INDEX_INPUT, RtdeJointSource
 from drivers.ros import RosJointSource
@@ -141,3 +142,23 @@ def test_a_ros_target_topic_hands_the_program_its_target_and_none_configured_lea
             assert s.target_channel() is None and s.no_channel == "no [robot] target_topic"
     finally:
         server.stop()
+
+
+def test_a_ros_bridge_gone_makes_a_target_write_fail_by_name():
+    """The bridge goes away mid-session: the write says so (DeviceUnreachable, which the session's
+    feed answers by correcting no more targets in-session), it does not vanish into a dead socket."""
+    server = RosbridgeServer(lambda: (TARGETS[0], [0.0] * 6), *free_address()).start()
+    source = RosJointSource(
+        server.host, server.port, server.topic, JOINT_NAMES, target_topic="/station/target"
+    )
+    source.open()
+    try:
+        channel = source.target_channel()
+        server.stop()
+        deadline = time.monotonic() + 5.0
+        while source._ros.is_connected and time.monotonic() < deadline:  # the close reaches roslibpy
+            time.sleep(0.01)
+        with pytest.raises(DeviceUnreachable, match=r"rosbridge ws://.* connection lost"):
+            channel.write(1, CORRECTED)
+    finally:
+        source.close()
