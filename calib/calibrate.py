@@ -15,11 +15,12 @@ then the terms (``calib.joint_terms``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from calib.accuracy import robot_covariance
+from calib.discrepancy import Blocks, Correlated, Discrepancy, estimate
 from calib.identifiability import redundancy_partners, select_columns, weakly_determined
 from calib.kinematics import N_DH
 from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
@@ -86,6 +87,8 @@ class CalibrationOptions:
         its prior (False); exact redundancies are held either way.
     lm : LMOptions
         Solver options.
+    correlated : bool
+        Weigh the fit by the model's discrepancy where the rows show one (``correlate``).
     """
 
     loss: str = "cauchy"
@@ -93,6 +96,7 @@ class CalibrationOptions:
     rank_rtol: float = 1e-6
     hold_weak: bool = False
     lm: LMOptions = field(default_factory=LMOptions)
+    correlated: bool = True
 
 
 @dataclass
@@ -122,6 +126,8 @@ class Calibration:
         Fitted noise scale per residual group, in units of the stated noise.
     downweighted : ndarray of int
         Sample rows the robust loss cut to below a quarter of their weight.
+    discrepancy : Discrepancy or None
+        The joint-space error the fit was weighted by (``correlate``), None for a white fit.
     """
 
     names: tuple[str, ...]
@@ -135,6 +141,7 @@ class Calibration:
     robot_index: np.ndarray
     scale: np.ndarray
     downweighted: np.ndarray
+    discrepancy: Discrepancy | None = None
 
     @property
     def x(self) -> np.ndarray:
@@ -383,7 +390,7 @@ def calibrate(
     sigma, cov, robot_cov = _uncertainty(start.prior, after, start.free, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[start.free] = sigma
-    return Calibration(
+    cal = Calibration(
         names=model.names,
         before=start.before,
         after=after,
@@ -395,6 +402,49 @@ def calibrate(
         robot_index=np.flatnonzero(workspace_mask(model)),
         scale=scale,
         downweighted=_downweighted_rows(start.prior, after, scale, options),
+    )
+    return correlate(model, cal, options) if options.correlated else cal
+
+
+def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOptions) -> Calibration:
+    """``cal`` refitted by generalised least squares under the model's discrepancy, where its
+    residuals show one (``calib.discrepancy``); else ``cal`` itself.
+
+    The white fit's robust weights stay (its gross readings stay out) and so do its ``scale`` and
+    ``downweighted`` (the rows' spread, what the noise checks read); the solution, its residuals and
+    its covariance are the weighted fit's.
+    """
+    if not model.pose_groups:
+        return cal
+    prior = WithPrior(model, model.x0)
+    r, jac = prior.residuals_and_jacobian(cal.x)
+    weights = cal.after.weights
+    blocks = Blocks(prior.rows, prior.groups, model.pose_groups, model.samples.q, weights)
+    found = estimate(r, jac[:, cal.identified], row_noise(prior, cal.scale), blocks, weights)
+    if found is None:
+        return cal
+    weighted = Correlated(prior, model.samples.q, found, weights)
+    result = levenberg_marquardt(
+        weighted.residuals_and_jacobian,
+        cal.x,
+        options=_with(options.lm, loss="linear"),
+        free=cal.identified,
+        groups=prior.groups,
+    )
+    scale = _scale(result.residuals, prior.groups)
+    sigma, cov, robot_cov = _uncertainty(weighted, result, cal.identified, scale)
+    full_sigma = np.full(len(model.names), np.nan)
+    full_sigma[cal.identified] = sigma
+    r, jac = prior.residuals_and_jacobian(result.x)
+    after = replace(
+        result,
+        residuals=r,
+        jacobian=jac[:, cal.identified],
+        weights=weights,
+        history=cal.after.history + result.history,
+    )
+    return replace(
+        cal, after=after, sigma=full_sigma, covariance=cov, robot_covariance=robot_cov, discrepancy=found
     )
 
 

@@ -1,7 +1,7 @@
 """k-means clustering, label for label what ``scipy.cluster.vq.kmeans2(data, k, minit="++",
 rng=rng)`` returns, in numpy alone: ``scipy.cluster`` pulls in ``scipy.spatial`` and
 ``scipy.special``, about 0.1 s of a ``station calibrate`` that needs k-means only for its
-cross-validation's regions (``calib.selection.region_folds``).
+regions of joint space (``region_folds``: cross-validation's folds, the discrepancy's blocks).
 
 The same arithmetic in the same order as scipy 1.17's ``_kpp``, ``_vq.vq`` and
 ``_vq.update_cluster_means``, so the same floating-point results and the same random draws: a
@@ -74,3 +74,37 @@ def _sum_of_squares(v: np.ndarray) -> np.ndarray:
     for j in range(v.shape[-1]):
         total += v[..., j] * v[..., j]
     return total
+
+
+REGION_JOINTS = 3
+"""The joints whose angles define the regions of joint space (the arm's: where the wrist is)."""
+
+
+def region_folds(q: np.ndarray, k: int) -> list[np.ndarray]:
+    """Rows grouped into ``k`` regions of joint space (fewer if a cluster comes out empty).
+
+    k-means (k-means++ start, fixed seed: the same rows give the same folds; ``calib.kmeans``,
+    scipy's ``kmeans2`` label for label) on the cosine and sine of the first ``REGION_JOINTS``
+    joint angles, each column scaled to unit variance.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 6)
+        Joint readings [rad].
+    k : int
+        Number of regions.
+
+    Returns
+    -------
+    list of ndarray of int
+        Ascending row indices of each region; together every row exactly once (one region, all
+        rows, where the poses of joints 1-3 are all alike).
+    """
+    angles = q[:, :REGION_JOINTS]
+    f = np.column_stack([np.cos(angles), np.sin(angles)])
+    f = (f - f.mean(axis=0)) / np.maximum(f.std(axis=0), 1e-9)
+    k = min(k, len(np.unique(f.round(9), axis=0)))  # no more regions than distinct poses
+    if k < 2:
+        return [np.arange(len(q))]
+    label = kmeans_labels(f, k, np.random.default_rng(0))
+    return [np.flatnonzero(label == c) for c in range(k) if np.any(label == c)]

@@ -66,6 +66,10 @@ class MeasurementModel(Protocol):
         Per residual, the instrument it comes from (robust scales are estimated per group).
     rows : ndarray of int, shape (m,)
         Per residual, the 0-based sample row it belongs to.
+    pose_groups : tuple of int
+        The residual groups whose rows are poses of their own, where an error that neighbouring
+        poses share is weighed (``calib.discrepancy``); none where the rows trace gauge lines (one
+        path, whose shared error its line's own unknowns take).
     """
 
     kind: str
@@ -77,6 +81,7 @@ class MeasurementModel(Protocol):
     terms: JointTerms
     groups: np.ndarray
     rows: np.ndarray
+    pose_groups: tuple[int, ...]
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Whitened residuals, shape (m,), at ``x`` (n,)."""
@@ -336,6 +341,7 @@ class DrawstringLineModel:
         self.rows = np.concatenate([np.arange(n), np.repeat(line_rows, 2)])
         line_groups = np.tile([GROUP_LINE_DIAL, GROUP_LINE_ACROSS], line_rows.size)
         self.groups = np.concatenate([np.full(n, GROUP_LENGTH), line_groups])
+        self.pose_groups = () if self.line_ids else (GROUP_LENGTH,)
 
     def gauges(self) -> dict[str, str]:
         """The table's structural gauges with a free anchor and free lines, and, on one line, the

@@ -207,6 +207,7 @@ class PositionModel:
         n = len(samples)
         self.rows = np.repeat(np.arange(n), 3)
         self.groups = np.full(3 * n, GROUP_POSITION)
+        self.pose_groups = (GROUP_POSITION,)
 
     def prior_sigma(self) -> np.ndarray:
         """The table's manufacturing tolerance and the terms' priors; the tracker placement and

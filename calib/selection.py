@@ -42,15 +42,13 @@ import numpy as np
 
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate
 from calib.joint_terms import COMPLIANCE_PRIOR, JointTerms, TermGroup
-from calib.kmeans import kmeans_labels
+from calib.kmeans import REGION_JOINTS, region_folds
 from calib.models import MeasurementModel
 from calib.special import gammaincc
 
 FOLDS = 5
 MIN_GAIN = 0.05
 """Relative cut of the cross-validated RMS error a term group must bring to be kept."""
-REGION_JOINTS = 3
-"""The joints whose angles define the regions of joint space (the arm's: where the wrist is)."""
 DETERMINED_P = 0.0027
 """A group is determined when its values' chi-square (their covariance) has a smaller p (three
 sigma): on data without the term it passes about once in 400 sessions."""
@@ -106,43 +104,13 @@ def kfold(placements: np.ndarray, k: int = FOLDS) -> list[np.ndarray]:
     return [np.sort(np.concatenate(b)).astype(int) for b in blocks]
 
 
-def region_folds(q: np.ndarray, k: int = FOLDS) -> list[np.ndarray]:
-    """Rows grouped into ``k`` regions of joint space (fewer if a cluster comes out empty).
-
-    k-means (k-means++ start, fixed seed: the same rows give the same folds; ``calib.kmeans``,
-    scipy's ``kmeans2`` label for label) on the cosine and sine of the first ``REGION_JOINTS``
-    joint angles, each column scaled to unit variance.
-
-    Parameters
-    ----------
-    q : ndarray, shape (N, 6)
-        Joint readings [rad].
-    k : int
-        Number of regions.
-
-    Returns
-    -------
-    list of ndarray of int
-        Ascending row indices of each region; together every row exactly once (one region, all
-        rows, where the poses of joints 1-3 are all alike).
-    """
-    angles = q[:, :REGION_JOINTS]
-    f = np.column_stack([np.cos(angles), np.sin(angles)])
-    f = (f - f.mean(axis=0)) / np.maximum(f.std(axis=0), 1e-9)
-    k = min(k, len(np.unique(f.round(9), axis=0)))  # no more regions than distinct poses
-    if k < 2:
-        return [np.arange(len(q))]
-    label = kmeans_labels(f, k, np.random.default_rng(0))
-    return [np.flatnonzero(label == c) for c in range(k) if np.any(label == c)]
-
-
 def blocked_folds(q: np.ndarray) -> tuple[list[np.ndarray], str]:
     """``region_folds`` of ``q`` (N, 6) [rad] and their description for the report.
 
     Not one gauge line out at a time: with the three lines of a typical session, the table fitted
     on two extrapolates so far to the third that a harmonic of a wrist joint cut the left-out error
     by 5 % on every clean simulated cell tried (``benchmarks/terms_false_positives.py``)."""
-    folds = region_folds(q)
+    folds = region_folds(q, FOLDS)
     return folds, f"{len(folds)} regions of joint space (k-means on joints 1-{REGION_JOINTS}), one left out"
 
 

@@ -201,6 +201,13 @@ def terms_summary(report: CalibrationReport) -> list[str]:
             f"model auto (cross-validated RMSE on {cv.scheme}, mm; "
             f"nominal table {cv.nominal_rmse_mm:.3f}): {steps}"
         )
+    if report.discrepancy is not None:
+        d = report.discrepancy
+        lines.append(
+            f"weighted: poses within {d.length_scale_deg:g} deg of each other (joints 1-3) share an "
+            f"error the model cannot express ({d.ratio:g} x the noise's variance; log-likelihood "
+            f"+{d.loglik_gain:.0f} over none), so the fit counts them together"
+        )
     if report.terms:
         terms = ", ".join(f"{n} {e.value:.4g} +- {e.sigma:.2g}" for n, e in report.terms.items())
         lines.append(f"terms: {terms}")

@@ -319,4 +319,3 @@ def _verify(out: Path, inputs, seed: int) -> None:
             flush=True,
         )
     print(f"verify:    ({time.perf_counter() - t0:.1f} s)", flush=True)
-

@@ -23,6 +23,7 @@ from calib.calibrate import (
     CalibrationOptions,
     WithPrior,
     calibrate,
+    correlate,
     covariance,
     fit_setup,
     robust_weights,
@@ -336,7 +337,9 @@ def validate(model: MeasurementModel, where: str, method: str, select: int | Non
 
 # -- the solvers --------------------------------------------------------------------------------
 def _lmlc(choice: TermChoice, method: str, select: int | None) -> MethodFit:
-    return MethodFit(choice.calibration or calibrate(choice.model, CalibrationOptions()))
+    if choice.calibration is None:
+        return MethodFit(calibrate(choice.model, CalibrationOptions()))
+    return MethodFit(correlate(choice.model, choice.calibration, CalibrationOptions()))
 
 
 def _mcs_lmlc(choice: TermChoice, method: str, select: int | None) -> MethodFit:
@@ -444,6 +447,7 @@ def _report(
         model=terms,
         terms=_parameters(cal, model.terms.names, model.x0),
         cross_validation=None if choice.selection is None else _cross_validation(choice.selection),
+        discrepancy=cal.discrepancy,
         fit_check=check,
         line_errors=line_errors(model, cal.x),
         provenance=origin,

@@ -11,6 +11,7 @@ import numpy as np
 
 from calib.calibrate import Calibration
 from calib.conventions import mdh_from_dh
+from calib.discrepancy import Discrepancy
 from calib.joint_terms import TERM_KINDS
 from calib.kinematics import N_DH, dh_table
 from calib.models import GROUP_PRIOR, DrawstringSetupEstimate
@@ -187,11 +188,12 @@ class CalibrationReport:
     estimate (``calib.models.DrawstringSetupEstimate`` or ``calib.position.TrackerSetupEstimate``),
     whose fields the JSON spreads at the top level. Beyond the contract's keys: ``model`` (the
     ``--model``), ``terms`` (the identified joint-space terms, as ``parameters``) and, for
-    ``--model auto``, ``cross_validation``; ``fit_check``, how the fit agrees with the stated
-    noise and tolerances; ``line_errors``, each gauge line's residual after the fit (merged into
-    the JSON's ``lines``); ``provenance`` (robot, samples, setup, date, version); ``holdout_scope``
-    (``none``, ``same lines``, ``new lines``, ``poses``: what the hold-out figure can speak for);
-    ``next``, what to do now in one sentence (docs/report.md lists every key)."""
+    ``--model auto``, ``cross_validation``; ``discrepancy``, the joint-space error the fit was
+    weighted by (``calib.discrepancy``; None for a white fit); ``fit_check``, how the fit agrees
+    with the stated noise and tolerances; ``line_errors``, each gauge line's residual after the fit
+    (merged into the JSON's ``lines``); ``provenance`` (robot, samples, setup, date, version);
+    ``holdout_scope`` (``none``, ``same lines``, ``new lines``, ``poses``: what the hold-out figure
+    can speak for); ``next``, what to do now in one sentence (docs/report.md lists every key)."""
 
     kind: str
     method: str
@@ -210,6 +212,7 @@ class CalibrationReport:
     model: str = "geometric"
     terms: dict[str, Estimate] = dataclasses.field(default_factory=dict)
     cross_validation: CrossValidation | None = None
+    discrepancy: Discrepancy | None = None
     fit_check: FitCheck | None = None
     line_errors: dict[int, ErrorMetrics] = dataclasses.field(default_factory=dict)
     provenance: Provenance | None = None
@@ -239,6 +242,7 @@ class CalibrationReport:
         out["terms"] = {name: dataclasses.asdict(e) for name, e in self.terms.items()}
         if self.cross_validation is not None:
             out["cross_validation"] = _plain(dataclasses.asdict(self.cross_validation))
+        out["discrepancy"] = None if self.discrepancy is None else dataclasses.asdict(self.discrepancy)
         if self.fit_check is not None:
             check = dataclasses.asdict(self.fit_check)
             out["fit_check"] = {**check, "excursion_tolerances": check["excursion_sigmas"]}

@@ -101,7 +101,7 @@ class TermChoice:
 
     @property
     def calibration(self) -> Calibration | None:
-        """The pipeline's calibration of ``model`` (default options) where ``auto`` already ran it."""
+        """The white calibration of ``model`` (no discrepancy) where ``auto`` already ran it."""
         return self.selection.calibration if self.selection is not None else None
 
 
@@ -120,9 +120,8 @@ def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, u
         return TermChoice(model, None, offer.held, warning)
     prior = [g for g in offer.groups if all(t.key == COMPLIANCE for t in g.terms)]
     others = [g for g in offer.groups if g not in prior]
-    selection = select_terms(
-        model, others, offer.pool, CalibrationOptions(), folds=folds, prior=prior, scheme=scheme
-    )
+    white = CalibrationOptions(correlated=False)  # the rule was chosen on white fits
+    selection = select_terms(model, others, offer.pool, white, folds=folds, prior=prior, scheme=scheme)
     kept = [t for g in selection.groups for t in g.terms]
     held = dict(offer.held)
     by_label = {g.label: g for g in offer.groups}

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.cluster.vq import kmeans2
 
-from calib.kmeans import kmeans_labels
-from calib.selection import region_folds
+from calib.kmeans import kmeans_labels, region_folds
+from calib.selection import FOLDS
 
 
 def scipy_labels(data, k, seed):
@@ -73,7 +73,7 @@ def test_region_folds_of_a_session_are_kmeans2s():
     f = (f - f.mean(axis=0)) / f.std(axis=0)
     _, label = kmeans2(f, 5, minit="++", rng=np.random.default_rng(0))
     want = [np.flatnonzero(label == c) for c in range(5) if np.any(label == c)]
-    got = region_folds(q)
+    got = region_folds(q, FOLDS)
     assert len(got) == len(want) and all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
 
 

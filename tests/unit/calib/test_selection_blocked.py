@@ -9,8 +9,9 @@ import pytest
 import configs
 from calib.calibrate import CalibrationOptions
 from calib.joint_terms import JointTerms, Term, compliance_group, harmonic_group
+from calib.kmeans import region_folds
 from calib.position import PositionModel
-from calib.selection import blocked_folds, implausible, not_harmful, region_folds, select_terms
+from calib.selection import FOLDS, blocked_folds, implausible, not_harmful, select_terms
 from sim_fixtures.world import JointError, Robot
 from tests.unit.calib.test_terms_recovery import TRACKER_SIGMA_MM, UR10_LINKS, position_set
 
@@ -34,11 +35,11 @@ def selection_of(compliance: dict[int, float], seed: int = 5, n: int = 150):
 
 def test_regions_partition_the_rows_and_lie_apart_in_joint_space():
     q = np.radians(np.random.default_rng(0).uniform(-180, 180, (300, 6)))
-    folds = region_folds(q)
+    folds = region_folds(q, FOLDS)
     assert len(folds) == 5
     np.testing.assert_array_equal(np.sort(np.concatenate(folds)), np.arange(300))
     assert all(
-        np.array_equal(a, b) for a, b in zip(folds, region_folds(q), strict=True)
+        np.array_equal(a, b) for a, b in zip(folds, region_folds(q, FOLDS), strict=True)
     )  # same rows, same folds
     # a left-out region lies farther from the rows it is predicted from than an interleaved fold does
     f = np.column_stack([np.cos(q[:, :3]), np.sin(q[:, :3])])
@@ -90,5 +91,5 @@ def test_the_plausibility_and_harm_tests():
 def test_no_more_regions_than_distinct_poses():
     q = np.zeros((30, 6))
     q[:10, 1] = 1.0
-    assert sorted(len(f) for f in region_folds(q)) == [10, 20]
-    assert [len(f) for f in region_folds(np.zeros((30, 6)))] == [30]
+    assert sorted(len(f) for f in region_folds(q, FOLDS)) == [10, 20]
+    assert [len(f) for f in region_folds(np.zeros((30, 6)), FOLDS)] == [30]
