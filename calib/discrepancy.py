@@ -27,7 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from calib.kmeans import REGION_JOINTS, region_folds
 
@@ -125,6 +124,8 @@ class Blocks:
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """Residuals (m,) and Jacobian (m, n) with each block's covariance whitened out and the
         other elements weighted by ``weights``."""
+        from scipy.linalg import solve_triangular  # only here: a gauge-line session never needs scipy
+
         r_out = r * np.where(self.white, weights, 1.0)
         j_out = None if jac is None else jac * np.where(self.white, weights, 1.0)[:, None]
         for table, lower in zip(self.tables, factors, strict=True):

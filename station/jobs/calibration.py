@@ -128,6 +128,14 @@ WARNINGS = {
         "workspace error, which counts the parameters' uncertainty, leaves out the {rmse:.3f} mm the "
         "fit leaves"
     ),
+    "model_error_shared": (
+        "the fit leaves residuals {ratio:.1f} times the stated noise (chi-square {chi2:.4g} on {dof} "
+        "degrees of freedom, p {p}) and poses within {length:g} deg of each other share that error "
+        "(restricted log-likelihood +{gain:.0f} over independent rows): the robot has an error this "
+        "model does not express, not the instruments; the fit weighed such poses together, and the "
+        "predicted workspace error, which counts the parameters' uncertainty, leaves out the "
+        "{rmse:.3f} mm the fit leaves"
+    ),
     "iteration_cap": (
         "the solver stopped at its cap of {nit} iterations before converging: the table may be short "
         "of the optimum"
@@ -722,10 +730,12 @@ def _beyond_noise(test: NoiseTest) -> bool:
 
 
 def _agreement(model: MeasurementModel, cal: Calibration) -> tuple[float, bool]:
-    """How alike neighbouring poses' residuals are, and whether that makes them the robot's error."""
+    """How alike neighbouring poses' residuals are, and whether that makes them the robot's error (so
+    does an error the fit found poses share: ``cal.discrepancy``)."""
     r = model.row_residuals(cal.x)
     value = neighbour_agreement(model.samples.q, r)
-    return value, bool(value >= max(NEIGHBOURS_ALIKE, NEIGHBOURS_ALIKE_SE / np.sqrt(r.size)))
+    alike = value >= max(NEIGHBOURS_ALIKE, NEIGHBOURS_ALIKE_SE / np.sqrt(r.size))
+    return value, bool(alike or cal.discrepancy is not None)
 
 
 def _absorbed_refusal(
@@ -764,9 +774,20 @@ def _doubts(
     if _beyond_noise(test):
         p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
         value, robot = agreement if agreement is not None else (float("nan"), False)
+        key = "model_error" if robot else "noise"
+        shared = cal.discrepancy
+        if shared is not None:
+            key, value = "model_error_shared", float("nan")
         messages.append(
-            WARNINGS["model_error" if robot else "noise"].format(
-                ratio=test.ratio, chi2=test.chi2, dof=test.dof, p=p, rmse=fit.rmse_mm, agreement=value
+            WARNINGS[key].format(
+                ratio=test.ratio,
+                chi2=test.chi2,
+                dof=test.dof,
+                p=p,
+                rmse=fit.rmse_mm,
+                agreement=value,
+                length=shared and shared.length_scale_deg,
+                gain=shared and shared.loglik_gain,
             )
         )
     if capped:

@@ -118,7 +118,7 @@ def test_a_residual_beyond_the_noise_is_named_the_robot_s_or_the_instruments(
     if robot_errs:
         assert check["neighbour_agreement"] > 0.25
         assert advice.startswith("accept with care: the robot errs beyond this model")
-        assert "neighbouring poses err alike" in out
+        assert "the robot has an error this model does not express, not the instruments" in out
     else:
         assert abs(check["neighbour_agreement"]) < 4 / np.sqrt(3 * 1000)
         assert advice.startswith("re-measure after checking the instruments")
