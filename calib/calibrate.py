@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from calib.accuracy import robot_covariance
-from calib.discrepancy import Blocks, Correlated, Discrepancy, estimate
+from calib.discrepancy import Blocks, Correlated, Discrepancy, estimate, tcp_rms_mm
 from calib.identifiability import redundancy_partners, select_columns, weakly_determined
 from calib.kinematics import N_DH
 from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
@@ -443,6 +443,8 @@ def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOpt
         weights=weights,
         history=cal.after.history + result.history,
     )
+    components = blocks.tables[0].shape[1]
+    found = replace(found, tcp_rms_mm=tcp_rms_mm(found, model.row_error_mm(result.x), components))
     return replace(
         cal, after=after, sigma=full_sigma, covariance=cov, robot_covariance=robot_cov, discrepancy=found
     )

@@ -54,11 +54,15 @@ class Discrepancy:
         Its variance over each group's noise variance.
     loglik_gain : float
         The restricted log-likelihood it gains over no discrepancy.
+    tcp_rms_mm : float
+        The RMS error [mm] it puts on the TCP at a pose, which no table takes out
+        (``tcp_rms_mm``; 0 until the weighted fit sets it).
     """
 
     length_scale_deg: float
     ratio: float
     loglik_gain: float
+    tcp_rms_mm: float = 0.0
 
 
 def joint_distance2(q: np.ndarray) -> np.ndarray:
@@ -206,3 +210,11 @@ def estimate(
     if gains[best] <= MIN_GAIN:
         return None
     return Discrepancy(grid[best].length_scale_deg, grid[best].ratio, float(gains[best]))
+
+
+def tcp_rms_mm(discrepancy: Discrepancy, row_error_mm: np.ndarray, components: int) -> float:
+    """The RMS TCP error [mm] of ``discrepancy`` at a pose: its share ``ratio / (1 + ratio)`` of the
+    rows' mean squared error ``row_error_mm`` (N,) [mm] after the fit, each row seeing
+    ``components`` of the TCP's three (a tracker point 3, a drawstring's distance 1)."""
+    share = discrepancy.ratio / (1.0 + discrepancy.ratio)
+    return float(np.sqrt(3.0 / components * share * np.mean(row_error_mm**2)))

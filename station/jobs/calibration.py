@@ -133,8 +133,8 @@ WARNINGS = {
         "degrees of freedom, p {p}) and poses within {length:g} deg of each other share that error "
         "(restricted log-likelihood +{gain:.0f} over independent rows): the robot has an error this "
         "model does not express, not the instruments; the fit weighed such poses together, and the "
-        "predicted workspace error, which counts the parameters' uncertainty, leaves out the "
-        "{rmse:.3f} mm the fit leaves"
+        "predicted workspace error counts that error ({shared:.3f} mm RMS at a pose) beside the "
+        "parameters' uncertainty"
     ),
     "iteration_cap": (
         "the solver stopped at its cap of {nit} iterations before converging: the table may be short "
@@ -505,6 +505,11 @@ NEXT = {
         "times the stated noise the fit leaves), so expect about the fit's {fit:.3f} mm RMS where it "
         "works, not the predicted {predicted:.3f} mm; measure where it will work to check"
     ),
+    "model_error_shared": (
+        "accept with care: the robot errs beyond this model (poses within {length:g} deg of each other "
+        "share about {shared:.3f} mm RMS), which the predicted {predicted:.3f} mm counts; measure "
+        "where it will work to check"
+    ),
     "excursion": (
         "check the {files} ({name} moved {z:.0f} times its tolerance), then calibrate again; "
         "re-measure if they are right"
@@ -562,8 +567,13 @@ def next_step(
         rows = ("row " if wild.size == 1 else "rows ") + ", ".join(str(r) for r in wild[:10])
         return NEXT["wild"].format(rows=rows, ratio=before[wild].max() / np.median(before))
     if check.noise_ratio >= NOISE_DOUBT_RATIO and check.p_value < NOISE_DOUBT_P:
+        predicted = workspace.predicted_rmse_mm
+        if cal.discrepancy is not None:
+            d = cal.discrepancy
+            return NEXT["model_error_shared"].format(
+                length=d.length_scale_deg, shared=d.tcp_rms_mm, predicted=predicted
+            )
         if check.model_error:
-            predicted = workspace.predicted_rmse_mm
             return NEXT["model_error"].format(ratio=check.noise_ratio, fit=fit.rmse_mm, predicted=predicted)
         return NEXT["noise"].format(ratio=check.noise_ratio)
     if check.excursion is not None and check.excursion_sigmas >= EXCURSION_DOUBT:
@@ -618,14 +628,19 @@ def _errors(model: MeasurementModel, x: np.ndarray) -> ErrorMetrics:
 
 def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementModel) -> WorkspacePrediction:
     """Expected RMS error [mm] of the measured point (the model's TCP) over random configurations
-    within the joint limits, and the RMS one calibration stays below with 95 % probability."""
+    within the joint limits, and the RMS one calibration stays below with 95 % probability: the
+    parameters' uncertainty and, where the fit found one, the error neighbouring poses share that no
+    table takes out (``cal.discrepancy``)."""
     q = workspace_configurations(robot)
     dh = dh_table(cal.x)
     modes = workspace_error_modes(
         dh, model.tcp_in_flange(cal.x), q, cal.robot_covariance, model.terms, model.tool_mask.any()
     )
+    shared = cal.discrepancy.tcp_rms_mm if cal.discrepancy is not None else 0.0
     return WorkspacePrediction(
-        predicted_workspace_rmse(modes), workspace_rmse_bound(modes, 0.95), WORKSPACE_POSES
+        float(np.hypot(predicted_workspace_rmse(modes), shared)),
+        float(np.hypot(workspace_rmse_bound(modes, 0.95), shared)),
+        WORKSPACE_POSES,
     )
 
 
@@ -774,22 +789,13 @@ def _doubts(
     if _beyond_noise(test):
         p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
         value, robot = agreement if agreement is not None else (float("nan"), False)
+        figures = dict(ratio=test.ratio, chi2=test.chi2, dof=test.dof, p=p, rmse=fit.rmse_mm, agreement=value)
         key = "model_error" if robot else "noise"
-        shared = cal.discrepancy
-        if shared is not None:
-            key, value = "model_error_shared", float("nan")
-        messages.append(
-            WARNINGS[key].format(
-                ratio=test.ratio,
-                chi2=test.chi2,
-                dof=test.dof,
-                p=p,
-                rmse=fit.rmse_mm,
-                agreement=value,
-                length=shared and shared.length_scale_deg,
-                gain=shared and shared.loglik_gain,
-            )
-        )
+        if cal.discrepancy is not None:
+            d = cal.discrepancy
+            key = "model_error_shared"
+            figures.update(length=d.length_scale_deg, gain=d.loglik_gain, shared=d.tcp_rms_mm)
+        messages.append(WARNINGS[key].format(**figures))
     if capped:
         messages.append(WARNINGS["iteration_cap"].format(nit=cal.after.nit))
     order = [k for k in np.argsort(-z) if z[k] >= EXCURSION_DOUBT]
