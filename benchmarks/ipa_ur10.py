@@ -217,7 +217,12 @@ def fmt(m: dict) -> str:
 
 
 def terms_text(outcome: CalibrationOutcome) -> str:
-    return ", ".join(f"{n} {e.value:.4g} +- {e.sigma:.2g}" for n, e in outcome.report.terms.items()) or "-"
+    """The fitted terms with their sigmas and the error poses share the fit was weighted by."""
+    terms = ", ".join(f"{n} {e.value:.4g} +- {e.sigma:.2g}" for n, e in outcome.report.terms.items()) or "-"
+    d = outcome.calibration.discrepancy
+    if d is None:
+        return f"{terms}; white"
+    return f"{terms}; weighted: {d.length_scale_deg:g} deg x {d.ratio:g}, log-likelihood +{d.loglik_gain:.0f}"
 
 
 def run_split(data: Path, train_name: str, test_names: list[str], robot) -> dict:
