@@ -319,3 +319,4 @@ def _verify(out: Path, inputs, seed: int) -> None:
             flush=True,
         )
     print(f"verify:    ({time.perf_counter() - t0:.1f} s)", flush=True)
+

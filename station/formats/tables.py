@@ -35,7 +35,6 @@ from station.formats.units import check_positions_in_mm, check_robot_units
 Mass = Annotated[float, Field(ge=0, le=1e4)]  # kg: a link or a payload, up to 10 t
 Compliance = Annotated[float, Field(ge=-1e6, le=1e6)]  # urad/(N m)
 
-
 class Joint(Strict):
     """One D-H joint; optionally its link's mass and centre of mass (in D-H frame i) for the
     gravity torques, and the joint-space terms a calibration identified (``calib.joint_terms``)."""

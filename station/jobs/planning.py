@@ -152,16 +152,7 @@ def design(
     if suggest:
         progress("trying further gauge-line placements")
         report["next"] = _next_placements(
-            dh,
-            tool,
-            limits,
-            lines,
-            q_all,
-            line_all,
-            ds_setup,
-            workspace_q,
-            rng,
-            readings=readings,
+            dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, readings=readings,
             cell=setup.cell,
         )
     approach = np.array([lines[int(lid)][3] for lid in line_all[rows]])

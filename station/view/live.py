@@ -213,8 +213,7 @@ class LiveView:
         scene += [] if robot_mm is None else [np.asarray(robot_mm, float).reshape(-1, 3)]
         self.rec.send_blueprint(blueprint(framing(np.vstack(scene))))
         self.rec.log(
-            "cell/base",
-            rr.Points3D([[0.0, 0.0, 0.0]], radii=25.0, colors=[ROBOT], labels=["robot base"]),
+            "cell/base", rr.Points3D([[0.0, 0.0, 0.0]], radii=25.0, colors=[ROBOT], labels=["robot base"]),
             static=True,
         )
         self.rec.log(
@@ -314,7 +313,7 @@ class LiveView:
         """A session-log line; a long one in rows of ``LOG_WIDTH`` characters (the view cuts a row
         at its right edge), the rows after the first indented."""
         level = log_level(text)
-        for row in textwrap.wrap(text, LOG_WIDTH, subsequent_indent="    ") or [""]:
+        for row in (textwrap.wrap(text, LOG_WIDTH, subsequent_indent="    ") or [""]):
             self.rec.log("log", rr.TextLog(row, level=level))
 
     def calibration(self, method: str, before_mm, after_mm, cost_per_iteration) -> None:
