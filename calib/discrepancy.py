@@ -72,10 +72,14 @@ def joint_distance2(q: np.ndarray) -> np.ndarray:
     return np.sum((2.0 * np.sin((z[:, None, :] - z[None, :, :]) / 2.0)) ** 2, axis=2)
 
 
+def correlation(distance2: np.ndarray, length_scale_rad: float) -> np.ndarray:
+    """The squared-exponential correlation ``exp(-d^2 / (2 l^2))`` of squared distances [rad^2]."""
+    return np.exp(-distance2 / (2.0 * length_scale_rad**2))
+
+
 def joint_kernel(q: np.ndarray, length_scale_rad: float) -> np.ndarray:
-    """Correlation (N, N) of the poses ``q`` (N, 6) [rad]: ``exp(-d^2 / (2 l^2))``
-    (``joint_distance2``)."""
-    return np.exp(-joint_distance2(q) / (2.0 * length_scale_rad**2))
+    """Correlation (N, N) of the poses ``q`` (N, 6) [rad] (``joint_distance2``, ``correlation``)."""
+    return correlation(joint_distance2(q), length_scale_rad)
 
 
 class Blocks:
@@ -118,8 +122,7 @@ class Blocks:
         for distance2, noise in zip(self.distance2, self.noise, strict=True):
             cov = np.diag(noise)
             if discrepancy is not None:
-                length = np.radians(discrepancy.length_scale_deg)
-                cov += discrepancy.ratio * np.exp(-distance2 / (2.0 * length**2))
+                cov += discrepancy.ratio * correlation(distance2, np.radians(discrepancy.length_scale_deg))
             out.append(np.linalg.cholesky(cov))
         return out
 

@@ -210,7 +210,8 @@ def calibrate_samples(
     if terms == "auto":
         stage("choosing the terms by cross-validation (a fit per candidate and fold)")
     choice = choose_terms(terms, model, robot.link_masses(payload), unknowns(model))
-    stage(f"fitting ({method})")
+    weighing = ", then weighing the error neighbouring poses share" if choice.model.pose_groups else ""
+    stage(f"fitting ({method}{weighing})")
     fit = SOLVERS[method](choice, method, select)
     stage("checking the fit and writing the report")
     elapsed = time.perf_counter() - t0
