@@ -136,12 +136,12 @@ class Blocks:
         r_out = r * np.where(self.white, weights, 1.0)
         j_out = None if jac is None else jac * np.where(self.white, weights, 1.0)[:, None]
         for table, lower in zip(self.tables, factors, strict=True):
-            r_out[table] = solve_triangular(lower, r[table], lower=True, check_finite=False)
+            n, c = table.shape
+            block = r[table] if jac is None else np.hstack([r[table], jac[table].reshape(n, -1)])
+            whitened = solve_triangular(lower, block, lower=True, check_finite=False)
+            r_out[table] = whitened[:, :c]
             if jac is not None:
-                n, c = table.shape
-                block = jac[table].reshape(n, c * jac.shape[1])
-                whitened = solve_triangular(lower, block, lower=True, check_finite=False)
-                j_out[table] = whitened.reshape(n, c, jac.shape[1])
+                j_out[table] = whitened[:, c:].reshape(n, c, jac.shape[1])
         return r_out, j_out
 
     def log_det(self, factors: list[np.ndarray]) -> float:
@@ -201,18 +201,27 @@ def estimate(
         rw, jw = blocks.whiten(factors, weights, r, jac)
         d = np.linalg.norm(jw, axis=0)
         d[d == 0] = 1.0
-        q, upper = np.linalg.qr(jw / d)
-        e = rw - q @ (q.T @ rw)
-        log_info = 2.0 * np.sum(np.log(np.abs(np.diag(upper)) * d))
-        return -0.5 * ((m - k) * np.log(e @ e / (m - k)) + blocks.log_det(factors) + log_info)
+        # R of [J | r]: its first k diagonals give log det(J^T J), its last the residual's norm
+        diag = np.abs(np.diag(np.linalg.qr(np.column_stack([jw / d, rw]), mode="r")))
+        log_info = 2.0 * np.sum(np.log(np.maximum(diag[:k], 1e-300) * d))
+        return -0.5 * ((m - k) * np.log(diag[k] ** 2 / (m - k)) + blocks.log_det(factors) + log_info)
 
     white = restricted(None)
-    grid = [Discrepancy(length, ratio, 0.0) for length in LENGTH_SCALES_DEG for ratio in RATIOS]
-    gains = [restricted(d) - white for d in grid]
-    best = int(np.argmax(gains))
-    if gains[best] <= MIN_GAIN:
+    gains = {}
+
+    def gain(length, ratio):
+        if (length, ratio) not in gains:
+            gains[length, ratio] = restricted(Discrepancy(length, ratio, 0.0)) - white
+        return gains[length, ratio]
+
+    # coordinate ascent over the grid: the length at a middling ratio, the ratio at that length,
+    # then the length again at that ratio (18 of the 42 points; the surface is smooth in both)
+    length = max(LENGTH_SCALES_DEG, key=lambda v: gain(v, RATIOS[2]))
+    ratio = max(RATIOS, key=lambda v: gain(length, v))
+    length = max(LENGTH_SCALES_DEG, key=lambda v: gain(v, ratio))
+    if gains[length, ratio] <= MIN_GAIN:
         return None
-    return Discrepancy(grid[best].length_scale_deg, grid[best].ratio, float(gains[best]))
+    return Discrepancy(length, ratio, float(gains[length, ratio]))
 
 
 def tcp_rms_mm(discrepancy: Discrepancy, row_error_mm: np.ndarray, components: int) -> float:
