@@ -103,3 +103,34 @@ def test_many_rows_are_split_into_regions_each_row_once(monkeypatch):
     everything = np.sort(np.concatenate([t.ravel() for t in blocks.tables]))
     np.testing.assert_array_equal(everything, np.arange(rows.size))
     assert all(np.all(rows[t] == rows[t][:, :1]) for t in blocks.tables)  # a row's components together
+
+
+def test_a_wild_reading_among_poses_sharing_an_error_stays_out_of_the_weighted_fit():
+    """The weighted fit keeps the white fit's robust weights: a reading 50 mm off (a tracker that
+    lost its target for one row) is named as down-weighted, leaves the discrepancy the clean rows
+    show as it is, and moves the weighted fit no more than it moves the white one."""
+    clean = correlated_world(5.0, seed=2)
+    position = clean.position.copy()
+    position[17] += [50.0, 0.0, 0.0]
+    model = PositionModel(clean, NOMINAL, PROBE, sigma_mm=TRACKER_SIGMA_MM)
+
+    def shift(correlated: bool) -> tuple[float, list]:
+        fits = [
+            calibrate(
+                PositionModel(s, NOMINAL, PROBE, sigma_mm=TRACKER_SIGMA_MM),
+                CalibrationOptions(correlated=correlated),
+            )
+            for s in (clean, PositionSamples(clean.q, position))
+        ]
+        assert 17 in fits[1].downweighted
+        moved = np.linalg.norm(model.predicted_mm(fits[1].x) - model.predicted_mm(fits[0].x), axis=1)
+        return float(np.sqrt(np.mean(moved**2))), [f.discrepancy for f in fits]
+
+    white, _ = shift(False)
+    weighted, (found_clean, found_wild) = shift(True)
+    assert found_clean is not None and found_wild is not None
+    assert (found_wild.length_scale_deg, found_wild.ratio) == (
+        found_clean.length_scale_deg,
+        found_clean.ratio,
+    )
+    assert weighted <= 1.1 * white
