@@ -7,7 +7,9 @@
    then the joint-space terms) holds whatever else the data cannot tell apart;
 3. "after": LMLC over the identified robot parameters (table and terms) and the setup unknowns,
    first with the linear loss, then with the robust loss whose scale is re-estimated from the
-   residuals (MAD, per group).
+   residuals (MAD, per group);
+4. where the residuals show an error that neighbouring poses share (``calib.discrepancy``), the
+   same fit again by generalised least squares under it, the robust weights kept (``correlate``).
 
 The robot's parameters are everything of ``x`` that is not setup (``~model.setup_mask``): the table,
 then the terms (``calib.joint_terms``).
@@ -423,7 +425,7 @@ def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOpt
     found = estimate(r, jac[:, cal.identified], row_noise(prior, cal.scale), blocks, weights)
     if found is None:
         return cal
-    weighted = Correlated(prior, model.samples.q, found, weights)
+    weighted = Correlated(prior, blocks, found, weights)
     result = levenberg_marquardt(
         weighted.residuals_and_jacobian,
         cal.x,

@@ -151,17 +151,16 @@ class Blocks:
 
 
 class Correlated:
-    """A prior-augmented model (``calib.calibrate.WithPrior``) whose sample rows are whitened by
-    ``discrepancy`` and the robust ``weights`` of the fit it starts from: its least squares is the
-    generalised least squares under that covariance."""
+    """A prior-augmented model (``calib.calibrate.WithPrior``) whose elements in ``blocks`` are
+    whitened by noise plus ``discrepancy`` and the others weighted by the robust ``weights`` of the
+    fit it starts from: its least squares is the generalised least squares under that covariance."""
 
-    def __init__(self, prior, q: np.ndarray, discrepancy: Discrepancy, weights: np.ndarray):
-        self.prior, self.model = prior, prior.model
+    def __init__(self, prior, blocks: Blocks, discrepancy: Discrepancy, weights: np.ndarray):
+        self.prior, self.model, self.blocks = prior, prior.model, blocks
         self.names, self.x0, self.groups, self.rows = prior.names, prior.x0, prior.groups, prior.rows
         self.setup_mask, self.tool_mask = prior.setup_mask, prior.tool_mask
         self.weights = np.asarray(weights, float)
-        self.blocks = Blocks(prior.rows, prior.groups, prior.model.pose_groups, q, self.weights)
-        self.factors = self.blocks.factors(discrepancy)
+        self.factors = blocks.factors(discrepancy)
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
         """Whitened residuals (m,) and Jacobian (m, n) at ``x`` (n,)."""
