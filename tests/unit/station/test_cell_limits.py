@@ -47,7 +47,7 @@ def test_the_tool_tilt_from_straight_down():
 
 def test_a_box_with_its_corners_reversed_is_refused(tmp_path):
     bad = tmp_path / "setup.toml"
-    bad.write_text(SETUP.read_text() + '\n[cell.reach]\nmin_mm = [0, 0, 0]\nmax_mm = [1, -1, 1]\n')
+    bad.write_text(SETUP.read_text() + "\n[cell.reach]\nmin_mm = [0, 0, 0]\nmax_mm = [1, -1, 1]\n")
     with pytest.raises(Exception, match="cell.reach: .*min_mm \\[0.0, 0.0, 0.0\\] must lie below max_mm"):
         load_setup(bad)
 

@@ -12,7 +12,7 @@ from tests.unit.station.test_position_sets import calibrate, write_position_set
 
 
 def test_poses_sharing_an_error_are_weighed_together_and_the_report_says_how(tmp_path, capsys):
-    samples = correlated_world(5.0, seed=1)
+    samples, _ = correlated_world(5.0, seed=1)
     path = tmp_path / "shared.csv"
     rows = ["sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"]
     rows += [
