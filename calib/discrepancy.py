@@ -14,7 +14,8 @@ variance; ``d`` the chord distance of joints 1-3, which carry the arm; each comp
 e.g. x, y, z of a tracker point, its own), and the table is fitted by generalised least squares
 under it: the fit weighs what the poses share once, not once per pose. The length scale ``l`` and
 ``ratio`` are those of greatest restricted likelihood (REML: the likelihood of the residuals with
-the fitted unknowns integrated out) over ``LENGTH_SCALES_DEG`` x ``RATIOS`` at the white fit, and
+the fitted unknowns integrated out) over ``LENGTH_SCALES_DEG`` x ``RATIOS`` at the white fit
+(coordinate ascent over that grid), and
 used only where they beat no discrepancy beyond chance (``MIN_GAIN``): a simulated cell, whose
 error is the table and white noise, keeps its white fit.
 
@@ -175,8 +176,8 @@ def estimate(
     blocks: Blocks,
     weights: np.ndarray,
 ) -> Discrepancy | None:
-    """The grid's discrepancy of greatest restricted likelihood, None unless it beats none by
-    ``MIN_GAIN``.
+    """The grid's discrepancy of greatest restricted likelihood (found by coordinate ascent, below),
+    None unless it beats none by ``MIN_GAIN``.
 
     Parameters
     ----------
