@@ -42,6 +42,9 @@ stiffness above about 3e4 N m/rad (industrial joints: 3e4 - 1e6)."""
 HARMONIC_PRIOR_DEG = 0.05
 """What is known of a harmonic's amplitude before measuring [deg], 1 sigma: about 3 arc minutes,
 the size of a strain-wave gear's transmission error."""
+TURN_GAP_DEG = 90.0
+"""A joint's rows cover its whole turn when the largest arc of its angle (mod 360 deg) that no row
+visits is under this (a quarter turn): a first harmonic fitted there interpolates at every angle."""
 LOAD_BEARING_SHARE = 0.1
 """A joint carries the arm when the RMS of its gravity torque over the rows is at least this share
 of the largest joint's: those joints get a compliance candidate."""
@@ -145,6 +148,21 @@ def load_bearing_joints(dh: np.ndarray, q: np.ndarray, links: LinkMasses) -> tup
     of at least ``LOAD_BEARING_SHARE`` of the largest joint's: those that carry the arm."""
     rms = np.sqrt(np.mean(gravity_torques(dh, q, links, range(N_JOINTS)) ** 2, axis=0))
     return tuple(int(j) for j in np.flatnonzero(rms >= LOAD_BEARING_SHARE * rms.max()))
+
+
+def turn_gap(q: np.ndarray) -> np.ndarray:
+    """The largest arc [rad] of each joint's circle (6,) that none of the configurations ``q``
+    (N, 6) [rad] visits."""
+    angles = np.sort(np.mod(q, 2.0 * np.pi), axis=0)
+    wrapped = np.vstack([angles, angles[:1] + 2.0 * np.pi])
+    return np.max(np.diff(wrapped, axis=0), axis=0)
+
+
+def whole_turn_joints(q: np.ndarray) -> tuple[int, ...]:
+    """Joints (0-based) whose angles over ``q`` (N, 6) [rad] cover the whole turn: every gap under
+    ``TURN_GAP_DEG``. An encoder's scale mounted off its axis reads a once-per-turn error (the first
+    harmonic), which such rows determine everywhere and partial turns only extrapolate."""
+    return tuple(int(j) for j in np.flatnonzero(turn_gap(q) < np.radians(TURN_GAP_DEG)))
 
 
 class JointTerms:

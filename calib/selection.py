@@ -28,7 +28,9 @@ tracker set and a drawstring session alike. Physically grounded terms (a joint y
 gravity: its sign and size are known before measuring) are treated as a prior rather than a
 candidate (``prior_groups``): they enter together, kept when the data determine them (joint
 chi-square beyond ``DETERMINED_P``), each value plausible (``implausible``) and the blocked
-cross-validated error not significantly worse (``not_harmful``); the other groups (harmonics) must
+cross-validated error not significantly worse (``not_harmful``). Prior groups come in stages, each
+judged on top of those kept before it (``station calibrate`` has two: the compliances, then the
+first harmonics of the joints whose rows cover their whole turn). The other groups (harmonics) must
 be determined as well (the best of m screened: p below ``DISCOVERY_P / m``) and earn ``min_gain``.
 On the real UR10 (IPA series A-D) row folds gave J2's compliance a 1-9 % gain and blocked folds 2-30 %, and
 compliance alone was the best fixed model on every "train one, test three" split.
@@ -41,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate
-from calib.joint_terms import COMPLIANCE_PRIOR, JointTerms, TermGroup
+from calib.joint_terms import COMPLIANCE, COMPLIANCE_PRIOR, JointTerms, TermGroup
 from calib.kmeans import REGION_JOINTS, region_folds
 from calib.models import MeasurementModel
 from calib.special import gammaincc
@@ -322,37 +324,46 @@ def _terms(pool: JointTerms, groups) -> JointTerms:
 
 def prior_groups(
     model: MeasurementModel,
+    kept: list[TermGroup],
     groups: list[TermGroup],
     pool: JointTerms,
     options: CalibrationOptions,
     folds: list[np.ndarray],
     base: np.ndarray,
+    round_: int,
 ) -> tuple[list[TermGroup], tuple[np.ndarray, Calibration] | None, list[CandidateScore]]:
-    """Physically grounded groups (compliances), entering together: each implausible one is
-    dropped (``implausible``) and the rest refitted; what is left is kept when its values are
-    determined (chi-square p below ``DETERMINED_P``) and the cross-validated errors stay
-    ``not_harmful`` beside ``base`` (N,), the table's. Returns the kept groups, their errors and
-    calibration (None if none kept) and the table's lines (round 1)."""
+    """Physically grounded groups entering together on top of the ``kept`` ones: each implausible
+    compliance is dropped (``implausible``) and the rest refitted; what is left is kept when its
+    values are determined (chi-square p below ``DETERMINED_P``) and the cross-validated errors stay
+    ``not_harmful`` beside ``base`` (N,), the kept model's. Returns the groups kept, their errors and
+    calibration (None if none kept) and the table's lines (``round_``)."""
     current, scores = list(groups), []
     while current:
-        wide = model.with_terms(_terms(pool, current))
+        wide = model.with_terms(_terms(pool, kept + current))
         err, cal = cross_validated_errors(wide, folds, options)
         gain = 1.0 - rms(err) / rms(base)
         value, sigma, _ = term_estimates(wide, cal)
-        bad = {g.label: implausible(v, s) for g, v, s in zip(current, value, sigma, strict=True)}
+        at = np.cumsum([len(_terms(pool, kept))] + [len(g.terms) for g in current])[:-1]
+        bad = {
+            g.label: implausible(value[a], sigma[a])
+            for g, a in zip(current, at, strict=True)
+            if g.terms[0].key == COMPLIANCE
+        }
         bad = {label: why for label, why in bad.items() if why}
         if bad:
-            scores += [CandidateScore(1, label, rms(err), gain, False, why) for label, why in bad.items()]
+            scores += [
+                CandidateScore(round_, label, rms(err), gain, False, why) for label, why in bad.items()
+            ]
             current = [g for g in current if g.label not in bad]
             continue
-        p = determined_p(wide, cal, len(current))
+        p = determined_p(wide, cal, len(_terms(pool, current)))
         reason = None
         if p > DETERMINED_P:
             reason = f"not determined by the rows (chi-square p {p:.2g}, above {DETERMINED_P})"
         elif not not_harmful(err, base):
             reason = f"raises the blocked cross-validated error ({rms(base):.4f} -> {rms(err):.4f} mm)"
         label = " + ".join(g.label for g in current)
-        scores.append(CandidateScore(1, label, rms(err), gain, reason is None, reason))
+        scores.append(CandidateScore(round_, label, rms(err), gain, reason is None, reason))
         return (current, (err, cal), scores) if reason is None else ([], None, scores)
     return [], None, scores
 
@@ -366,7 +377,7 @@ def select_terms(
     min_gain: float = MIN_GAIN,
     *,
     folds: list[np.ndarray] | None = None,
-    prior: list[TermGroup] = (),
+    prior: tuple[list[TermGroup], ...] = (),
     scheme: str = "contiguous blocks of each placement's rows",
 ) -> TermSelection:
     """Greedy forward selection of term groups by cross-validation (module docstring).
@@ -388,8 +399,9 @@ def select_terms(
         Relative cut of the cross-validated RMS error a group must bring.
     folds : list of ndarray of int, optional
         Left-out rows of each fold (``blocked_folds``); default ``kfold`` of the placements.
-    prior : list of TermGroup
-        Physically grounded groups, judged first and together (``prior_groups``).
+    prior : tuple of list of TermGroup
+        Physically grounded groups in stages, each judged together on top of the stages kept before
+        it (``prior_groups``), before any candidate.
     scheme : str
         What the folds leave out, for the report.
 
@@ -403,10 +415,15 @@ def select_terms(
     nominal = rms(nominal_errors(model.with_terms(_terms(pool, kept)), cal, folds))
     current = rms(err)
     table = [CandidateScore(0, None, current, 0.0, True)]
-    if prior:
-        kept, fit, lines = prior_groups(model, list(prior), pool, options, folds, err)
+    for stage in prior:
+        if not stage:
+            continue
+        found, fit, lines = prior_groups(
+            model, kept, list(stage), pool, options, folds, err, table[-1].round + 1
+        )
         table += lines
         if fit is not None:
+            kept += found
             err, cal = fit
             current = rms(err)
     left = list(candidates)

@@ -49,7 +49,8 @@ def register(sub) -> None:
         help="terms beside the D-H table: geometric (none), compliance (load-bearing joints under "
         "gravity), full (plus 1st and 2nd harmonics of every joint), auto (default: the compliances "
         "where the rows determine them and they do not raise the error at poses left out by region, "
-        "a harmonic only where it cuts that error by >= 5 %%)",
+        "then so the 1st harmonics of the joints whose rows cover their whole turn, any other "
+        "harmonic only where it cuts that error by >= 5 %%)",
     )
     p.add_argument("--report", type=Path, help="report JSON to write")
     p.add_argument(

@@ -121,7 +121,8 @@ class CrossValidationRow:
     """One line of ``--model auto``'s table: in ``round`` (0: the table alone), the model kept so
     far plus ``added`` (None: nothing) predicts left-out rows to ``rmse_mm``, a relative ``gain``
     over the round's starting model; ``kept`` whether it stayed; ``reason`` why a physically grounded
-    group (the compliances, entering together) was left."""
+    group (the compliances; the first harmonics of the whole-turn joints: each entering together)
+    was left."""
 
     round: int
     added: str | None

@@ -10,7 +10,10 @@ and which a robot file carries (``calib.joint_terms``).
 - ``auto``: ``full``'s groups judged by cross-validation on blocked folds of the training rows (one
   region of joint space left out at a time: what the table does away from the poses it was fitted
   on, ``calib.selection``): the compliances together, as a prior, kept when determined, plausible
-  and not harmful; each harmonic only if determined at five sigma and it cuts the error by 5 %.
+  and not harmful; then, likewise together, the first harmonics of the joints whose rows cover their
+  whole turn (an encoder's once-per-turn error, which such rows interpolate at every angle:
+  ``calib.joint_terms.whole_turn_joints``); each other harmonic only if determined at five sigma
+  and it cuts the error by 5 %.
 
 Whatever the data cannot determine is held by the pipeline with its reason, as a table parameter is.
 """
@@ -31,6 +34,7 @@ from calib.joint_terms import (
     compliance_group,
     harmonic_group,
     load_bearing_joints,
+    whole_turn_joints,
 )
 from calib.kinematics import N_JOINTS, dh_table
 from calib.methods import TERM_MODELS
@@ -118,8 +122,10 @@ def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, u
     if per_fold < unknowns + len(every):
         warning = TOO_FEW.format(n=n, per_fold=per_fold, needed=unknowns + len(every))
         return TermChoice(model, None, offer.held, warning)
-    prior = [g for g in offer.groups if all(t.key == COMPLIANCE for t in g.terms)]
-    others = [g for g in offer.groups if g not in prior]
+    compliances = [g for g in offer.groups if all(t.key == COMPLIANCE for t in g.terms)]
+    turns = [harmonic_group(j, 1) for j in whole_turn_joints(model.samples.q)]
+    prior = (compliances, [g for g in offer.groups if g in turns])
+    others = [g for g in offer.groups if g not in compliances + prior[1]]
     white = CalibrationOptions(correlated=False)  # the rule was chosen on white fits
     selection = select_terms(model, others, offer.pool, white, folds=folds, prior=prior, scheme=scheme)
     kept = [t for g in selection.groups for t in g.terms]

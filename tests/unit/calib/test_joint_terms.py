@@ -14,6 +14,8 @@ from calib.joint_terms import (
     gravity_torques,
     harmonic_group,
     load_bearing_joints,
+    turn_gap,
+    whole_turn_joints,
 )
 from calib.kinematics import base_from_frames, tcp_position
 from sim_fixtures.world import Robot
@@ -103,3 +105,14 @@ def test_tcp_jacobian_by_the_terms_matches_finite_differences(rng):
 def test_a_compliance_without_masses_is_refused():
     with pytest.raises(ValueError, match="link masses"):
         JointTerms([Term(1, "compliance_urad_per_Nm")], ur10(), None)
+
+
+def test_the_turn_gap_is_the_widest_arc_no_row_visits():
+    """Joint 1 on a whole turn (every 10 deg), joint 2 on an arc of 260 deg, joint 3 on an arc of 40
+    deg across the +-180 deg seam, the rest still: the gaps are 10, 100, 320 and 360 deg."""
+    q = np.zeros((37, 6))
+    q[:, 0] = np.linspace(-180, 180, 37)
+    q[:, 1] = np.linspace(-80, 180, 37)
+    q[:, 2] = np.concatenate([np.linspace(150, 180, 19), np.linspace(-180, -170, 18)])
+    np.testing.assert_allclose(np.degrees(turn_gap(np.radians(q))), [10, 100, 320, 360, 360, 360], atol=1e-9)
+    assert whole_turn_joints(np.radians(q)) == (0,)

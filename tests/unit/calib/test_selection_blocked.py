@@ -26,7 +26,7 @@ def selection_of(compliance: dict[int, float], seed: int = 5, n: int = 150):
     _, samples = position_set(n, error, seed=seed)
     model = PositionModel(samples, NOMINAL, np.array([0.0, 0.0, 100.0]), sigma_mm=TRACKER_SIGMA_MM)
     folds, scheme = blocked_folds(samples.q)
-    prior = [compliance_group(1), compliance_group(2)]
+    prior = ([compliance_group(1), compliance_group(2)],)
     harmonics = [harmonic_group(j, h) for j in range(6) for h in (1, 2)]
     pool = JointTerms((), NOMINAL, UR10_LINKS)
     options = CalibrationOptions()

@@ -25,18 +25,31 @@ HEADER = "sample,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,x_mm,y_mm,z_mm"
 COMPLIANCE = {1: 15.0, 2: 10.0}  # the simulated UR10's joints 2 and 3 [urad / (N m)]
 
 
-def write_compliant_set(path: Path, n: int, seed: int) -> None:
+ECCENTRICITY_DEG = (0.02, -0.015)
+"""J1's encoder read off its axis: its once-per-turn error, sine and cosine of q1 [deg]."""
+
+
+def write_compliant_set(
+    path: Path, n: int, seed: int, *, eccentric: bool = False, j1_deg: float = 180.0
+) -> None:
     """A UR10 with machining errors and joints 2-3 yielding under gravity (the robot file's masses),
-    ``n`` random poses seen by a tracker with 0.02 mm noise."""
+    J1's encoder ``eccentric`` (``ECCENTRICITY_DEG``), ``n`` random poses (J1 within +-``j1_deg``)
+    seen by a tracker with 0.02 mm noise."""
     rng = np.random.default_rng(seed)
     robot = load_robot(ROBOT)
     nominal = dh_from_degrees(robot.table_deg())
     true = nominal + np.column_stack(
         [np.radians(rng.normal(0, 0.15, 6)), rng.normal(0, 0.75, (6, 2)), np.radians(rng.normal(0, 0.15, 6))]
     )
-    terms = JointTerms([Term(j, "compliance_urad_per_Nm") for j in COMPLIANCE], nominal, robot.link_masses())
+    keys = [(j, "compliance_urad_per_Nm") for j in COMPLIANCE] + [
+        (0, "sin1_deg"),
+        (0, "cos1_deg"),
+    ] * eccentric
+    terms = JointTerms([Term(j, k) for j, k in keys], nominal, robot.link_masses())
+    values = list(COMPLIANCE.values()) + list(np.radians(ECCENTRICITY_DEG)) * eccentric
     q_links = rng.uniform(-180, 180, (n, 6))
-    q = JointError(terms, np.array(list(COMPLIANCE.values()))).readings_deg(q_links)
+    q_links[:, 0] *= j1_deg / 180.0
+    q = JointError(terms, np.array(values)).readings_deg(q_links)
     p = tcp_position(true, np.radians(q_links), np.array([0.0, 0.0, 100.0]))
     p = p @ rotation_from_vector(np.array([0.1, -0.2, 2.5])).T + [2500.0, -1000.0, 200.0]
     p += rng.normal(0, 0.02, p.shape)
@@ -116,6 +129,26 @@ def test_auto_never_looks_at_the_holdout(compliant):
     assert runs[0].report.terms == runs[1].report.terms == runs[2].report.terms
     assert "J2.compliance_urad_per_Nm" in runs[0].report.terms  # and it found what is there
     assert runs[2].report.after.holdout.rmse_mm > 50  # the nonsense was evaluated, after the fit
+
+
+@pytest.mark.parametrize("j1_deg", [180.0, 90.0])
+def test_an_encoders_once_per_turn_error_is_a_prior_where_the_rows_cover_the_turn(tmp_path, j1_deg):
+    """J1's encoder reads 0.025 deg off once per turn. Rows over J1's whole turn: its first harmonic
+    enters with the first harmonics of the other whole-turn joints, after the compliances, and is
+    recovered within 3 sigma. Rows over half of J1's turn leave it out of that stage: there it
+    would be extrapolated over the other half, not interpolated."""
+    write_compliant_set(tmp_path / "e.csv", 150, seed=4, eccentric=True, j1_deg=j1_deg)
+    out = calibration.calibrate_samples(
+        load_samples(tmp_path / "e.csv"), load_robot(ROBOT), None, terms="auto"
+    )
+    second = [row for row in out.report.cross_validation.rows if row.round == 2]
+    stage = second[0].added.split(" + ")
+    assert ("J1 harmonic 1" in stage) == (j1_deg == 180.0)
+    if j1_deg == 180.0:
+        assert len(second) == 1 and second[0].kept and "J6 harmonic 1" in stage
+        for key, truth in zip(("J1.sin1_deg", "J1.cos1_deg"), ECCENTRICITY_DEG, strict=True):
+            estimate = out.report.terms[key]
+            assert abs(estimate.value - truth) < 3 * estimate.sigma
 
 
 def test_folds_are_contiguous_blocks_of_every_placement():
