@@ -159,9 +159,10 @@ def turn_gap(q: np.ndarray) -> np.ndarray:
 
 
 def whole_turn_joints(q: np.ndarray) -> tuple[int, ...]:
-    """Joints (0-based) whose angles over ``q`` (N, 6) [rad] cover the whole turn: every gap under
-    ``TURN_GAP_DEG``. An encoder's scale mounted off its axis reads a once-per-turn error (the first
-    harmonic), which such rows determine everywhere and partial turns only extrapolate."""
+    """Joints (0-based) whose angles over ``q`` (N, 6) [rad] cover the whole turn: no unvisited arc
+    (``turn_gap``) as wide as ``TURN_GAP_DEG``. An encoder's scale mounted off its axis reads a
+    once-per-turn error (the first harmonic), which such rows determine everywhere and partial turns
+    only extrapolate."""
     return tuple(int(j) for j in np.flatnonzero(turn_gap(q) < np.radians(TURN_GAP_DEG)))
 
 
