@@ -179,11 +179,12 @@ class DrawstringSetup:
     dial_axis : dict of int to ndarray, shape (3,)
         Per line id, the dial's unit axis in the base frame.
     default_dial_axis : ndarray, shape (3,), optional
-        The axis on lines without their own; with neither, the dial only gates captures.
+        The axis on lines without their own; with neither, the dial gates captures and its reading
+        bounds the offset from the edge.
     sigma_contact : float
-        How far the tool may sit off the edge where no dial reading measures it [mm, 1 sigma]: a row
-        without a reading (NaN) on a line with a dial axis, or any row on a line without one (then
-        across the edge in both directions).
+        How far the tool may sit off the edge where no dial read it [mm, 1 sigma]: a row without a
+        reading (NaN); across the edge in both directions on a line without a dial axis. A row the
+        dial read on such a line is held to its reading instead (``DrawstringLineModel.line_sigma``).
     rho : float
         Weight of the line terms.
     anchor_tolerance, offset_tolerance : float
@@ -504,17 +505,32 @@ class DrawstringLineModel:
         return (r, np.concatenate(jparts)) if jacobian else (r, None)
 
     def line_sigma(self, lid: int) -> np.ndarray:
-        """Each row's stated noise on line ``lid`` along (e1, e2) [mm], (rows, 2): ``sigma_line``
-        where the dial measures the tool's offset from the edge, with ``sigma_contact`` added in
-        quadrature where nothing does (``DrawstringSetup.sigma_contact``)."""
+        """Each row's stated noise on line ``lid`` along (e1, e2) [mm], (rows, 2).
+
+        Where the dial's axis is stated, its reading moves the TCP onto the edge: ``sigma_line``.
+        Where it is not, the dial gated the capture and its reading ``dial_mm`` is how far the tool
+        sat from the edge, in a direction across it that no file states: an offset of length
+        ``|dial_mm|`` whose two components carry ``|dial_mm| / sqrt(2)`` each (RMS over directions),
+        added in quadrature. Where no dial read the row, ``sigma_contact`` is (on the axis's
+        component alone where an axis is stated)."""
         st, rows = self.setup_values, self._on_line[lid]
+        dial = self.samples.dial[rows]
+        unread = np.isnan(dial)
         sigma = np.full((rows.size, 2), st.sigma_line)
-        contact = np.hypot(st.sigma_line, st.sigma_contact)
         if st.dial_axis_of(lid) is None:
-            sigma[:] = contact
+            sigma[:] = np.hypot(st.sigma_line, np.nan_to_num(np.abs(dial)) / np.sqrt(2))[:, None]
+            sigma[unread] = np.hypot(st.sigma_line, st.sigma_contact)
         else:
-            sigma[np.isnan(self.samples.dial[rows]), 0] = contact
+            sigma[unread, 0] = np.hypot(st.sigma_line, st.sigma_contact)
         return sigma
+
+    def dial_mode(self, lid: int) -> str:
+        """How line ``lid``'s rows were held to its edge: ``"axis"`` (the setup states the dial's
+        axis and the dial read rows there), ``"gated"`` (the dial read rows without an axis: it gated
+        them and bounds their offset), ``"none"`` (no dial reading on the line: ``sigma_contact``)."""
+        if np.isnan(self.samples.dial[self._on_line[lid]]).all():
+            return "none"
+        return "gated" if self.setup_values.dial_axis_of(lid) is None else "axis"
 
     def _dial_shift(self, rows: np.ndarray, lid: int) -> np.ndarray:
         axis = self.setup_values.dial_axis_of(lid)

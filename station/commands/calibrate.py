@@ -182,6 +182,7 @@ def summary(report: CalibrationReport) -> str:
         f"predicted workspace error: {ws.predicted_rmse_mm:.3f} mm RMS "
         f"(95 %: below {ws.predicted_rmse_95_mm:.3f} mm)"
     )
+    lines += dial_summary(report)
     mode = report.fit_check.dial_mode if report.fit_check else None
     if mode and not any(mode in w for w in report.warnings):
         lines.append(f"dial-less: {mode}")
@@ -189,6 +190,19 @@ def summary(report: CalibrationReport) -> str:
     lines.append(f"note: {HOLDOUT_SCOPES[report.holdout_scope]}")
     lines.append(f"next: {report.next}")
     return "\n".join(lines)
+
+
+def dial_summary(report: CalibrationReport) -> list[str]:
+    """How each gauge line's rows were held to its edge, one line for the lines of each mode."""
+    from station.jobs.absorbed import DIAL_MODE_TEXT
+
+    by_mode: dict[str, list[str]] = {}
+    for lid, mode in report.line_dial.items():
+        by_mode.setdefault(mode, []).append(str(lid))
+    return [
+        f"gauge line{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {DIAL_MODE_TEXT[mode]}"
+        for mode, ids in by_mode.items()
+    ]
 
 
 def terms_summary(report: CalibrationReport) -> list[str]:

@@ -264,8 +264,8 @@ class SetupCell(Strict):
 class SetupFile(Strict):
     """Station geometry as measured roughly (contract: setup TOML). ``line_sigma_mm``: how well the
     tool sits on the gauge edge (joint-reading noise at the TCP included); ``contact_sigma_mm``: how
-    far off the edge it may sit where no dial reading measures it (a dial-less cell, a row without a
-    reading, a line without a ``dial_axis``); ``rho``: line-term weight;
+    far off the edge it may sit where no dial read the row (a dial-less cell, a row without a
+    reading; a row read on a line without a ``dial_axis`` is held to its reading); ``rho``: line-term weight;
     ``payload``: what the flange carried while measuring (for the gravity torques)."""
 
     drawstring: SetupDrawstring | None = None

@@ -60,7 +60,7 @@ class LineDial:
 @dataclass(frozen=True)
 class Findings:
     """What the checks found: ``warnings`` for the report, a ``refusal`` (None: none), each line's
-    ``dials`` and the ``unread`` lines (no dial reading measured the tool's offset there)."""
+    ``dials`` and the ``unread`` lines (with rows no dial reading measured the offset of)."""
 
     warnings: tuple[str, ...] = ()
     refusal: str | None = None
@@ -71,16 +71,20 @@ class Findings:
 def findings(model: MeasurementModel, cal: Calibration, weights: np.ndarray) -> Findings:
     """All checks of this module on a finished fit; ``weights`` are the robust loss's per residual
     row (``calib.calibrate.robust_weights``). Rows without dial readings on a line whose dial axis
-    the setup states are a lost channel (a warning); lines without an axis are a dial-less mode."""
+    the setup states, or on a line the dial read elsewhere, are a lost channel (a warning); a line no
+    dial read at all, without an axis, is a dial-less mode."""
     warnings = downweighted(model, cal, weights)
     if model.kind != "drawstring":
         return Findings(tuple(warnings))
     dials = line_dials(model, cal)
     refusal = next((_dial_text(d) for d in dials if d.verdict not in ("agrees", "inconclusive")), None)
     unread = unread_lines(model)
-    lost = [lid for lid in unread if model.setup_values.dial_axis_of(lid) is not None]
-    if lost:
-        warnings.insert(0, _unread_text(model, lost, "the setup states a dial_axis, but "))
+    stated = [lid for lid in unread if model.setup_values.dial_axis_of(lid) is not None]
+    if stated:
+        warnings.insert(0, _unread_text(model, stated, "the setup states a dial_axis, but "))
+    gaps = [lid for lid in unread if lid not in stated and _read(model, lid).any()]
+    if gaps:
+        warnings.insert(0, _unread_text(model, gaps, "the dial read other rows of the line, but "))
     return Findings(tuple(warnings), refusal, tuple(dials), tuple(unread))
 
 
@@ -152,17 +156,25 @@ def _dial_text(d: LineDial) -> str:
 
 
 def unread_lines(model) -> list[int]:
-    """The lines where no dial reading measures the tool's offset from the edge: no readings, or
-    no dial axis to read them along."""
-    return [
-        lid
-        for lid in model.line_ids
-        if model.setup_values.dial_axis_of(lid) is None or not _read(model, lid).all()
-    ]
+    """The lines with rows no dial reading measures the tool's offset on (``dial_mm`` empty)."""
+    return [lid for lid in model.line_ids if not _read(model, lid).all()]
 
 
 def _read(model, lid: int) -> np.ndarray:
     return ~np.isnan(model.samples.dial[model.placement_ids() == lid])
+
+
+DIAL_MODE_TEXT = {
+    "axis": "dial axis stated (its readings move the TCP onto the edge: line_sigma_mm)",
+    "gated": "dial gated, no dial_axis (each reading bounds the offset from the edge: |dial_mm|)",
+    "none": "no dial (contact_sigma_mm)",
+}
+"""How a line's rows were held to its edge (``calib.models.DrawstringLineModel.dial_mode``)."""
+
+
+def line_modes(model) -> dict[int, str]:
+    """Each gauge line's dial mode (``DIAL_MODE_TEXT``'s keys); empty for a tracker's positions."""
+    return {lid: model.dial_mode(lid) for lid in model.line_ids} if model.kind == "drawstring" else {}
 
 
 def _unread_text(model, unread: list[int], lead: str) -> str:
@@ -170,8 +182,8 @@ def _unread_text(model, unread: list[int], lead: str) -> str:
     some = len(unread) < len(model.line_ids)
     which = "line " + ", ".join(str(lid) for lid in unread) if some else "any line"
     return (
-        f"{lead}no dial reading measures the tool's offset from the edge on {which} (no dial_mm readings "
-        f"or no dial_axis): those line rows hold the TCP to contact_sigma_mm {st.sigma_contact:g} mm "
+        f"{lead}no dial reading measures the tool's offset from the edge on {which} (rows without "
+        f"dial_mm): those rows hold the TCP to contact_sigma_mm {st.sigma_contact:g} mm "
         f"instead of line_sigma_mm {st.sigma_line:g}, and the predicted workspace error counts it"
     )
 

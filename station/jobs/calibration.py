@@ -459,6 +459,7 @@ def _report(
         discrepancy=cal.discrepancy,
         fit_check=check,
         line_errors=line_errors(model, cal.x),
+        line_dial=absorbed.line_modes(model),
         provenance=origin,
         holdout_scope=scope,
         next=next_step(model, cal, check, after.train, workspace, method if short else None, doubts),

@@ -192,7 +192,9 @@ class CalibrationReport:
     ``--model auto``, ``cross_validation``; ``discrepancy``, the joint-space error the fit was
     weighted by (``calib.discrepancy``; None for a white fit); ``fit_check``, how the fit agrees
     with the stated noise and tolerances; ``line_errors``, each gauge line's residual after the fit
-    (merged into the JSON's ``lines``); ``provenance`` (robot, samples, setup, date, version);
+    (merged into the JSON's ``lines``) and ``line_dial``, how its rows were held to the edge
+    (``dial``: ``axis``, ``gated`` or ``none``, ``station.jobs.absorbed.DIAL_MODE_TEXT``);
+    ``provenance`` (robot, samples, setup, date, version);
     ``holdout_scope`` (``none``, ``same lines``, ``new lines``, ``poses``: what the hold-out figure
     can speak for); ``next``, what to do now in one sentence (docs/report.md lists every key)."""
 
@@ -216,6 +218,7 @@ class CalibrationReport:
     discrepancy: Discrepancy | None = None
     fit_check: FitCheck | None = None
     line_errors: dict[int, ErrorMetrics] = dataclasses.field(default_factory=dict)
+    line_dial: dict[int, str] = dataclasses.field(default_factory=dict)
     provenance: Provenance | None = None
     holdout_scope: str = "none"
     next: str = ""
@@ -250,6 +253,8 @@ class CalibrationReport:
         if self.line_errors and "lines" in out:
             for line in out["lines"]:
                 line.update(dataclasses.asdict(self.line_errors[line["id"]]))
+                if line["id"] in self.line_dial:
+                    line["dial"] = self.line_dial[line["id"]]
         if self.provenance is not None:
             out.update(self.provenance.as_json())
         out["holdout_scope"] = self.holdout_scope

@@ -91,3 +91,26 @@ def test_model_jacobian_matches_finite_differences(rng, with_terms):
 def test_single_line_holds_the_anchor_rotation_about_it(rng):
     assert "anchor.about_line_mm" in _model(rng, 1).gauges()
     assert "anchor.about_line_mm" not in _model(rng, 3).gauges()
+
+
+def test_each_rows_line_noise_is_what_its_dial_reading_says(rng):
+    """Line 0 states its dial axis: a row the dial read sits on the edge to ``sigma_line`` once its
+    reading is taken off, an unread row to ``sigma_contact`` along the axis. Lines 1 and 2 state
+    none: the dial gated each row, and its reading is the offset's length in a direction across the
+    edge no file states (``|dial_mm| / sqrt(2)`` RMS on each component); an unread row carries
+    ``sigma_contact`` on both. A line no dial read at all is dial-less."""
+    model = _model(rng, 3)
+    dial = model.samples.dial.copy()
+    dial[[0, 12]] = np.nan  # the first rows of lines 0 and 1
+    dial[24:] = np.nan  # line 2
+    s = model.samples
+    model = model.with_samples(DrawstringSamples(s.q, s.length, dial, s.line))
+    st = model.setup_values
+    line, contact = st.sigma_line, np.hypot(st.sigma_line, st.sigma_contact)
+    np.testing.assert_array_equal(model.line_sigma(0)[0], [contact, line])
+    np.testing.assert_array_equal(model.line_sigma(0)[1:], line)
+    gated = np.hypot(line, np.abs(dial[13:24]) / np.sqrt(2))
+    np.testing.assert_allclose(model.line_sigma(1)[1:], np.column_stack([gated, gated]), rtol=1e-12)
+    np.testing.assert_array_equal(model.line_sigma(1)[0], [contact, contact])
+    np.testing.assert_array_equal(model.line_sigma(2), contact)
+    assert [model.dial_mode(lid) for lid in (0, 1, 2)] == ["axis", "gated", "none"]
