@@ -32,18 +32,34 @@ registers' value at power-on: none; set so when the channel opens), written last
 program``'s URScript takes the joints when the index names its next target, and reads the index
 again after them). A controller that refuses those inputs (another client writes them)
 gives no channel (``no_channel`` says why).
+
+The ``RTDEIOInterface`` lives in a child process (:mod:`drivers.rtde_inputs`): nothing reads its
+socket after the handshake, so it still calls itself connected after the controller has gone, its
+``disconnect()`` then raises (``read: End of file``, the pause request unanswered) and its
+destructor, which calls ``disconnect()`` again, throws out of a C++ destructor: ``std::terminate``
+("write: Broken pipe"), SIGABRT for the process that drops it, mid-session at a controller reboot.
+The child never runs that destructor; the station asks it to disconnect, waits ``CLOSE_S`` and ends
+it either way, so a controller gone, frozen or unplugged costs at most a second, and the channel
+comes back with the next open (:func:`drivers.base.call_with_reconnect`) and the next write.
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
+import os
+import select
 import socket
 import struct
+import subprocess
+import sys
+import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import ClassVar
 
-import rtde_io
 import rtde_receive
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
@@ -52,6 +68,7 @@ from drivers.base import (
     DeviceTimeout,
     DeviceUnreachable,
     Driver,
+    DriverError,
     Field,
     GarbledReply,
     IncompatibleDevice,
@@ -68,6 +85,7 @@ TARGET_JOINT6_INPUT = 43  # input_int_register_43: joint 6 [urad]
 URAD = 1e6  # joint 6's register counts per radian
 RTDE_VARIABLES = ("timestamp", "actual_q", "actual_qd", "robot_mode")
 JOINTS = 6
+INPUTS_WRITER = Path(__file__).with_name("rtde_inputs.py")  # the child that writes them (RtdeTargets)
 
 RTDE_TYPES = ("DOUBLE", "VECTOR6D", "VECTOR6D", "INT32")  # of RTDE_VARIABLES (UR's RTDE guide)
 _DATA = struct.Struct(">B d 6d 6d i")  # a data package of that recipe: recipe id, then the values
@@ -236,12 +254,16 @@ class RtdeJointSource(Driver):
                 self._targets = RtdeTargets(self.name, self.host)
             except RuntimeError as exc:
                 self.no_channel = f"{self._where} refused its input registers: {exc}"
+            except DriverError as exc:  # the writer did not answer: no channel until the next open
+                self.no_channel = exc.cause
         return self._targets
 
     def close(self) -> None:
         """Drop the interface; its destructor pauses the stream (if the link is up) and
         disconnects. After a silent controller, first let ur_rtde's read deadline (2.5 s) mark
-        the link down: its pause request would otherwise wait for a reply that never comes."""
+        the link down: its pause request would otherwise wait for a reply that never comes. The
+        target channel, if open, is ended (:meth:`RtdeTargets.close`: never raises, at most
+        ``CLOSE_S``) and opened again at the next ask after the next open."""
         rtde, self._rtde = self._rtde, None
         targets, self._targets, self.no_channel = self._targets, None, None
         if targets is not None:
@@ -302,7 +324,16 @@ class RtdeJointSource(Driver):
 
 class RtdeTargets:
     """A UR controller's input registers for corrected targets (module notes), written by ur_rtde's
-    ``RTDEIOInterface`` (upper range)."""
+    ``RTDEIOInterface`` (upper range) in a child process (:mod:`drivers.rtde_inputs` says why: an IO
+    interface whose controller has gone aborts the process that drops it). Every exchange with the
+    child is bounded in time; one that it does not answer ends it (the kernel closes its socket).
+
+    Raises ``RuntimeError`` (ur_rtde's words) where the controller refuses the registers, and
+    :class:`DeviceTimeout` or :class:`DeviceUnreachable` where the writer does not answer."""
+
+    OPEN_S = 5.0  # connection, protocol, five input recipes and ur_rtde's 0.1 s wait
+    WRITE_S = 2.0  # the seven registers (socket writes: nothing to wait for but the scheduler)
+    CLOSE_S = 1.0  # the pause request answered (a controller gone or frozen never answers)
 
     def __init__(self, name: str, host: str):
         self.name, self.host = name, host
@@ -311,30 +342,96 @@ class RtdeTargets:
             f"{TARGET_JOINT_INPUTS[0]}..{TARGET_JOINT_INPUTS[-1]}: joints 1-5 rad, "
             f"int {TARGET_JOINT6_INPUT}: joint 6 urad)"
         )
-        self._io = rtde_io.RTDEIOInterface(host, False, True)
-        self._io.setInputIntRegister(TARGET_INDEX_INPUT, 0)  # no target yet (not a previous session's)
+        self._buffer = b""
+        self._lock = threading.Lock()
+        self._child = subprocess.Popen(  # no target yet (not a previous session's): it clears the index
+            [sys.executable, str(INPUTS_WRITER), host, str(TARGET_INDEX_INPUT)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+        )
+        try:
+            answer = self._exchange(None, self.OPEN_S, "opening its input registers")
+        except DriverError:
+            self.close()
+            raise
+        if "error" in answer:
+            self.close()
+            raise RuntimeError(answer["error"])
 
     def close(self) -> None:
-        if self._io.isConnected():
-            self._io.disconnect()
+        """Disconnect (where the controller answers within ``CLOSE_S``) and end the writer; never
+        raises, safe to call twice."""
+        with self._lock:
+            child, self._child = self._child, None
+        if child is None:
+            return
+        try:
+            if child.poll() is None:
+                child.stdin.write(b'{"op": "close"}\n')
+                child.stdin.flush()
+                child.wait(self.CLOSE_S)
+        except (OSError, subprocess.TimeoutExpired):
+            pass
+        finally:
+            if child.poll() is None:
+                child.kill()
+                child.wait()
+            for pipe in (child.stdin, child.stdout):
+                with contextlib.suppress(OSError):
+                    pipe.close()
 
     def write(self, target: int, q_deg) -> None:
         """The joints, then the index (the program reads the index before and after the joints)."""
         q = [math.radians(v) for v in q_deg]
-        try:
-            ok = all(
-                self._io.setInputDoubleRegister(r, v) for r, v in zip(TARGET_JOINT_INPUTS, q[:5], strict=True)
-            )
-            ok = ok and self._io.setInputIntRegister(TARGET_JOINT6_INPUT, round(q[5] * URAD))
-            ok = ok and self._io.setInputIntRegister(TARGET_INDEX_INPUT, int(target) + 1)
-        except RuntimeError as exc:
+        registers = [["double", r, v] for r, v in zip(TARGET_JOINT_INPUTS, q[:5], strict=True)]
+        registers.append(["int", TARGET_JOINT6_INPUT, round(q[5] * URAD)])
+        registers.append(["int", TARGET_INDEX_INPUT, int(target) + 1])  # last
+        doing = f"writing target {target}"
+        answer = self._exchange({"op": "write", "registers": registers}, self.WRITE_S, doing)
+        if "error" in answer:
+            raise DeviceUnreachable(self.name, f"RTDE {self.host}:{RTDE_PORT}: {doing}: {answer['error']}")
+        if not answer.get("ok"):
+            raise DeviceUnreachable(self.name, f"RTDE {self.host}:{RTDE_PORT}: {doing} failed")
+
+    def _exchange(self, request: dict | None, timeout_s: float, doing: str) -> dict:
+        """Send ``request`` (None: nothing, the first reply) and read the child's reply within
+        ``timeout_s``; a child that ended or does not answer is ended, and said."""
+        with self._lock:
+            child = self._child
+            where = f"RTDE {self.host}:{RTDE_PORT}: {doing}"
+            if child is None:
+                raise DeviceUnreachable(self.name, f"{where}: the target channel is closed")
+            try:
+                if request is not None:
+                    child.stdin.write(json.dumps(request).encode() + b"\n")
+                    child.stdin.flush()
+                line = self._line(child, time.monotonic() + timeout_s)
+            except OSError:
+                line = b""
+            if line:
+                return json.loads(line)
+            if child.poll() is None:
+                child.kill()
+                child.wait()
+                raise DeviceTimeout(self.name, f"{where}: ur_rtde did not answer within {timeout_s:g} s")
             raise DeviceUnreachable(
-                self.name, f"RTDE {self.host}:{RTDE_PORT}: writing target {target}: {exc}"
-            ) from exc
-        if not ok:
-            raise DeviceUnreachable(
-                self.name, f"RTDE {self.host}:{RTDE_PORT}: writing target {target} failed"
+                self.name, f"{where}: ur_rtde's writer ended (exit code {child.returncode})"
             )
+
+    def _line(self, child: subprocess.Popen, deadline: float) -> bytes:
+        """The child's next reply line, or b"" if it ends first or ``deadline`` passes."""
+        fd = child.stdout.fileno()
+        while b"\n" not in self._buffer:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([fd], [], [], left)[0]:
+                return b""
+            chunk = os.read(fd, 4096)
+            if not chunk:
+                return b""
+            self._buffer += chunk
+        line, self._buffer = self._buffer.split(b"\n", 1)
+        return line
 
 
 def target_from_inputs(inputs) -> tuple[float, ...]:
