@@ -509,16 +509,17 @@ class DrawstringLineModel:
 
         Where the dial's axis is stated, its reading moves the TCP onto the edge: ``sigma_line``.
         Where it is not, the dial gated the capture and its reading ``dial_mm`` is how far the tool
-        sat from the edge, in a direction across it that no file states: an offset of length
-        ``|dial_mm|`` whose two components carry ``|dial_mm| / sqrt(2)`` each (RMS over directions),
-        added in quadrature. Where no dial read the row, ``sigma_contact`` is (on the axis's
-        component alone where an axis is stated)."""
+        sat from the edge, in a direction across it that no file states: either component may
+        carry the whole offset, so ``|dial_mm|`` is added in quadrature on both (a bound: RMS over
+        directions would be ``|dial_mm| / sqrt(2)``, and held the true error of fewer simulated
+        cells). Where no dial read the row, ``sigma_contact`` is (on the axis's component alone
+        where an axis is stated)."""
         st, rows = self.setup_values, self._on_line[lid]
         dial = self.samples.dial[rows]
         unread = np.isnan(dial)
         sigma = np.full((rows.size, 2), st.sigma_line)
         if st.dial_axis_of(lid) is None:
-            sigma[:] = np.hypot(st.sigma_line, np.nan_to_num(np.abs(dial)) / np.sqrt(2))[:, None]
+            sigma[:] = np.hypot(st.sigma_line, np.nan_to_num(np.abs(dial)))[:, None]
             sigma[unread] = np.hypot(st.sigma_line, st.sigma_contact)
         else:
             sigma[unread, 0] = np.hypot(st.sigma_line, st.sigma_contact)

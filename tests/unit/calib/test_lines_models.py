@@ -97,7 +97,7 @@ def test_each_rows_line_noise_is_what_its_dial_reading_says(rng):
     """Line 0 states its dial axis: a row the dial read sits on the edge to ``sigma_line`` once its
     reading is taken off, an unread row to ``sigma_contact`` along the axis. Lines 1 and 2 state
     none: the dial gated each row, and its reading is the offset's length in a direction across the
-    edge no file states (``|dial_mm| / sqrt(2)`` RMS on each component); an unread row carries
+    edge no file states (``|dial_mm|`` on either component, a bound); an unread row carries
     ``sigma_contact`` on both. A line no dial read at all is dial-less."""
     model = _model(rng, 3)
     dial = model.samples.dial.copy()
@@ -109,7 +109,7 @@ def test_each_rows_line_noise_is_what_its_dial_reading_says(rng):
     line, contact = st.sigma_line, np.hypot(st.sigma_line, st.sigma_contact)
     np.testing.assert_array_equal(model.line_sigma(0)[0], [contact, line])
     np.testing.assert_array_equal(model.line_sigma(0)[1:], line)
-    gated = np.hypot(line, np.abs(dial[13:24]) / np.sqrt(2))
+    gated = np.hypot(line, np.abs(dial[13:24]))
     np.testing.assert_allclose(model.line_sigma(1)[1:], np.column_stack([gated, gated]), rtol=1e-12)
     np.testing.assert_array_equal(model.line_sigma(1)[0], [contact, contact])
     np.testing.assert_array_equal(model.line_sigma(2), contact)
