@@ -74,30 +74,34 @@ def with_masses(robot):
     return robot.model_copy(update={"joints": joints})
 
 
+def session_terms(setting: str, n_lines: int, per_line: int, seed: int) -> tuple[list[str], str]:
+    """The joint-space terms ``--model auto`` keeps on one simulated session of ``setting`` (every
+    one a false positive) and the cross-validation's fold scheme."""
+    if setting == "ur10 tracker":
+        robot = load_robot(configs.path("robots/ur10.toml"))
+        samples, setup = tracker_session(seed, per_line, robot)
+    else:
+        samples, setup = drawstring_session(seed, n_lines, per_line)
+        robot = load_robot(configs.path("robots/hsr_jr680.toml"))
+        robot = with_masses(robot) if setting == "jr680 + masses" else robot
+    report = calibrate_samples(samples, robot, setup, terms="auto").report
+    scheme = report.cross_validation.scheme if report.cross_validation else "too few rows"
+    return list(report.terms), scheme
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     args = parser.parse_args()
-    jr680, ur10 = (
-        load_robot(configs.path("robots/hsr_jr680.toml")),
-        load_robot(configs.path("robots/ur10.toml")),
-    )
     print(f"{args.seeds} seeds per setting, --model auto on cells without joint-space terms")
     print("| cell | lines x samples | folds | sessions with a term kept | terms kept | s per session |")
     print("|---|---|---|---|---|---|")
     for setting, n_lines, per_line in SETTINGS:
         kept, names, scheme, t0 = 0, [], "", time.perf_counter()
         for seed in range(args.seeds):
-            if setting == "ur10 tracker":
-                samples, setup = tracker_session(seed, per_line, ur10)
-                robot = ur10
-            else:
-                samples, setup = drawstring_session(seed, n_lines, per_line)
-                robot = with_masses(jr680) if setting == "jr680 + masses" else jr680
-            report = calibrate_samples(samples, robot, setup, terms="auto").report
-            scheme = report.cross_validation.scheme if report.cross_validation else "too few rows"
-            kept += bool(report.terms)
-            names += list(report.terms)
+            terms, scheme = session_terms(setting, n_lines, per_line, seed)
+            kept += bool(terms)
+            names += terms
         per = (time.perf_counter() - t0) / args.seeds
         shown = ", ".join(sorted(set(names))) or "none"
         print(
