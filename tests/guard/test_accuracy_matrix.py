@@ -42,7 +42,9 @@ def test_the_comparison_fails_a_cell_made_worse_or_less_honest(baseline):
     worse = json.loads(json.dumps(baseline))
     for r in worse[cell][setup]:
         r["true_mm"] += 2 * allowance
-    assert [f.split(":")[0] for f in matrix.regressions(worse, baseline)] == [f"{cell} / {setup}"]
+    found = matrix.regressions(worse, baseline)
+    assert {f.split(":")[0] for f in found} == {f"{cell} / {setup}"}
+    assert "true workspace error" in found[0]
     outside = json.loads(json.dumps(baseline))
     run = next(r for r in outside[cell][setup] if r["true_mm"] <= r["bound95_mm"])
     run["bound95_mm"] = 0.99 * run["true_mm"]
