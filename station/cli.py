@@ -91,7 +91,12 @@ def main(argv: list[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         _check_paths(args)
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # here, not at exit: a reader gone (`| head`) is then ours to handle
+        return code
+    except BrokenPipeError:
+        _stdout_gone()
+        return 1
     except InputError as exc:
         print(f"station: error: {exc}", file=sys.stderr)
         return 2
@@ -117,6 +122,14 @@ def _check_paths(args) -> None:
         for path in value if isinstance(value, list | tuple) else (value,):
             if isinstance(path, Path):
                 check_path(path)
+
+
+def _stdout_gone() -> None:
+    """The reader of standard output has gone (``station history --json | head``): say nothing
+    more, and point stdout at /dev/null so that the interpreter's last flush has nowhere to fail."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def _interrupt(signum, frame) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from calib.methods import ALL_METHODS
 from station.commands.calibrate import FLAGS, load_inputs
-from station.commands.flags import parameters_as_flags
+from station.commands.flags import parameters_as_flags, seed
 
 
 def register(sub) -> None:
@@ -26,7 +26,7 @@ def register(sub) -> None:
         default=ALL_METHODS,
         help=f"comma-separated subset of {','.join(ALL_METHODS)} (default: all)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.set_defaults(func=run)
 
 

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 
 from calib.methods import DEFAULT_TERM_MODEL
 from errors import DeviceError, InputError
+from station.commands.flags import seed
 
 if TYPE_CHECKING:
     from station.acquire.runner import SessionRun
@@ -47,7 +48,7 @@ def register(sub) -> None:
         help="open the Rerun viewer (needs a display; the .rrd is saved either way)",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="the simulated cell: true robot, gauge lines, noise (default 0)"
+        "--seed", type=seed, default=0, help="the simulated cell: true robot, gauge lines, noise (default 0)"
     )
     p.add_argument(
         "--plan-size",

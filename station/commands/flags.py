@@ -33,3 +33,7 @@ def number(parse: Callable[[str], float], what: str, valid: Callable[[float], bo
         return value
 
     return convert
+
+
+seed = number(int, "a whole number", lambda v: 0 <= v < 2**63, "{} must be from 0 to 2**63 - 1")
+"""An argparse ``type`` for ``--seed``: numpy's generators take no negative seed."""

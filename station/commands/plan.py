@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from errors import InputError
-from station.commands.flags import number, parameters_as_flags
+from station.commands.flags import number, parameters_as_flags, seed
 
 _positive = number(int, "a whole number", lambda v: v >= 1, "{} must be at least 1")
 
@@ -41,7 +41,7 @@ def register(sub) -> None:
         help="a short verification plan instead (station verify): N poses (default 15) on one gauge line, "
         "those most sensitive to joint zeros and link lengths and twists",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
     p.add_argument("--plot", type=Path, help="PNG to write: O1 curve and line placements")

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import configs
 from errors import DeviceError, InputError
+from station.commands.flags import seed
 
 JR680_NAME = "HSR-JR680"
 """The robot ``sim serve`` simulates without ``--robot``: ``configs/robots/hsr_jr680.toml``'s name."""
@@ -65,7 +66,9 @@ def register(subparsers) -> None:
     serve.add_argument(
         "--setup", type=Path, help="the cell's setup TOML (drawstring, [[lines]] with point_mm, direction)"
     )
-    serve.add_argument("--seed", type=int, help="seed of the simulated truth and noise (default: [sim] seed)")
+    serve.add_argument(
+        "--seed", type=seed, help="seed of the simulated truth and noise (default: [sim] seed)"
+    )
     serve.set_defaults(func=run)
 
 

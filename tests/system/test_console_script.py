@@ -79,3 +79,32 @@ def test_calibrate_with_the_default_model_imports_no_scipy(three_lines, tmp_path
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout.splitlines()[-1]) == [0, []]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["sim", "serve", "--seed", "-1"], ["demo", "--seed", "-3"], ["plan", "--out", "p.csv", "--seed", "-1"]],
+)
+def test_a_negative_seed_is_one_line_and_exit_2(argv, tmp_path):
+    """numpy's generators take no negative seed: it was a ValueError traceback from deep inside."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "station.cli", *argv], capture_output=True, text=True, timeout=60, cwd=tmp_path
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    last = proc.stderr.strip().splitlines()[-1]
+    assert last.endswith(f"argument --seed: {argv[-1]} must be from 0 to 2**63 - 1"), proc.stderr
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path):
+    """``station history --json | head``: the pipe's reader gone before the command writes (here at
+    once) was a BrokenPipeError traceback; now nothing on stderr and exit 1 (the output was not
+    delivered whole)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station.cli", "history", "--json", "--db", str(tmp_path / "h.sqlite")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    proc.stdout.close()  # no reader left: the command's first write fails with EPIPE
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 1
+    assert stderr == ""
