@@ -38,6 +38,10 @@ MIN_STANDOFF_MM = 2.0
 POSE_AGREES_MM = 10.0
 """A plan's contact pose this far from the model's TCP at its joints belongs to another robot or tool
 (beyond the few mm a robot's own error, or a compensation, moves it)."""
+POSE_AGREES_DEG = 3.0
+"""A plan's contact orientation this far from the model's tool at its joints disagrees with them
+(beyond the fraction of a degree a robot's own error, or a compensation, turns it): the linear
+approach onto such a pose would turn the wrist on the way in."""
 
 
 @dataclass(frozen=True)
@@ -85,7 +89,18 @@ def measurement(plan: Plan, robot: RobotFile, where: str, motion: Motion = Motio
         k = int(np.argmax(off))
         raise InputError(
             f"{where}: target {int(plan.target[k])}: its contact pose lies {off[k]:.1f} mm from "
-            f"{robot.name}'s TCP at its joints: a plan for another robot or tool (tool_mm)"
+            f"{program_text(robot.name)}'s TCP at its joints: a plan for another robot or tool (tool_mm)"
+        )
+    turn = (
+        Rotation.from_rotvec(pose[:, 3:], degrees=True)
+        * Rotation.from_rotvec(nominal[:, 3:], degrees=True).inv()
+    ).magnitude()
+    if np.any(np.degrees(turn) > POSE_AGREES_DEG):
+        k = int(np.argmax(turn))
+        raise InputError(
+            f"{where}: target {int(plan.target[k])}: its contact orientation (rx_deg, ry_deg, rz_deg) is "
+            f"{np.degrees(turn[k]):.1f} deg from {program_text(robot.name)}'s tool at its joints: the row's "
+            "pose and joints disagree (the approach would turn the wrist on the way in)"
         )
     rot = Rotation.from_rotvec(pose[:, 3:], degrees=True).as_matrix()
     approach = rot[:, :, 2] if plan.approach is None else plan.approach
@@ -117,7 +132,8 @@ def urscript(m: Measurement, robot: RobotFile, source: str, motion: Motion = Mot
     deg = np.radians
     joint_v, joint_a = deg(motion.joint_deg_s), deg(motion.joint_deg_s2)
     lines = [
-        f"# Measurement program for {robot.name}: {len(m.plan)} targets from {source} (station program).",
+        f"# Measurement program for {program_text(robot.name)}: {len(m.plan)} targets from "
+        f"{program_text(source)} (station program).",
         f"# Per target: movej to a stand-off {motion.standoff_mm:g} mm back along the approach, movel at "
         f"{motion.approach_mm_s:g} mm/s onto the contact pose,",
         f"# a {motion.dwell_s:g} s dwell (station sample captures there), movel back to the stand-off. "
@@ -212,6 +228,13 @@ def poses_csv(m: Measurement, motion: Motion = Motion()) -> str:
         ]
         out.append(",".join(cells))
     return "\n".join(out) + "\n"
+
+
+def program_text(text: str) -> str:
+    """``text`` as it may stand in a program's comment or string, in any controller's language:
+    every character outside printable ASCII escaped (``\\n``, ``\\x1b``, ``\\u00e9``), so that
+    a robot's or a file's name with a line break cannot start a line of code."""
+    return "".join(c if " " <= c <= "~" and c != "\\" else c.encode("unicode_escape").decode() for c in text)
 
 
 def _numbers(v, digits: int) -> str:

@@ -173,3 +173,51 @@ def test_a_target_without_a_stand_off_within_the_limits_is_left_out_and_said(irb
     assert script.count("movej(") == int((~found.skipped).sum())
     rows = measurement.poses_csv(found).splitlines()[1:]
     assert [int(r.split(",")[0]) for r in rows] == plan.target[~found.skipped].tolist()
+
+
+def test_names_with_line_breaks_cannot_inject_code_into_the_program(irb_plan, tmp_path):
+    """A robot named, or a plan file named, with a line break and code after it: the name goes into
+    the program's header comment; every line before ``def station_measurement():`` stays a comment."""
+    robot, plan = irb_plan
+    text = IRB2600.read_text().replace(
+        'name = "ABB IRB 2600-20/1.65"',
+        'name = "IRB\\nmovej([0, 0, 0, 0, 0, 0])\\npopup(\\"\\u001b[31mhi\\")"',
+    )
+    named = tmp_path / "robot.toml"
+    named.write_text(text)
+    path = tmp_path / "plan\nmovej([1, 1, 1, 1, 1, 1]).csv"
+    path.write_text(plan.csv_text())
+    out = tmp_path / "prog.script"
+    assert main(["program", str(path), "--robot", str(named), "--format", "urscript", "--out", str(out)]) == 0
+    script = out.read_text()
+    head = script[: script.index("def station_measurement():")].splitlines()
+    assert all(line.startswith("#") for line in head), head
+    assert "\x1b" not in script and "IRB\\nmovej([0, 0, 0, 0, 0, 0])\\npopup" in head[0]
+    assert sum(line.lstrip().startswith("movej(") for line in script.splitlines()) == len(plan)
+
+
+def test_a_plan_row_whose_orientation_disagrees_with_its_joints_is_refused(irb_plan, tmp_path, capsys):
+    """Only the position was compared: a row turned 90 deg about x was accepted, and the slow linear
+    approach onto it turned the wrist on the way in."""
+    robot, plan = irb_plan
+    pose = plan.pose.copy()
+    pose[3, 3:] = (
+        Rotation.from_rotvec([90.0, 0, 0], degrees=True) * Rotation.from_rotvec(pose[3, 3:], degrees=True)
+    ).as_rotvec(degrees=True)
+    path = tmp_path / "plan.csv"
+    path.write_text(Plan(plan.target, plan.line, plan.q_deg, pose, plan.approach).csv_text())
+    out = tmp_path / "prog.script"
+    assert (
+        main(["program", str(path), "--robot", str(IRB2600), "--format", "urscript", "--out", str(out)]) == 2
+    )
+    err = capsys.readouterr().err
+    assert f"target {int(plan.target[3])}: its contact orientation" in err and "90.0 deg" in err
+    assert not out.exists()
+    small = plan.pose.copy()  # a robot's own error turns the tool a fraction of a degree: accepted
+    small[3, 3:] = (
+        Rotation.from_rotvec([0.5, 0, 0], degrees=True) * Rotation.from_rotvec(small[3, 3:], degrees=True)
+    ).as_rotvec(degrees=True)
+    path.write_text(Plan(plan.target, plan.line, plan.q_deg, small, plan.approach).csv_text())
+    assert (
+        main(["program", str(path), "--robot", str(IRB2600), "--format", "urscript", "--out", str(out)]) == 0
+    )
