@@ -93,6 +93,30 @@ class RobotFile(Strict):
     controller_hash: str | None = None  # the controller's factory-calibration id (UR: ``hash``)
 
     @model_validator(mode="after")
+    def _serial_names_a_robot(self) -> RobotFile:
+        if self.serial is not None and not self.serial.strip():
+            raise ValueError("serial: blank: give the robot's serial number, or leave the key out")
+        return self
+
+    @model_validator(mode="after")
+    def _noise_scale(self) -> RobotFile:
+        """A corrected table's ``[calibration] noise_scale``: what an unchanged robot leaves on
+        verification, per residual group in stated noises; a calibration leaving ``MAX_NOISE_SCALE``
+        or more is refused, so no table it writes carries more."""
+        given = (self.calibration or {}).get("noise_scale")
+        if given is None:
+            return self
+        ok = isinstance(given, list) and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and 0 <= v < MAX_NOISE_SCALE for v in given
+        )
+        if not ok:
+            raise ValueError(
+                f"calibration.noise_scale: expected a list of numbers from 0 to below {MAX_NOISE_SCALE:g} "
+                "(the noise each instrument left, in stated noises), as station calibrate writes it"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _convention_keys(self) -> RobotFile:
         if self.convention == "dh":
             if self.flange is not None:
@@ -285,14 +309,22 @@ class SetupFile(Strict):
         return self
 
 
+MAX_NOISE_SCALE = 100.0
+"""A calibration whose residual is this many times the stated noise is refused (``station.jobs.
+calibration.OVERWHELMING_RATIO``), so a table's ``noise_scale`` lies below it."""
 SAME_ROBOT_MM, SAME_ROBOT_DEG = 50.0, 10.0
 """Largest table difference between a calibrated robot and its nominal model: beyond it the two
 files describe different robots."""
 
 
 def check_same_robot(table: RobotFile, table_where: str, nominal: RobotFile, nominal_where: str) -> None:
-    """Bad input unless ``table`` (a calibration of) and ``nominal`` are the same robot: every D-H
-    parameter within ``SAME_ROBOT_MM`` / ``SAME_ROBOT_DEG``."""
+    """Bad input unless ``table`` (a calibration of) and ``nominal`` are the same robot: the same
+    ``serial`` where both name one, every D-H parameter within ``SAME_ROBOT_MM`` / ``SAME_ROBOT_DEG``."""
+    if table.serial and nominal.serial and table.serial != nominal.serial:
+        raise InputError(
+            f"{table_where}: serial {table.serial!r} is not {nominal_where}'s {nominal.serial!r}: a table "
+            "calibrated for another robot of the same type"
+        )
     diff = np.abs(table.table_deg() - nominal.table_deg())
     limit = np.array([SAME_ROBOT_DEG, SAME_ROBOT_MM, SAME_ROBOT_MM, SAME_ROBOT_DEG])
     if (diff > limit).any():

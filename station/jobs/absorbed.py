@@ -77,7 +77,7 @@ def findings(model: MeasurementModel, cal: Calibration, weights: np.ndarray) -> 
     if model.kind != "drawstring":
         return Findings(tuple(warnings))
     dials = line_dials(model, cal)
-    refusal = next((_dial_text(d) for d in dials if d.verdict not in ("agrees", "inconclusive")), None)
+    refusal = dial_refusal(dials)
     unread = unread_lines(model)
     stated = [lid for lid in unread if model.setup_values.dial_axis_of(lid) is not None]
     if stated:
@@ -100,16 +100,26 @@ def line_dials(model, cal: Calibration) -> list[LineDial]:
     rows without their dial readings by ``DIAL_FREE_STEPS`` robust Gauss-Newton steps (the same
     robust cost as a refit's, from next to its optimum: a wrong dial moves the solution by a
     fraction of a millimetre, over which the model is linear)."""
-    axis_of = model.setup_values.dial_axis_of
-    judged = [lid for lid in model.line_ids if _read(model, lid).any() and axis_of(lid) is not None]
-    if not judged:
+    if not judged_lines(model):
         return []
-    samples = model.samples
-    free = model.with_samples(dataclasses.replace(samples, dial=np.full(len(samples), np.nan)))
+    free = dial_free(model)
     x = robust_steps(WithPrior(free, free.x0), cal.x, cal.identified, DIAL_FREE_STEPS, CalibrationOptions())
+    return judge_dials(model, x)
+
+
+def dial_free(model):
+    """``model`` with its rows' dial readings dropped."""
+    samples = model.samples
+    return model.with_samples(dataclasses.replace(samples, dial=np.full(len(samples), np.nan)))
+
+
+def judge_dials(model, x: np.ndarray) -> list[LineDial]:
+    """Each line of ``model`` with a stated dial axis and readings, judged by the gain its readings
+    show on the TCPs at ``x``, a fit of ``dial_free(model)``."""
+    samples = model.samples
     tcp = model.tcp(x)
     out = []
-    for lid in judged:
+    for lid in judged_lines(model):
         rows = np.flatnonzero((model.placement_ids() == lid) & ~np.isnan(samples.dial))
         point, direction = model.line(x, lid)
         axis = np.asarray(model.setup_values.dial_axis_of(lid), float)
@@ -117,6 +127,17 @@ def line_dials(model, cal: Calibration) -> list[LineDial]:
         found = dial_gain(tcp[rows], point, direction, samples.dial[rows], noise)
         out.append(LineDial(lid, _t(axis), _t(found.gain), found.sigma, _verdict(found, axis, direction)))
     return out
+
+
+def judged_lines(model) -> list[int]:
+    """The lines whose dial can be judged: a stated axis and readings."""
+    axis_of = model.setup_values.dial_axis_of
+    return [lid for lid in model.line_ids if _read(model, lid).any() and axis_of(lid) is not None]
+
+
+def dial_refusal(dials: list[LineDial]) -> str | None:
+    """The first line whose dial disagrees with its stated axis, as the fix to make; None if none."""
+    return next((_dial_text(d) for d in dials if d.verdict not in ("agrees", "inconclusive")), None)
 
 
 def _verdict(found: DialGain, axis: np.ndarray, direction: np.ndarray) -> str:

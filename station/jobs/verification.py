@@ -28,7 +28,9 @@ from calib.verification import Change, DriftTest, caught_changes, drift_test, li
 from errors import InputError
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
+from station.jobs import absorbed
 from station.jobs.calibration import (
+    EXCURSION_OVERWHELMING,
     NOISE_DOUBT_RATIO,
     build_model,
     check_joint_limits,
@@ -49,6 +51,11 @@ LIKELY_SIGMAS = 3.0
 LIKELY_SHARE = 0.5
 """... and explains at least this share of what the best single parameter explains."""
 LIKELY_MAX = 5
+POSE_RESOLUTION_DEG = 0.01
+"""Poses whose joints agree to this are one pose (a robot at rest reads its joints to 0.001 deg)."""
+MIN_TEST_DOF = 6
+"""What the distinct poses must measure beyond the setup's unknowns for a verdict."""
+NOT_THIS_TABLE = EXCURSION_OVERWHELMING
 CAUGHT_POWER_Z = 1.2816
 """A change counts as caught when its estimate clears the single-parameter test nine times in ten:
 its mean z-score is the test's threshold plus the normal's 90 % quantile."""
@@ -205,13 +212,10 @@ def verify_samples(
     links = table.link_masses(payload_of(table, setup))
     model = model.with_terms(JointTerms(table.terms(), robot.dh, links))
     held = setup_unknowns(model)
-    if len(model.groups) <= int(held.sum()):
-        raise InputError(
-            f"{samples.path}: {len(model.samples)} samples cannot determine the {int(held.sum())} setup "
-            "unknowns and test the table: measure more (station plan --verify)"
-        )
+    check_distinct_poses(model, int(held.sum()), samples.path)
     x0 = model.x0.copy()
     x0[~model.setup_mask] = np.concatenate([robot.dh.ravel(), robot.term_values])
+    check_dials(model, x0, samples.path)
     _, fit, fit_scale = hold_robot(model, x0)
     x = fit.x
     r, jac = model.residuals_and_jacobian(x)
@@ -223,6 +227,7 @@ def verify_samples(
     candidates = np.array([k for k in robot_cols if model.names[k] not in model.gauges()], int)
     basis = (weights, scale, jac[:, held], jac[:, candidates])
     changes = likely_changes(r, *basis, candidates, jac[:, robot_cols], cov)
+    check_same_table(model, changes, table, samples.path)
     drifted = is_drifted(test, changes, scale)
     likely = tuple(_likely(model, c) for c in named(changes)) if drifted else ()
     smallest = caught_changes(*basis, jac[:, robot_cols], cov, _z_caught(candidates))
@@ -248,6 +253,55 @@ def verify_samples(
         missed=missed,
     )
     return VerifyOutcome(report, model, x)
+
+
+def check_distinct_poses(model: MeasurementModel, unknowns: int, where: str) -> None:
+    """Bad input unless the samples' distinct poses (joints to ``POSE_RESOLUTION_DEG``) measure
+    ``MIN_TEST_DOF`` more numbers than the setup's ``unknowns`` take up: one pose read fifteen times
+    tells its noise, not whether the table holds elsewhere."""
+    q = np.round(np.degrees(model.samples.q) / POSE_RESOLUTION_DEG)
+    distinct = len(np.unique(q, axis=0))
+    per_pose = (np.count_nonzero(model.groups != GROUP_PRIOR)) / len(model.samples)
+    needed = int(np.ceil((unknowns + MIN_TEST_DOF) / per_pose))
+    if distinct < needed:
+        raise InputError(
+            f"{where}: {len(model.samples)} samples at {distinct} distinct pose{'s' if distinct > 1 else ''} "
+            f"cannot judge a table: the setup's {unknowns} unknowns take up what they measure; measure "
+            f"at least {needed} distinct poses (station plan --verify)"
+        )
+
+
+def check_dials(model: MeasurementModel, x0: np.ndarray, where: str) -> None:
+    """Bad input where a line's dial readings contradict its stated ``dial_axis`` (flipped, another
+    axis, not this edge's): judged as ``station calibrate`` judges them (``absorbed.judge_dials``),
+    on a setup fit without the readings, the table held at ``x0``."""
+    if model.kind != "drawstring" or not absorbed.judged_lines(model):
+        return
+    _, free_fit, _ = hold_robot(absorbed.dial_free(model), x0)
+    refusal = absorbed.dial_refusal(absorbed.judge_dials(model, free_fit.x))
+    if refusal:
+        raise InputError(f"{where}: {refusal}; the table cannot be judged until it is, nothing recorded")
+
+
+def check_same_table(model: MeasurementModel, changes: list[Change], table: RobotFile, where: str) -> None:
+    """Bad input where the change that best explains the residual lies ``NOT_THIS_TABLE``
+    tolerances or more from the table (a robot drifts by a fraction of a degree or a millimetre;
+    another robot's table, or a wrong setup, by tens of degrees): ``station calibrate`` refuses the
+    same at ``EXCURSION_OVERWHELMING``."""
+    if not changes:
+        return
+    best = changes[0]
+    tolerance = model.prior_sigma()[best.index]
+    if abs(best.change) < NOT_THIS_TABLE * tolerance:
+        return
+    name = model.names[best.index]
+    factor, unit = display_unit(name)
+    raise InputError(
+        f"{where}: these samples do not fit this table: {table.param_name(name)} would have moved "
+        f"{best.change * factor:+.4g} {unit}, {abs(best.change) / tolerance:.0f} times its tolerance "
+        f"({tolerance * factor:.3g} {unit}); likely cause: a table of another robot (it describes the "
+        f"{table.name}) or a wrong setup file, not a drift; nothing recorded"
+    )
 
 
 def _z_caught(candidates: np.ndarray) -> float:
