@@ -4,16 +4,20 @@ record to an embedded SQLite database (stdlib ``sqlite3``).
 Where: ``--db``, else ``$STATION_HISTORY_DB``, else ``history.sqlite`` in the user's data folder
 (``$XDG_DATA_HOME/calibration-station``, default ``~/.local/share/calibration-station``). Several
 stations may write one database: SQLite's own locking (WAL journal, a busy timeout) serialises
-them. A file that is not such a database, or a damaged one, is refused with one line naming it
-(``PRAGMA integrity_check``) and is never written to: nothing already recorded is lost.
+them, and a new file is checked and set up in one locked transaction. A file that is not such a
+database, of a newer ``SCHEMA_VERSION`` or another layout, a damaged one (``PRAGMA
+integrity_check``) or a record this station would not write is refused with one line naming it
+and is never written to: nothing already recorded is lost.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import sqlite3
+import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -41,6 +45,16 @@ CREATE TABLE IF NOT EXISTS records (
 );
 CREATE INDEX IF NOT EXISTS records_robot ON records (robot, id);
 """
+SCHEMA_VERSION = 1
+"""The layout above (``PRAGMA user_version``; 0: a history made before the version was written,
+the same layout, stamped 1 at its next append). A newer one is refused, never written to."""
+COLUMNS = (
+    "id", "robot", "robot_name", "time_utc", "command", "samples", "table_path", "table_hash", "verdict",
+    "rmse_mm", "figures",
+)  # fmt: skip
+TYPES = {key: str for key in COLUMNS} | {"id": int, "verdict": str | None, "rmse_mm": int | float | None}
+"""What each column holds as this station writes it (SQLite keeps any value in any column)."""
+UNKNOWN = "another program's record or a hand's; nothing was changed"
 FLAG_SIGMAS = 3.0
 """A parameter that moved between consecutive calibrations by more than this many combined sigmas
 is flagged."""
@@ -103,44 +117,119 @@ def file_hash(path: Path) -> str:
 
 
 def _connect(path: Path) -> sqlite3.Connection:
-    """An open, checked history database, made (with its folder) where missing."""
+    """The history opened to append to, made (with its folder) where missing: checked, and set up
+    when new, in one locked transaction (stations that make it at the same instant wait their turn)."""
     path = Path(path)
     if not path.exists():
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise InputError(f"{path}: cannot create the history's folder ({exc.strerror})") from None
+    conn = _open(path, "rwc")
     try:
-        conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)
-    except sqlite3.Error as exc:
-        raise InputError(f"{path}: cannot open the history database ({exc})") from None
-    try:
-        _check(conn, path)
+        with _refusing_errors(path):
+            conn.execute("BEGIN IMMEDIATE")
+            version = _check(conn, path)
+            if version is None:
+                _create(conn)
+            elif version < SCHEMA_VERSION:
+                conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            conn.execute("COMMIT")
+            _wal(conn)
     except BaseException:
         conn.close()
         raise
     return conn
 
 
-def _check(conn: sqlite3.Connection, path: Path) -> None:
-    """Refuse a file that is not a station history or is damaged; set up a new one."""
+def _open(path: Path, mode: str, immutable: bool = False) -> sqlite3.Connection:
+    """A connection in SQLite ``mode`` (``ro``: read only, ``rwc``: made where missing)."""
+    uri = f"{Path(path).absolute().as_uri()}?mode={mode}" + ("&immutable=1" if immutable else "")
     try:
-        conn.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
-        app = conn.execute("PRAGMA application_id").fetchone()[0]
-        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        if app not in (0, APPLICATION_ID) or (app == 0 and tables):
-            raise InputError(
-                f"{path}: not a station history database (another program's SQLite file); "
-                "point --db or $STATION_HISTORY_DB elsewhere"
-            )
-        ok = conn.execute("PRAGMA integrity_check").fetchone()[0]
-        if ok != "ok":
-            raise InputError(f"{path}: the history database is damaged ({ok}); {_damaged_hint(path)}")
-        if app == 0:
-            conn.execute("PRAGMA journal_mode = WAL")
-            conn.executescript(f"BEGIN IMMEDIATE; {SCHEMA} PRAGMA application_id = {APPLICATION_ID}; COMMIT;")
+        return sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)
+    except sqlite3.Error as exc:
+        raise InputError(f"{path}: cannot open the history database ({exc})") from None
+
+
+@contextlib.contextmanager
+def _refusing_errors(path: Path):
+    """SQLite's errors as one line naming ``path``: a file SQLite cannot take as damaged (with
+    how to recover it), one it cannot use here (locked, read-only, out of space) as such."""
+    try:
+        yield
+    except sqlite3.OperationalError as exc:
+        raise InputError(
+            f"{path}: cannot use the history database ({exc}); nothing was written to it"
+        ) from None
     except sqlite3.DatabaseError as exc:
         raise InputError(f"{path}: not a readable history database ({exc}); {_damaged_hint(path)}") from None
+
+
+def _check(conn: sqlite3.Connection, path: Path) -> int | None:
+    """The history's schema version (None for a new, empty file); InputError for a file that is
+    not a station history of a version and layout this station knows, or that is damaged."""
+    app = conn.execute("PRAGMA application_id").fetchone()[0]
+    version = conn.execute("PRAGMA user_version").fetchone()[0]
+    tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if app == 0 and not tables and version == 0:
+        return None
+    if app != APPLICATION_ID:
+        raise InputError(
+            f"{path}: not a station history database (another program's SQLite file); "
+            "point --db or $STATION_HISTORY_DB elsewhere"
+        )
+    if version > SCHEMA_VERSION:
+        raise InputError(
+            f"{path}: a history of schema version {version}, written by a newer station (this one "
+            f"knows version {SCHEMA_VERSION}); nothing was written to it; update the station, or point "
+            "--db elsewhere"
+        )
+    ok = conn.execute("PRAGMA integrity_check").fetchone()[0]
+    if ok != "ok":
+        raise InputError(f"{path}: the history database is damaged ({ok}); {_damaged_hint(path)}")
+    _check_layout(conn, path, tables)
+    return version
+
+
+def _check_layout(conn: sqlite3.Connection, path: Path, tables: set[str]) -> None:
+    """Refuse a history whose ``records`` table is missing or lacks a column."""
+    found = {r[1] for r in conn.execute("PRAGMA table_info(records)")} if "records" in tables else set()
+    missing = [c for c in COLUMNS if c not in found]
+    if missing:
+        what = "no table records" if not found else "table records lacks " + ", ".join(missing)
+        raise InputError(
+            f"{path}: not a history layout this station knows ({what}); nothing was written to it; "
+            "point --db or $STATION_HISTORY_DB at a new file"
+        )
+
+
+def _create(conn: sqlite3.Connection) -> None:
+    """Set up a new history (inside the caller's transaction)."""
+    for statement in SCHEMA.split(";"):
+        if statement.strip():
+            conn.execute(statement)
+    conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+    conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+
+
+def _wal(conn: sqlite3.Connection) -> None:
+    """Switch to the WAL journal (once per file: it stays); another station switching it at the
+    same instant is waited for."""
+    deadline = time.monotonic() + BUSY_TIMEOUT_MS / 1000
+    while conn.execute("PRAGMA journal_mode").fetchone()[0] != "wal":
+        try:
+            conn.execute("PRAGMA journal_mode = WAL")
+        except sqlite3.OperationalError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.01)
+
+
+def _reader(path: Path) -> sqlite3.Connection | None:
+    """The history opened and checked; None while there is none."""
+    if not Path(path).exists():
+        return None
+    return _connect(path)
 
 
 def _damaged_hint(path: Path) -> str:
@@ -155,8 +244,7 @@ def append(path: Path, record: Record) -> int:
     conn = _connect(path)
     try:
         cur = conn.execute(
-            "INSERT INTO records (robot, robot_name, time_utc, command, samples, table_path, table_hash, "
-            "verdict, rmse_mm, figures) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            f"INSERT INTO records ({', '.join(COLUMNS[1:])}) VALUES ({', '.join('?' * (len(COLUMNS) - 1))})",
             (
                 record.robot,
                 record.robot_name,
@@ -172,7 +260,7 @@ def append(path: Path, record: Record) -> int:
         )
         return int(cur.lastrowid)
     except sqlite3.Error as exc:
-        raise InputError(f"{path}: cannot append to the history ({exc})") from None
+        raise InputError(f"{path}: cannot append to the history ({exc}); nothing was written to it") from None
     finally:
         conn.close()
 
@@ -180,9 +268,9 @@ def append(path: Path, record: Record) -> int:
 def robots(path: Path) -> list[dict]:
     """Every robot in the history: identity, name, records, calibrations, last time and verdict
     (none while no database exists)."""
-    if not Path(path).exists():
+    conn = _reader(path)
+    if conn is None:
         return []
-    conn = _connect(path)
     try:
         rows = conn.execute(
             "SELECT robot, robot_name, COUNT(*), SUM(command = 'calibrate'), MAX(time_utc), "
@@ -191,28 +279,63 @@ def robots(path: Path) -> list[dict]:
         ).fetchall()
     finally:
         conn.close()
+    columns = ("robot", "robot_name", "records", "calibrations", "time_utc", "verdict")
     keys = ("robot", "name", "records", "calibrations", "last_utc", "last_verdict")
+    for row in rows:
+        _check_row(dict(zip(columns, row, strict=True)), f"{path}: robot {row[0]!r}")
     return [dict(zip(keys, row, strict=True)) for row in rows]
 
 
 def records(path: Path, robot: str) -> list[dict]:
     """One robot's records, oldest first (figures parsed); none while no database exists."""
-    if not Path(path).exists():
+    conn = _reader(path)
+    if conn is None:
         return []
-    conn = _connect(path)
     try:
-        rows = conn.execute(
-            "SELECT id, time_utc, command, samples, table_path, table_hash, verdict, rmse_mm, figures "
-            "FROM records WHERE robot = ? ORDER BY id",
-            (robot,),
-        ).fetchall()
+        rows = conn.execute(f"SELECT {', '.join(COLUMNS)} FROM records WHERE robot = ? ORDER BY id", (robot,))
+        return [_record(dict(zip(COLUMNS, row, strict=True)), path) for row in rows]
     finally:
         conn.close()
-    keys = ("id", "time_utc", "command", "samples", "table", "table_hash", "verdict", "rmse_mm", "figures")
-    out = [dict(zip(keys, row, strict=True)) for row in rows]
-    for rec in out:
-        rec["figures"] = json.loads(rec["figures"])
-    return out
+
+
+def _record(row: dict, path: Path) -> dict:
+    """A stored row as a record (figures parsed); InputError naming it where a value is not what
+    this station writes (another program's or a hand's)."""
+    where = f"{path}: record #{row['id']}"
+    _check_row(row, where)
+    try:
+        datetime.fromisoformat(row["time_utc"])
+    except ValueError:
+        raise InputError(
+            f"{where}: its time_utc {row['time_utc']!r:.40} is not an ISO 8601 time; {UNKNOWN}"
+        ) from None
+    try:
+        figures = json.loads(row["figures"])
+    except ValueError as exc:  # json.JSONDecodeError is one
+        raise InputError(f"{where}: its figures are not JSON ({exc}); {UNKNOWN}") from None
+    if not isinstance(figures, dict) or not _parameters_ok(figures.get("parameters", {})):
+        raise InputError(f"{where}: its figures are not a report this station writes; {UNKNOWN}")
+    rec = {
+        ("table" if k == "table_path" else k): v for k, v in row.items() if k not in ("robot", "robot_name")
+    }
+    return rec | {"figures": figures}
+
+
+def _check_row(row: dict, where: str) -> None:
+    """InputError naming the first value of ``row`` not of the type this station writes."""
+    for key, value in row.items():
+        if key in TYPES and not isinstance(value, TYPES[key]):
+            raise InputError(
+                f"{where}: its {key} is {type(value).__name__}, not as the station writes it; {UNKNOWN}"
+            )
+
+
+def _parameters_ok(parameters) -> bool:
+    """A report's ``parameters``: name -> {"value": number, "sigma": number, ...}."""
+    return isinstance(parameters, dict) and all(
+        isinstance(p, dict) and all(isinstance(p.get(k), int | float) for k in ("value", "sigma"))
+        for p in parameters.values()
+    )
 
 
 def moves(history: list[dict]) -> list[dict]:
