@@ -4,10 +4,11 @@ record to an embedded SQLite database (stdlib ``sqlite3``).
 Where: ``--db``, else ``$STATION_HISTORY_DB``, else ``history.sqlite`` in the user's data folder
 (``$XDG_DATA_HOME/calibration-station``, default ``~/.local/share/calibration-station``). Several
 stations may write one database: SQLite's own locking (WAL journal, a busy timeout) serialises
-them, and a new file is checked and set up in one locked transaction. A file that is not such a
-database, of a newer ``SCHEMA_VERSION`` or another layout, a damaged one (``PRAGMA
-integrity_check``) or a record this station would not write is refused with one line naming it
-and is never written to: nothing already recorded is lost.
+them, and a new file is checked and set up in one locked transaction. Reading opens it read-only
+(also in a folder this user cannot write). A file that is not such a database, of a newer
+``SCHEMA_VERSION`` or another layout, a damaged one (``PRAGMA integrity_check``) or a record this
+station would not write is refused with one line naming it and is never written to: nothing
+already recorded is lost.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import hashlib
 import json
 import os
 import sqlite3
+import stat
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -116,11 +118,27 @@ def file_hash(path: Path) -> str:
         return ""
 
 
+def _exists(path: Path) -> bool:
+    """Whether the file ``path`` is there; InputError where it cannot be told (a folder this user
+    may not search, a parent that is a file) or it is a folder."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        raise InputError(f"{path}: cannot reach the history database ({exc.strerror})") from None
+    if stat.S_ISDIR(mode):
+        raise InputError(
+            f"{path}: a folder; --db names the history's file (e.g. {Path(path) / 'history.sqlite'})"
+        )
+    return True
+
+
 def _connect(path: Path) -> sqlite3.Connection:
     """The history opened to append to, made (with its folder) where missing: checked, and set up
     when new, in one locked transaction (stations that make it at the same instant wait their turn)."""
     path = Path(path)
-    if not path.exists():
+    if not _exists(path):
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -226,10 +244,38 @@ def _wal(conn: sqlite3.Connection) -> None:
 
 
 def _reader(path: Path) -> sqlite3.Connection | None:
-    """The history opened and checked; None while there is none."""
-    if not Path(path).exists():
+    """The history opened read-only and checked; None while there is none (or it is empty)."""
+    path = Path(path)
+    if not _exists(path):
         return None
-    return _connect(path)
+    conn = _open(path, "ro")
+    try:
+        with _refusing_errors(path):
+            try:
+                conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()
+            except sqlite3.OperationalError:
+                conn.close()
+                conn = _read_only_folder(path)
+            version = _check(conn, path)
+    except BaseException:
+        conn.close()
+        raise
+    if version is None:
+        conn.close()
+        return None
+    return conn
+
+
+def _read_only_folder(path: Path) -> sqlite3.Connection:
+    """A WAL history in a folder this user cannot write (SQLite cannot make its ``-shm`` file):
+    read as it lies on disk (``immutable``) unless its ``-wal`` holds records not yet in it."""
+    wal = Path(f"{path}-wal")
+    if _exists(wal) and wal.stat().st_size > 0:
+        raise InputError(
+            f"{path}: cannot be read in a folder this user cannot write: its write-ahead log "
+            f"({wal.name}) holds records not yet in the file; copy the files to a folder of yours"
+        )
+    return _open(path, "ro", immutable=True)
 
 
 def _damaged_hint(path: Path) -> str:

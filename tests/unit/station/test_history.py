@@ -130,6 +130,90 @@ def test_a_history_made_before_versions_is_read_and_appended_to(tmp_path, capsys
     assert sqlite3.connect(db).execute("PRAGMA user_version").fetchone()[0] == history.SCHEMA_VERSION
 
 
+# item 11: a --db folder this user cannot search
+
+
+def test_a_db_folder_the_user_cannot_search_leaves_each_command_its_own_exit(cell, tmp_path):
+    """calibrate and verify keep their result and say "history not written"; history exits 2."""
+    s, flags = cell
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0)
+    db = locked / "h.sqlite"
+    try:
+        calibrate = _station_held_to_modes(
+            ["calibrate", s.samples, "--out", tmp_path / "t.toml", *flags, "--db", db]
+        )
+        verify = _station_held_to_modes(
+            ["verify", s.holdout, "--table", tmp_path / "t.toml", *flags[:4], "--db", db]
+        )
+        listing = _station_held_to_modes(["history", "--db", db])
+    finally:
+        locked.chmod(0o755)
+    assert calibrate.returncode == 0 and (tmp_path / "t.toml").exists(), calibrate.stderr
+    assert verify.returncode in (0, 3), verify.stderr
+    for done in (calibrate, verify):
+        err = _one_error_line(done.stderr)
+        assert (
+            err
+            == f"station: history not written: {db}: cannot reach the history database (Permission denied)\n"
+        )
+    assert listing.returncode == 2
+    assert _one_error_line(listing.stderr).startswith(f"station: error: {db}: cannot reach the history")
+    assert not db.exists()
+
+
+def test_a_db_that_is_a_folder_is_named_so(cell, tmp_path, capsys):
+    """It read as "disk I/O error" (history) and "unable to open database file" (calibrate)."""
+    assert main(["history", "--db", str(tmp_path)]) == 2
+    says = f"{tmp_path}: a folder; --db names the history's file (e.g. {tmp_path}/history.sqlite)"
+    assert _one_error_line(capsys.readouterr().err) == f"station: error: {says}\n"
+    assert _calibrate(cell, tmp_path / "t.toml", tmp_path) == 0
+    assert "history not written: " + f"{tmp_path}: a folder" in _one_error_line(capsys.readouterr().err)
+
+
+# item 12: a WAL history in a folder this user cannot write
+
+
+def test_a_wal_history_in_a_read_only_folder_is_read(tmp_path):
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    db = shared / "h.sqlite"
+    for k in range(3):
+        history.append(db, _record(k))
+    assert db.read_bytes()[18:20] == b"\x02\x02"  # the file's header: WAL journal
+    shared.chmod(0o555)
+    try:
+        done = _station_held_to_modes(["history", "R1", "--db", db, "--json"])
+    finally:
+        shared.chmod(0o755)
+    assert done.returncode == 0, done.stderr
+    assert [r["samples"] for r in json.loads(done.stdout)["records"]] == ["s0", "s1", "s2"]
+    assert sorted(p.name for p in shared.iterdir()) == ["h.sqlite"]
+
+
+def test_a_read_only_history_with_records_only_in_its_log_is_refused_not_half_read(tmp_path):
+    """Copied while a station held it open: ``-wal`` holds records the file does not yet, and no
+    ``-shm`` can be made beside it. Read as it lies, the file would lack them."""
+    db, shared = tmp_path / "h.sqlite", tmp_path / "shared"
+    history.append(db, _record(0))
+    writer = sqlite3.connect(db, isolation_level=None)
+    writer.execute("PRAGMA wal_autocheckpoint = 0")
+    writer.execute("INSERT INTO records SELECT NULL, robot, robot_name, time_utc, command, 's1', "
+                   "table_path, table_hash, verdict, rmse_mm, figures FROM records")  # fmt: skip
+    shared.mkdir()
+    for name in ("h.sqlite", "h.sqlite-wal"):
+        shutil.copy(tmp_path / name, shared / name)
+    writer.close()
+    shared.chmod(0o555)
+    try:
+        done = _station_held_to_modes(["history", "R1", "--db", shared / "h.sqlite"])
+    finally:
+        shared.chmod(0o755)
+    assert done.returncode == 2
+    assert "write-ahead log (h.sqlite-wal) holds records not yet in the file" in _one_error_line(done.stderr)
+    assert [r["samples"] for r in history.records(shared / "h.sqlite", "R1")] == ["s0", "s1"]
+
+
 # item 13: stations making a new history at the same instant
 
 
