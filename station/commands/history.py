@@ -3,7 +3,9 @@ every parameter that moved between consecutive calibrations."""
 
 from __future__ import annotations
 
+import functools
 import json
+import unicodedata
 from pathlib import Path
 
 from errors import InputError
@@ -32,7 +34,7 @@ def run(args) -> int:
         return 0
     found = history.records(path, args.robot)
     if not found:
-        known = ", ".join(r["robot"] for r in history.robots(path)) or "none"
+        known = ", ".join(escaped(r["robot"]) for r in history.robots(path)) or "none"
         raise InputError(f"{path}: no records of robot {args.robot!r} (robots: {known})")
     moved = history.moves(found)
     if args.plot:
@@ -40,9 +42,9 @@ def run(args) -> int:
         from station.view.plots import history_figure
 
         check_writable(args.plot, "--plot")
-        write_outputs(
-            [Output(args.plot, "--plot", lambda tmp: history_figure(args.robot, found, moved, tmp))]
-        )
+        shown = [m | {"param": escaped(m["param"])} for m in moved]
+        figure = functools.partial(history_figure, escaped(args.robot), found, shown)
+        write_outputs([Output(args.plot, "--plot", figure)])
     if args.json:
         print(json.dumps({"robot": args.robot, "records": found, "moved": moved}, indent=2))
     else:
@@ -58,8 +60,8 @@ def robots_text(found: list[dict], path: Path) -> str:
     lines = [f"{'robot':24}{'name':16}{'records':>8}{'calibr.':>8}  last"]
     for r in found:
         lines.append(
-            f"{r['robot']:24}{r['name']:16}{r['records']:>8}{r['calibrations']:>8}  "
-            f"{r['last_utc']} {r['last_verdict'] or ''}"
+            f"{escaped(r['robot']):24}{escaped(r['name']):16}{r['records']:>8}{r['calibrations']:>8}  "
+            f"{escaped(r['last_utc'])} {escaped(r['last_verdict'] or '')}"
         )
     return "\n".join(lines)
 
@@ -68,11 +70,12 @@ def records_text(robot: str, found: list[dict], moved: list[dict]) -> str:
     """One line per record, then every flagged move (``J2.a_mm +0.41 mm, 6.2 sigma since ...``)."""
     from calib.params import display_unit
 
-    lines = [f"robot {robot}: {len(found)} records"]
+    lines = [f"robot {escaped(robot)}: {len(found)} records"]
     for r in found:
+        r = {k: v if k in ("id", "rmse_mm", "figures") else escaped(v or "") for k, v in r.items()}
         rmse = "" if r["rmse_mm"] is None else f"{r['rmse_mm']:.3f} mm"
         lines.append(
-            f"  #{r['id']:<4} {r['time_utc']}  {r['command']:9} {r['verdict'] or '':12} {rmse:>10}  "
+            f"  #{r['id']:<4} {r['time_utc']}  {r['command']:9} {r['verdict']:12} {rmse:>10}  "
             f"{r['samples']} (table {r['table']}, {r['table_hash'][:12]})"
         )
     if not moved:
@@ -80,7 +83,25 @@ def records_text(robot: str, found: list[dict], moved: list[dict]) -> str:
     for m in moved:
         unit = display_unit(m["param"])[1]
         lines.append(
-            f"moved: {m['param']} {m['change']:+.3g} {unit}, {m['sigmas']:.1f} sigma since "
+            f"moved: {escaped(m['param'])} {m['change']:+.3g} {unit}, {m['sigmas']:.1f} sigma since "
             f"{m['since']} (record #{m['record']}): a collision or wear?"
         )
     return "\n".join(lines)
+
+
+HIDDEN = {"Cc", "Cf", "Cs", "Zl", "Zp"}
+"""Unicode categories a terminal does not show as themselves: controls (newline, ESC), format
+characters (a right-to-left override), lone surrogates, line and paragraph separators."""
+
+
+def escaped(text: str) -> str:
+    """``text`` as one line of what it holds: a character of ``HIDDEN`` as its Python escape
+    (``\\n``, ``\\x1b``, ``\\u202e``), so that a stored name forges no line and colours no terminal."""
+    if text.isprintable():
+        return text
+    return "".join(
+        c.encode("unicode_escape", "backslashreplace").decode("ascii")
+        if unicodedata.category(c) in HIDDEN
+        else c
+        for c in text
+    )

@@ -187,7 +187,7 @@ def verification_figure(data: dict, path: Path) -> None:
 def history_figure(robot: str, records: list[dict], moved: list[dict], path: Path) -> None:
     """A robot's history (``station history ROBOT --plot``): each record's RMSE [mm] in order,
     coloured by its verdict (calibrations as circles, verifications as squares), dated below, every
-    flagged move annotated at the calibration that showed it."""
+    flagged move annotated at the calibration that showed it. Text drawn as given (no mathtext)."""
     fig, ax = plt.subplots(figsize=(11, 4.8))
     markers = {"calibrate": "o", "verify": "s"}
     for k, r in enumerate(records):
@@ -212,12 +212,13 @@ def history_figure(robot: str, records: list[dict], moved: list[dict], path: Pat
             color="C3",
             fontsize=9,
             arrowprops={"arrowstyle": "->", "color": "C3"},
+            parse_math=False,
         )
     labels = [f"#{r['id']}\n{r['time_utc'][:16].replace('T', ' ')}" for r in records]
     ax.set_xticks(range(len(records)), labels, fontsize=8)
     ax.set_xlim(-0.5, len(records) - 0.5)
     ax.set_ylabel("RMSE [mm] (calibrate: training fit; verify: new samples)")
-    ax.set_title(f"robot {robot}: {len(records)} records")
+    ax.set_title(f"robot {robot}: {len(records)} records", parse_math=False)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

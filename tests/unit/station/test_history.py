@@ -251,3 +251,40 @@ def test_three_stations_making_new_histories_at_once_lose_none_of_300_records(tm
     for db in dbs:
         found = history.records(db, "R1")
         assert sorted(r["samples"] for r in found) == each and len({r["id"] for r in found}) == 6
+
+
+# item 14: what a robot file or a database holds, shown as one line of what it is
+
+
+FORGED = "JR680$\\frac$\n  #9999 2030-01-01T00:00:00+00:00  calibrate consistent 0.001 mm  forged\x1b[31m"
+"""A serial that, shown as it is, adds a record line, colours the terminal red and is mathtext."""
+
+
+def test_a_serial_with_newlines_and_escapes_forges_no_line(cell, tmp_path, capsys):
+    s, _ = cell
+    robot = tmp_path / "robot.toml"
+    robot.write_text(f"serial = {json.dumps(FORGED)}\n" + s.robot.read_text())
+    db = tmp_path / "h.sqlite"
+    assert _calibrate(cell, tmp_path / "t.toml", db, robot) == 0
+    capsys.readouterr()
+    assert main(["history", "--db", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and len(out.splitlines()) == 2  # the header and one robot
+    assert "JR680$\\frac$\\n  #9999" in out and "forged\\x1b[31m" in out
+    assert main(["history", FORGED, "--db", str(db), "--plot", str(tmp_path / "h.png")]) == 0
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and "#9999" not in "".join(line[:4] for line in out.splitlines())
+    assert len(out.splitlines()) == 4  # title, one record, no move, wrote
+    assert (tmp_path / "h.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("serial", ["", "   ", "\t\n"])
+def test_a_blank_serial_is_refused_not_made_an_identity(cell, tmp_path, capsys, serial):
+    s, _ = cell
+    robot = tmp_path / "robot.toml"
+    robot.write_text(f"serial = {json.dumps(serial)}\n" + s.robot.read_text())
+    db = tmp_path / "h.sqlite"
+    assert _calibrate(cell, tmp_path / "t.toml", db, robot) == 2
+    err = _one_error_line(capsys.readouterr().err)
+    assert str(robot) in err and "serial" in err
+    assert not db.exists() and not (tmp_path / "t.toml").exists()
