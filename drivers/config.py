@@ -166,8 +166,34 @@ def _axis_template(text: str) -> str:
     return text
 
 
+def _node_id(text: str) -> str:
+    """``text`` (empty: none) if, ``{axis}`` read as 1 .. 6, asyncua parses it as node ids it can send."""
+    for axis in range(1, 7) if text else ():
+        _check_node_id(text.format(axis=axis))
+    return text
+
+
+def _check_node_id(text: str) -> None:
+    from asyncua import ua  # here: only an OPC UA section pays for the import
+
+    try:
+        node = ua.NodeId.from_string(text)
+    except ua.UaStringParsingError:
+        raise ValueError(
+            f"{text!r}: not an OPC UA node id (ns=<index>;i=<number>, ns=<index>;s=<name>, "
+            "g=<guid> or b=<base64>)"
+        ) from None
+    if not 0 <= node.NamespaceIndex <= 0xFFFF:
+        raise ValueError(f"{text!r}: namespace index {node.NamespaceIndex} is not within 0 .. 65535")
+    if node.NodeIdType == ua.NodeIdType.Numeric and not 0 <= node.Identifier <= 0xFFFFFFFF:
+        raise ValueError(f"{text!r}: numeric id {node.Identifier} is not within 0 .. 4294967295")
+
+
 NodeTemplate = Annotated[
-    str, Field(max_length=4096, pattern=r"^[^\x00{}]*(\{axis\}[^\x00{}]*)*$"), AfterValidator(_axis_template)
+    str,
+    Field(max_length=4096, pattern=r"^[^\x00{}]*(\{axis\}[^\x00{}]*)*$"),
+    AfterValidator(_axis_template),
+    AfterValidator(_node_id),
 ]
 """An OPC UA node id with ``{axis}`` for the axis number 1 .. 6, e.g.
 ``ns=2;s=DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/ActualPosition``."""
@@ -191,9 +217,9 @@ class RobotOpcUa(Section):
     unit: Literal["deg", "rad"] = "deg"
     timeout_s: Timeout = 1.0
     target_node: NodeTemplate = f"{AXIS_PARAMETERS}/TargetPosition"
-    target_index_node: Annotated[str, Field(max_length=4096, pattern=r"^[^\x00{}]*$")] = (
-        "ns=2;s=DeviceSet/Robot/TargetIndex"
-    )
+    target_index_node: Annotated[
+        str, Field(max_length=4096, pattern=r"^[^\x00{}]*$"), AfterValidator(_node_id)
+    ] = "ns=2;s=DeviceSet/Robot/TargetIndex"
 
     def nodes(self) -> tuple[list[str], list[str] | None]:
         """The six position node ids and the six speed node ids (None: no speed nodes)."""

@@ -13,6 +13,7 @@ from drivers.opcua import OpcUaJointSource
 from errors import InputError
 from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.station_sim import SimStation
+from station import cli
 from station.config import station_config
 from tests.system.moving import fails_retryably, free_address, two_targets
 
@@ -109,6 +110,11 @@ def test_sim_serve_publishes_its_robot_over_opcua_for_the_station(tmp_path):
             "robot.position_node: 'ns=2;s=Axis1.ActualPosition': write {axis}",
         ),
         ({"unit": "grad"}, "robot.unit: Input should be 'deg' or 'rad'"),
+        ({"position_node": "garbage{axis}"}, r"robot.position_node: 'garbage1': not an OPC UA node id"),
+        ({"speed_node": "ns=2;i=x{axis}"}, r"robot.speed_node: 'ns=2;i=x1': not an OPC UA node id"),
+        ({"target_node": "ns=70000;i={axis}"}, r"robot.target_node: 'ns=70000;i=1': namespace index"),
+        ({"target_index_node": "i=4294967296"}, r"robot.target_index_node: 'i=4294967296': numeric id"),
+        ({"position_node": "i=429496729{axis}"}, r"robot.position_node: 'i=4294967296': numeric id"),
     ],
 )
 def test_a_wrong_opcua_section_is_one_line_naming_the_key(robot, message):
@@ -118,3 +124,15 @@ def test_a_wrong_opcua_section_is_one_line_naming_the_key(robot, message):
     }
     with pytest.raises(InputError, match=message):
         station_config(raw, "station.toml")
+
+
+def test_station_read_refuses_a_node_id_that_is_none_in_one_line_exit_2(moving, tmp_path, capsys):
+    """Issue 34, item 4: ``garbage{axis}`` was asyncua's parsing traceback once connected."""
+    config = tmp_path / "station.toml"
+    config.write_text(
+        f'[robot]\nkind = "opcua"\nurl = "{moving[0].url}"\nposition_node = "garbage{{axis}}"\n\n'
+        '[drawstring]\nkind = "modbus_tcp"\n'
+    )
+    assert cli.main(["read", "--config", str(config)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "robot.position_node: 'garbage1': not an OPC UA node id" in err, err
