@@ -185,41 +185,82 @@ def verification_figure(data: dict, path: Path) -> None:
 
 
 def history_figure(robot: str, records: list[dict], moved: list[dict], path: Path) -> None:
-    """A robot's history (``station history ROBOT --plot``): each record's RMSE [mm] in order,
-    coloured by its verdict (calibrations as circles, verifications as squares), dated below, every
-    flagged move annotated at the calibration that showed it. Text drawn as given (no mathtext)."""
+    """A robot's history (``station history ROBOT --plot``): each record's RMSE [mm] at its time,
+    one series per command (calibrations circles, verifications squares) and verdict (colour), dates
+    below as matplotlib's concise date axis; the calibrations that showed a flagged move ringed,
+    the latest ``HISTORY_NOTES`` moves listed. Text drawn as given (no mathtext)."""
+    import matplotlib.dates as mdates
+
     fig, ax = plt.subplots(figsize=(11, 4.8))
+    when = np.array([_utc(r["time_utc"]) for r in records], dtype="datetime64[s]")
+    rmse = np.array([np.nan if r["rmse_mm"] is None else r["rmse_mm"] for r in records], float)
+    ms = float(np.clip(10 * np.sqrt(50 / max(len(records), 50)), 3, 10))
     markers = {"calibrate": "o", "verify": "s"}
-    for k, r in enumerate(records):
-        if r["rmse_mm"] is not None:
-            colour = VERDICT_COLOURS.get(r["verdict"], "0.4")
-            ax.plot(k, r["rmse_mm"], markers.get(r["command"], "^"), color=colour, ms=10)
+    for (command, verdict), rows in _series(records).items():
+        colour = VERDICT_COLOURS.get(verdict, "0.4")
+        ax.plot(when[rows], rmse[rows], markers.get(command, "^"), color=colour, ms=ms, ls="none")
     for command, marker in markers.items():
         if any(r["command"] == command for r in records):
             ax.plot([], [], marker, color="0.4", ls="none", label=command)
     for verdict, colour in VERDICT_COLOURS.items():
         if any(r["verdict"] == verdict for r in records):
             ax.plot([], [], "D", color=colour, ls="none", label=verdict)
-    index = {r["id"]: k for k, r in enumerate(records)}
-    for m in moved:
-        k = index[m["record"]]
-        ax.annotate(
-            f"{m['param']} {m['change']:+.3g} ({m['sigmas']:.1f} sigma)",
-            (k, records[k]["rmse_mm"] or 0.0),
-            textcoords="offset points",
-            xytext=(-12, 14 + 14 * moved.index(m)),
-            ha="right",
-            color="C3",
-            fontsize=9,
-            arrowprops={"arrowstyle": "->", "color": "C3"},
-            parse_math=False,
-        )
-    labels = [f"#{r['id']}\n{r['time_utc'][:16].replace('T', ' ')}" for r in records]
-    ax.set_xticks(range(len(records)), labels, fontsize=8)
-    ax.set_xlim(-0.5, len(records) - 0.5)
+    _history_moves(ax, records, moved, when, np.nan_to_num(rmse), ms)
+    locator = mdates.AutoDateLocator()
+    ax.xaxis.set_major_locator(locator)
+    ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    ax.set_xlabel("time (UTC)")
     ax.set_ylabel("RMSE [mm] (calibrate: training fit; verify: new samples)")
     ax.set_title(f"robot {robot}: {len(records)} records", parse_math=False)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+HISTORY_NOTES = 8
+"""How many flagged moves ``history_figure`` lists (the latest); the others are ringed only."""
+
+
+def _utc(text: str):
+    """An ISO 8601 time as a naive UTC datetime (one without a zone is taken as UTC)."""
+    from datetime import datetime, timezone
+
+    t = datetime.fromisoformat(text)
+    return t.astimezone(timezone.utc).replace(tzinfo=None) if t.tzinfo else t
+
+
+def _series(records: list[dict]) -> dict[tuple, np.ndarray]:
+    """Row indices of the records per (command, verdict)."""
+    keys = [(r["command"], r["verdict"]) for r in records]
+    return {key: np.array([k for k, x in enumerate(keys) if x == key]) for key in dict.fromkeys(keys)}
+
+
+def _history_moves(ax, records: list[dict], moved: list[dict], when, rmse, ms: float) -> None:
+    """Ring every calibration that showed a flagged move (one call); list the latest few beside
+    the legend (record, date, parameter, change)."""
+    from calib.params import display_unit
+
+    index = {r["id"]: k for k, r in enumerate(records)}
+    rows = np.array(sorted({index[m["record"]] for m in moved}), int)
+    if not len(rows):
+        return
+    ring = {"mfc": "none", "mec": "C3", "mew": 1.5, "ms": max(9.0, 1.7 * ms), "ls": "none", "zorder": 3}
+    ax.plot(when[rows], rmse[rows], "o", label="moved", **ring)
+    named = moved[::-1][:HISTORY_NOTES]
+    lines = [f"moved (latest {len(named)} of {len(moved)}):" if len(moved) > len(named) else "moved:"]
+    lines += [
+        f"#{m['record']} {m['time_utc'][:10]} {m['param']} {m['change']:+.3g} {display_unit(m['param'])[1]} "
+        f"({m['sigmas']:.1f} sigma)"
+        for m in named
+    ]
+    ax.text(
+        1.01,
+        0.5,
+        "\n".join(lines),
+        transform=ax.transAxes,
+        va="top",
+        fontsize=8,
+        color="C3",
+        parse_math=False,
+    )

@@ -10,6 +10,7 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import pytest
@@ -288,3 +289,55 @@ def test_a_blank_serial_is_refused_not_made_an_identity(cell, tmp_path, capsys, 
     err = _one_error_line(capsys.readouterr().err)
     assert str(robot) in err and "serial" in err
     assert not db.exists() and not (tmp_path / "t.toml").exists()
+
+
+# item 15: the plot of a long history
+
+
+COLUMNS = "robot, robot_name, time_utc, command, samples, table_path, table_hash, verdict, rmse_mm, figures"
+
+
+def _long_history(db: Path, count: int) -> None:
+    """``count`` records of R1, 6 h apart: a calibration every fourth, else verifications."""
+    history.append(db, _record(0))
+    start = datetime(2026, 1, 1, tzinfo=timezone.utc)
+    rows = [
+        ("R1", "robot", (start + timedelta(hours=6 * k)).isoformat(), "calibrate" if k % 4 == 0 else "verify",
+         f"s{k}", "t", "", "consistent" if k % 4 == 0 else "holds", 0.02 + 0.001 * (k % 7), "{}")
+        for k in range(1, count)
+    ]  # fmt: skip
+    conn = sqlite3.connect(db)
+    with conn:
+        conn.executemany(f"INSERT INTO records ({COLUMNS}) VALUES ({', '.join('?' * 10)})", rows)
+    conn.close()
+
+
+def test_the_plot_of_a_long_history_draws_each_series_at_once_with_dates_that_do_not_overlap(
+    tmp_path, monkeypatch
+):
+    """300 records: one ``plot`` call a point (14 s for 1,000 records, 120 s and 687 MB for 10,000)
+    and a tick label a record, overlapping from 100 on. Checked in the figure the command saves."""
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    db = tmp_path / "h.sqlite"
+    _long_history(db, 300)
+    calls, boxes = [], []
+    plot, savefig = Axes.plot, Figure.savefig
+
+    def counted(ax, *args, **kwargs):
+        calls.append(len(args[0]) if args and hasattr(args[0], "__len__") else 1)
+        return plot(ax, *args, **kwargs)
+
+    def saved(fig, *args, **kwargs):
+        savefig(fig, *args, **kwargs)  # lays the tick labels out
+        renderer = fig.canvas.get_renderer()
+        labels = [t for t in fig.axes[0].get_xticklabels() if t.get_visible() and t.get_text()]
+        boxes.extend(sorted((b.x0, b.x1) for b in (t.get_window_extent(renderer) for t in labels)))
+
+    monkeypatch.setattr(Axes, "plot", counted)
+    monkeypatch.setattr(Figure, "savefig", saved)
+    assert main(["history", "R1", "--db", str(db), "--plot", str(tmp_path / "h.png")]) == 0
+    assert len(calls) <= 8 and sum(calls) >= 300  # every record drawn, in a few calls
+    assert 3 <= len(boxes) <= 15
+    assert all(left[1] < right[0] for left, right in zip(boxes[:-1], boxes[1:], strict=True))
