@@ -17,7 +17,9 @@ The companion specification has no single "program running" flag, so ``robot_mod
 (7, as over RTDE) while the server answers; a stopped controller shows as joints that stand still.
 Freshness: every read asks the server (a read, not a subscription), so a value is as old as the
 round trip; a server that stops answering raises :class:`~drivers.base.DeviceTimeout` after the
-client's ``timeout_s``, a lost connection :class:`~drivers.base.DeviceUnreachable`.
+client's ``timeout_s``, a lost connection :class:`~drivers.base.DeviceUnreachable`. asyncua's own
+log (its tracebacks of a teardown that a stalled server does not answer) is silenced when a client
+opens: the driver's errors say what failed.
 """
 
 from __future__ import annotations
@@ -32,8 +34,6 @@ from asyncua import ua
 from asyncua.sync import Client, ThreadLoopNotRunning
 
 from drivers.base import DeviceReplyError, DeviceTimeout, DeviceUnreachable, Driver, Field, Reading
-
-logging.getLogger("asyncua").setLevel(logging.ERROR)  # its notes on unencrypted endpoints are not ours
 
 JOINTS = 6
 RUNNING = 7  # reported while the server answers (see the module notes)
@@ -82,18 +82,24 @@ class OpcUaJointSource(Driver):
 
     def open(self) -> None:
         """Connect and read every node once (a node id the server lacks: DeviceReplyError naming it)."""
+        logging.getLogger("asyncua").setLevel(logging.CRITICAL)  # module notes
         client = Client(self.url, timeout=self.timeout_s, sync_wrapper_timeout=self.timeout_s + 1.0)
         try:
             client.connect()
-        except (OSError, asyncio.TimeoutError, TimeoutError, ua.UaError) as exc:
+        except (asyncio.TimeoutError, TimeoutError) as exc:
             client.tloop.stop()
-            raise DeviceUnreachable(
-                self.name, f"cannot connect to OPC UA {self.url}: {exc or type(exc).__name__}"
-            ) from exc
+            raise DeviceTimeout(self.name, self._silent) from exc
+        except (OSError, ua.UaError) as exc:
+            client.tloop.stop()
+            raise DeviceUnreachable(self.name, f"cannot connect to OPC UA {self.url}: {_why(exc)}") from exc
         self._client, self._last = client, None
         self._nodes = [client.get_node(n) for n in self.node_ids]
         self._read_values()
         self._targets = self._find_targets()
+
+    @property
+    def _silent(self) -> str:
+        return f"OPC UA {self.url} did not answer within {self.timeout_s:g} s"
 
     def target_channel(self) -> OpcUaTargets | None:
         return self._targets
@@ -159,11 +165,9 @@ class OpcUaJointSource(Driver):
         try:
             results = self._client.tloop.post(self._client.aio_obj.uaclient.read(params))
         except (asyncio.TimeoutError, TimeoutError) as exc:
-            raise DeviceTimeout(
-                self.name, f"OPC UA {self.url} did not answer within {self.timeout_s} s"
-            ) from exc
+            raise DeviceTimeout(self.name, self._silent) from exc
         except (OSError, ConnectionError, ThreadLoopNotRunning, ua.UaError) as exc:
-            raise DeviceUnreachable(self.name, f"OPC UA {self.url}: {exc or type(exc).__name__}") from exc
+            raise DeviceUnreachable(self.name, f"OPC UA {self.url}: {_why(exc)}") from exc
         out = []
         for node_id, result in zip(self.node_ids, results, strict=True):
             if not result.StatusCode.is_good():
@@ -182,6 +186,11 @@ class OpcUaJointSource(Driver):
                 ) from None
         stamp = results[0].SourceTimestamp or results[0].ServerTimestamp
         return out, stamp.timestamp() if stamp else math.nan
+
+
+def _why(exc: BaseException) -> str:
+    """An exception's message, or its kind where it has none (asyncio's timeouts)."""
+    return str(exc) or type(exc).__name__
 
 
 class OpcUaTargets:
@@ -216,7 +225,7 @@ class OpcUaTargets:
         ) as exc:
             raise DeviceUnreachable(
                 self.source.name,
-                f"OPC UA {self.source.url}: writing target {target}: {exc or type(exc).__name__}",
+                f"OPC UA {self.source.url}: writing target {target}: {_why(exc)}",
             ) from exc
         bad = next(((n, c) for n, c in zip(self.node_ids, codes, strict=True) if not c.is_good()), None)
         if bad is not None:

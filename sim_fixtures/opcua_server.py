@@ -11,6 +11,10 @@ The target channel (no part of the companion specification: what a controller pr
 offers a station that corrects targets in-session): writable ``TargetPosition`` (Double, deg)
 beside each axis's ``ActualPosition``, and ``DeviceSet/Robot/TargetIndex`` (Int32). Writing the
 index commits the positions written before it: ``hand(target, q_deg)``, the program's channel.
+
+A hostile or unusual server (tests): ``edit(joint, index, value)`` (joint 0 .. 5, index 0 for the
+position and 1 for the speed) gets the ``ua.DataValue`` a read would answer and returns the one to
+answer instead: another type, no number, an old timestamp, or a wait that stalls the server.
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ class OpcUaRobotServer:
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="opcua-sim", daemon=True)
+        self.edit = None  # (joint, index, ua.DataValue) -> ua.DataValue: see the module notes
 
     def start(self) -> OpcUaRobotServer:
         self._thread.start()
@@ -122,9 +127,10 @@ class OpcUaRobotServer:
         def read(node_id, attr) -> ua.DataValue:
             value = float(self.state()[index][joint])
             now = datetime.now(timezone.utc)
-            return ua.DataValue(
+            answer = ua.DataValue(
                 ua.Variant(value, ua.VariantType.Double), SourceTimestamp=now, ServerTimestamp=now
             )
+            return answer if self.edit is None else self.edit(joint, index, answer)
 
         return read
 

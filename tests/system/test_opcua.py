@@ -3,7 +3,11 @@ server laid out as the OPC UA Robotics companion specification, fed by the simul
 program; what a cell's wiring gets wrong (a node id, a server gone) is named, and ``sim serve``'s
 station reads its robot through it."""
 
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +21,7 @@ from station import cli
 from station.config import station_config
 from tests.system.moving import fails_retryably, free_address, two_targets
 
+ROOT = Path(__file__).resolve().parents[2]
 POSITIONS = [position_node(i) for i in range(1, 7)]
 SPEEDS = [speed_node(i) for i in range(1, 7)]
 
@@ -136,3 +141,36 @@ def test_station_read_refuses_a_node_id_that_is_none_in_one_line_exit_2(moving, 
     assert cli.main(["read", "--config", str(config)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "robot.position_node: 'garbage1': not an OPC UA node id" in err, err
+
+
+def station_read(tmp_path, url: str, timeout_s: float = 1.0) -> subprocess.CompletedProcess:
+    """``station read`` in a process of its own (its stderr as the user sees it) on an OPC UA robot
+    at ``url`` (2 attempts); no drawstring answers, so a robot read exits 1 too, naming it."""
+    config = tmp_path / "station.toml"
+    config.write_text(
+        f'[robot]\nkind = "opcua"\nurl = "{url}"\ntimeout_s = {timeout_s}\n\n'
+        '[drawstring]\nkind = "modbus_tcp"\nport = 1\n\n[reconnect]\nattempts = 2\n'
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, "-m", "station.cli", "read", "--config", str(config)],
+        capture_output=True, text=True, timeout=60, env=env, cwd=tmp_path,
+    )  # fmt: skip
+
+
+def test_a_server_that_does_not_answer_in_time_is_one_line_saying_so(moving, tmp_path):
+    """Issue 34, item 5: a server stalled 3 s at its first value read (its event loop blocked) was
+    "cannot connect to ...: " with no reason and asyncua's tracebacks on stderr."""
+    server, *_ = moving
+    stalled = []
+
+    def stall_once(joint, index, value):
+        if not stalled:
+            stalled.append(time.sleep(3.0))
+        return value
+
+    server.edit = stall_once
+    proc = station_read(tmp_path, server.url, timeout_s=0.3)
+    assert proc.returncode == 1 and proc.stdout == ""
+    assert proc.stderr.count("\n") == 1, proc.stderr
+    assert f"OPC UA {server.url} did not answer within 0.3 s" in proc.stderr, proc.stderr
