@@ -96,6 +96,8 @@ class RobotFile(Strict):
     def _serial_names_a_robot(self) -> RobotFile:
         if self.serial is not None and not self.serial.strip():
             raise ValueError("serial: blank: give the robot's serial number, or leave the key out")
+        if not self.name.strip():
+            raise ValueError("name: blank: give the robot's name (its history identity without a serial)")
         return self
 
     @model_validator(mode="after")

@@ -6,6 +6,7 @@ no record lost, no forged line, a plot of 10,000 records as quick as one of 10."
 import json
 import multiprocessing
 import os
+import re
 import shutil
 import sqlite3
 import subprocess
@@ -279,15 +280,19 @@ def test_a_serial_with_newlines_and_escapes_forges_no_line(cell, tmp_path, capsy
     assert (tmp_path / "h.png").stat().st_size > 0
 
 
-@pytest.mark.parametrize("serial", ["", "   ", "\t\n"])
-def test_a_blank_serial_is_refused_not_made_an_identity(cell, tmp_path, capsys, serial):
+@pytest.mark.parametrize("key, value", [("serial", ""), ("serial", "   "), ("serial", "\t\n"), ("name", " ")])
+def test_a_blank_serial_is_refused_not_made_an_identity(cell, tmp_path, capsys, key, value):
+    """A blank serial, or a blank name without a serial, would be a robot's identity."""
     s, _ = cell
     robot = tmp_path / "robot.toml"
-    robot.write_text(f"serial = {json.dumps(serial)}\n" + s.robot.read_text())
+    text = s.robot.read_text()
+    if key == "name":
+        text = re.sub(r'(?m)^name = ".*"$', f"name = {json.dumps(value)}", text)
+    robot.write_text((f"serial = {json.dumps(value)}\n" if key == "serial" else "") + text)
     db = tmp_path / "h.sqlite"
     assert _calibrate(cell, tmp_path / "t.toml", db, robot) == 2
     err = _one_error_line(capsys.readouterr().err)
-    assert str(robot) in err and "serial" in err
+    assert str(robot) in err and key in err
     assert not db.exists() and not (tmp_path / "t.toml").exists()
 
 
