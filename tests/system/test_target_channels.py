@@ -108,6 +108,7 @@ def _said(proc: subprocess.Popen, timeout_s: float, what: str) -> dict:
     return json.loads([line for line in out.splitlines() if line.startswith("{")][-1])
 
 
+@pytest.mark.guard  # issue 33: the guard tier runs it too
 def test_a_controller_gone_with_the_channel_open_costs_a_reconnect_not_the_process(controller):
     """A controller reboot with the target channel open (ur_rtde's RTDEIOInterface): the link is
     lost, a write says so, the reconnect closes the dead channel, reads again and the channel comes
