@@ -88,6 +88,11 @@ ON_REQUEST = {  # (device, FaultPlan kind) -> fault kind
     ("dial", "garbled"): "dial garbage",
     ("dial", "silence"): "dial silent",
 }
+SAME_REQUEST = {
+    kind: "|".join(NAMED_BY[k] for (d, _), k in ON_REQUEST.items() if d == device)
+    for (device, _), kind in ON_REQUEST.items()
+}
+"""Per fault on a request: what names any failure of that device's request."""
 
 
 def _free_loopback() -> str:
@@ -261,20 +266,21 @@ def run_session(config: Path, out: Path, injector: Injector, interval_s: float, 
 
 
 def unlogged(faults: list[tuple[float, str]], log: list[tuple[float, str]]) -> list[tuple[float, str]]:
-    """Faults without a log line of their kind after them (each line names one fault)."""
-    claimed: set[int] = set()
-    missing = []
-    for t, kind in faults:
-        match = next(
-            (i for i, (tl, line) in enumerate(log)
-             if i not in claimed and tl >= t - 0.05 and re.search(NAMED_BY[kind], line)),
-            None,
-        )  # fmt: skip
-        if match is None:
-            missing.append((t, kind))
-        else:
-            claimed.add(match)
-    return missing
+    """Faults no log line names: each line of a fault's kind names the latest fault of that kind
+    before it that no earlier line named (a fault the station could not see, e.g. one applied to a
+    request it had already given up on, then leaves no line that a later fault needs). A fault on a
+    request counts as named by any line on that request's failure (``SAME_REQUEST``): on a loaded
+    machine a bad CRC or a garbled reply arriving late is rightly a "no reply"."""
+    named: set[int] = set()
+    for tl, line in log:
+        seen = [
+            i
+            for i, (t, kind) in enumerate(faults)
+            if i not in named and t <= tl + 0.05 and re.search(SAME_REQUEST.get(kind, NAMED_BY[kind]), line)
+        ]
+        if seen:
+            named.add(max(seen, key=lambda i: faults[i][0]))
+    return [f for i, f in enumerate(faults) if i not in named]
 
 
 def audit(folder: Path, log: list[tuple[float, str]], seed: int, per_line: int) -> dict:
