@@ -64,6 +64,9 @@ class Reading:
         )
 
 
+MAX_JOINT_DEG = 3600.0
+"""Ten turns: a joint reading beyond it is no robot's (``station.formats`` refuses it in a file too)."""
+
 EXCERPT_CHARS = 80  # what a device's reply contributes to a message, at most
 
 

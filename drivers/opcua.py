@@ -20,6 +20,10 @@ round trip; a server that stops answering raises :class:`~drivers.base.DeviceTim
 client's ``timeout_s``, a lost connection :class:`~drivers.base.DeviceUnreachable`. asyncua's own
 log (its tracebacks of a teardown that a stalled server does not answer) is silenced when a client
 opens: the driver's errors say what failed.
+
+Values: a node holds a number of a numeric type (a Boolean, a String or an array:
+:class:`~drivers.base.DeviceReplyError`, the node is no axis's); a value that is not finite, or an
+angle beyond ``MAX_JOINT_DEG``, is a :class:`~drivers.base.GarbledReply`, retried as RTDE's.
 """
 
 from __future__ import annotations
@@ -33,7 +37,17 @@ from collections.abc import Sequence
 from asyncua import ua
 from asyncua.sync import Client, ThreadLoopNotRunning
 
-from drivers.base import DeviceReplyError, DeviceTimeout, DeviceUnreachable, Driver, Field, Reading
+from drivers.base import (
+    MAX_JOINT_DEG,
+    DeviceReplyError,
+    DeviceTimeout,
+    DeviceUnreachable,
+    Driver,
+    Field,
+    GarbledReply,
+    Reading,
+    excerpt,
+)
 
 JOINTS = 6
 RUNNING = 7  # reported while the server answers (see the module notes)
@@ -45,6 +59,10 @@ OPCUA_FIELDS = {
     "controller_time_s": Field("s", (), "the server's source timestamp of joint 1, s since the epoch"),
 }
 UNIT_TO_DEG = {"deg": 1.0, "rad": math.degrees(1.0)}
+NUMBERS = {
+    getattr(ua.VariantType, name)
+    for name in ("SByte", "Byte", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Float", "Double")
+}
 
 
 class OpcUaJointSource(Driver):
@@ -169,23 +187,37 @@ class OpcUaJointSource(Driver):
         except (OSError, ConnectionError, ThreadLoopNotRunning, ua.UaError) as exc:
             raise DeviceUnreachable(self.name, f"OPC UA {self.url}: {_why(exc)}") from exc
         out = []
-        for node_id, result in zip(self.node_ids, results, strict=True):
+        for k, (node_id, result) in enumerate(zip(self.node_ids, results, strict=True)):
             if not result.StatusCode.is_good():
                 raise DeviceReplyError(
                     self.name,
                     f"OPC UA {self.url}: node {node_id}: {result.StatusCode.name}",
                     code=result.StatusCode.name,
                 )
-            try:
-                out.append(float(result.Value.Value))
-            except (TypeError, ValueError):
-                raise DeviceReplyError(
-                    self.name,
-                    f"OPC UA {self.url}: node {node_id} holds {result.Value.Value!r}, not a number",
-                    "NOT_A_NUMBER",
-                ) from None
+            out.append(self._value(node_id, result.Value, speed=k >= JOINTS))
         stamp = results[0].SourceTimestamp or results[0].ServerTimestamp
         return out, stamp.timestamp() if stamp else math.nan
+
+    def _value(self, node_id: str, variant: ua.Variant, speed: bool) -> float:
+        """A node's number in the config's unit: a value of another type (a Boolean, a String, an
+        array) is a DeviceReplyError (the node is not an axis's), an angle beyond ``MAX_JOINT_DEG``
+        or a speed that is no number a GarbledReply (retried, as RTDE's)."""
+        value = variant.Value
+        if variant.VariantType not in NUMBERS or isinstance(value, list):
+            kind = "an array" if isinstance(value, list) else f"a {variant.VariantType.name}"
+            raise DeviceReplyError(
+                self.name,
+                f"OPC UA {self.url}: node {node_id} holds {excerpt(repr(value))}, {kind}, not a number",
+                "NOT_A_NUMBER",
+            )
+        value = float(value)
+        unit = f"{self.unit}/s" if speed else self.unit
+        if not math.isfinite(value) or (not speed and abs(value * UNIT_TO_DEG[self.unit]) > MAX_JOINT_DEG):
+            what = "a speed" if speed else f"an angle within +-{MAX_JOINT_DEG:g} deg"
+            raise GarbledReply(
+                self.name, f"OPC UA {self.url}: node {node_id} holds {value:g} {unit}, not {what}"
+            )
+        return value
 
 
 def _why(exc: BaseException) -> str:

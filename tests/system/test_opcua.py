@@ -4,6 +4,7 @@ program; what a cell's wiring gets wrong (a node id, a server gone) is named, an
 station reads its robot through it."""
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -11,10 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from asyncua import ua
 
 from drivers.base import DeviceReplyError
+from drivers.drawstring import RegisterMap
 from drivers.opcua import OpcUaJointSource
 from errors import InputError
+from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.station_sim import SimStation
 from station import cli
@@ -143,18 +147,21 @@ def test_station_read_refuses_a_node_id_that_is_none_in_one_line_exit_2(moving, 
     assert err.count("\n") == 1 and "robot.position_node: 'garbage1': not an OPC UA node id" in err, err
 
 
-def station_read(tmp_path, url: str, timeout_s: float = 1.0) -> subprocess.CompletedProcess:
-    """``station read`` in a process of its own (its stderr as the user sees it) on an OPC UA robot
-    at ``url`` (2 attempts); no drawstring answers, so a robot read exits 1 too, naming it."""
+def station_read(
+    tmp_path, url: str, timeout_s: float = 1.0, drawstring: int = 1
+) -> subprocess.CompletedProcess:
+    """``station read`` in a process of its own (its stderr as the user sees it, and its end) on an
+    OPC UA robot at ``url`` (2 attempts) and a Modbus TCP drawstring on port ``drawstring`` (1:
+    none, so a robot read exits 1 too, naming the drawstring)."""
     config = tmp_path / "station.toml"
     config.write_text(
         f'[robot]\nkind = "opcua"\nurl = "{url}"\ntimeout_s = {timeout_s}\n\n'
-        '[drawstring]\nkind = "modbus_tcp"\nport = 1\n\n[reconnect]\nattempts = 2\n'
+        f'[drawstring]\nkind = "modbus_tcp"\nport = {drawstring}\n\n[reconnect]\nattempts = 2\n'
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.run(
         [sys.executable, "-m", "station.cli", "read", "--config", str(config)],
-        capture_output=True, text=True, timeout=60, env=env, cwd=tmp_path,
+        capture_output=True, text=True, timeout=30, env=env, cwd=tmp_path,
     )  # fmt: skip
 
 
@@ -174,3 +181,81 @@ def test_a_server_that_does_not_answer_in_time_is_one_line_saying_so(moving, tmp
     assert proc.returncode == 1 and proc.stdout == ""
     assert proc.stderr.count("\n") == 1, proc.stderr
     assert f"OPC UA {server.url} did not answer within 0.3 s" in proc.stderr, proc.stderr
+
+
+def answering(value: ua.Variant, joint: int = 2, index: int = 0, times: int = 10**9):
+    """An ``edit`` of the simulated server: joint ``joint``'s position (``index`` 1: speed) holds
+    ``value`` for the first ``times`` reads, then the program's."""
+    left = [times]
+
+    def edit(j, i, answer):
+        if (j, i) != (joint, index) or left[0] <= 0:
+            return answer
+        left[0] -= 1
+        return ua.DataValue(value, SourceTimestamp=answer.SourceTimestamp)
+
+    return edit
+
+
+AT_REST = [10.0, -20.0, 30.0, 0.0, 45.0, 5.0]
+
+
+@pytest.fixture(scope="module")
+def cell():
+    """A robot at rest at ``AT_REST`` on its OPC UA server and a Modbus TCP drawstring (the
+    config's default registers) reading 1234.5 mm, shared by the tests of hostile values."""
+    server = OpcUaRobotServer(lambda: (AT_REST, [0.0] * 6), *free_address()).start()
+    with ModbusDevice(RegisterMap(), lambda: 1234.5, tcp=("127.0.0.1", 0)) as drawstring:
+        yield server, drawstring.address["port"]
+    server.stop()
+
+
+@pytest.fixture
+def at_rest(cell):
+    """The shared cell, its server's ``edit`` cleared after the test."""
+    yield cell
+    cell[0].edit = None
+
+
+def read_with(tmp_path, url: str, drawstring: int, capsys) -> tuple[int, str, str]:
+    """``station read`` (2 attempts) in this process: exit code, stdout, stderr."""
+    config = tmp_path / "station.toml"
+    config.write_text(
+        f'[robot]\nkind = "opcua"\nurl = "{url}"\n\n'
+        f'[drawstring]\nkind = "modbus_tcp"\nport = {drawstring}\n\n'
+        "[reconnect]\nattempts = 2\ninitial_s = 0.01\n"
+    )
+    code = cli.main(["read", "--config", str(config)])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.parametrize(
+    "value, index, says",
+    [
+        (
+            ua.Variant(float("nan"), ua.VariantType.Double),
+            0,
+            "Axis3/ParameterSet/ActualPosition holds nan deg",
+        ),
+        (ua.Variant(float("inf"), ua.VariantType.Double), 0, "ActualPosition holds inf deg, not an angle"),
+        (ua.Variant(1e300, ua.VariantType.Double), 0, r"holds 1e\+300 deg, not an angle within"),
+        (ua.Variant(10**18, ua.VariantType.Int64), 0, r"holds 1e\+18 deg, not an angle within"),
+        (ua.Variant(True, ua.VariantType.Boolean), 0, "ActualPosition holds True, a Boolean, not a number"),
+        (ua.Variant("12.5", ua.VariantType.String), 0, "ActualPosition holds '12.5', a String, not a number"),
+        (
+            ua.Variant(float("nan"), ua.VariantType.Double),
+            1,
+            "Axis3/ParameterSet/ActualSpeed holds nan deg/s",
+        ),
+        (ua.Variant([1.0, 2.0], ua.VariantType.Double), 0, r"holds \[1.0, 2.0\], an array, not a number"),
+    ],
+)
+def test_a_value_that_is_no_angle_is_refused_naming_the_node(at_rest, tmp_path, capsys, value, index, says):
+    """Issue 34, item 3: NaN, inf, 1e300, a Boolean (1.0 deg), the String "12.5" and an Int64 1e18
+    were read as angles, `station read` exit 0."""
+    server, drawstring = at_rest
+    server.edit = answering(value, index=index)
+    code, out, err = read_with(tmp_path, server.url, drawstring, capsys)
+    assert code == 1 and out == "" and err.count("\n") == 1, err
+    assert re.search(says, err), err

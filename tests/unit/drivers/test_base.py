@@ -4,6 +4,7 @@ against the simulated devices in test_drivers_dial / test_drivers_drawstring).""
 import pytest
 
 from drivers.base import (
+    MAX_JOINT_DEG,
     Backoff,
     CrcError,
     DeviceReplyError,
@@ -15,6 +16,7 @@ from drivers.base import (
     call_with_reconnect,
 )
 from errors import DeviceError
+from station.formats import base as formats
 
 
 class Flaky(Driver):
@@ -65,3 +67,7 @@ def test_device_error_code_is_not_retried():
         call_with_reconnect(dev, dev.read, Backoff(attempts=3), lambda s: None)
     assert info.value.code == "3" and dev.opens == 0
     assert isinstance(info.value, DeviceError)  # the CLI maps it to exit 1
+
+
+def test_the_drivers_refuse_the_joint_readings_the_station_files_refuse():
+    assert MAX_JOINT_DEG == formats.MAX_JOINT_DEG
