@@ -99,7 +99,9 @@ class OpcUaJointSource(Driver):
         self.no_channel = "no target nodes configured" if self.target_ids is None else "not opened"
 
     def open(self) -> None:
-        """Connect and read every node once (a node id the server lacks: DeviceReplyError naming it)."""
+        """Connect and read every node once (a node id the server lacks: DeviceReplyError naming it);
+        a client still open is closed first (its thread would outlive the process's work)."""
+        self.close()
         logging.getLogger("asyncua").setLevel(logging.CRITICAL)  # module notes
         client = Client(self.url, timeout=self.timeout_s, sync_wrapper_timeout=self.timeout_s + 1.0)
         try:

@@ -3,6 +3,7 @@ server laid out as the OPC UA Robotics companion specification, fed by the simul
 program; what a cell's wiring gets wrong (a node id, a server gone) is named, and ``sim serve``'s
 station reads its robot through it."""
 
+import json
 import os
 import re
 import subprocess
@@ -259,3 +260,13 @@ def test_a_value_that_is_no_angle_is_refused_naming_the_node(at_rest, tmp_path, 
     code, out, err = read_with(tmp_path, server.url, drawstring, capsys)
     assert code == 1 and out == "" and err.count("\n") == 1, err
     assert re.search(says, err), err
+
+
+def test_a_value_that_is_no_angle_once_is_retried_and_read(at_rest, tmp_path):
+    """Retried with a reconnect, in a process of its own: the retry's client was opened over the
+    one before, whose thread then kept the process alive after its output."""
+    server, drawstring = at_rest
+    server.edit = answering(ua.Variant(float("nan"), ua.VariantType.Double), times=1)
+    proc = station_read(tmp_path, server.url, drawstring=drawstring)
+    assert proc.returncode == 0 and proc.stderr == ""
+    assert json.loads(proc.stdout)["q_deg"] == AT_REST
