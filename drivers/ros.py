@@ -6,7 +6,10 @@ order (a name the message lacks: :class:`~drivers.base.DeviceReplyError` naming 
 (ROS: rad, rad/s); a message older than ``stale_s`` (the publisher stopped) raises
 :class:`~drivers.base.DeviceTimeout`, a closed bridge :class:`~drivers.base.DeviceUnreachable`.
 Without velocities the speed is the change between two messages over their stamps. JointState has
-no controller mode: ``robot_mode`` reads RUNNING (7, as over RTDE) while messages arrive.
+no controller mode: ``robot_mode`` reads RUNNING (7, as over RTDE) while messages arrive. A
+message that is no JointState (not an object; no list of names; no stamp; a position, or a velocity
+that is not empty, other than one finite number per name; a joint beyond ``MAX_JOINT_DEG``) is a
+:class:`~drivers.base.GarbledReply` saying what is wrong, retried as RTDE's garbage is.
 
 The target channel (``target_topic``): the driver advertises that topic, latched, and publishes each
 corrected target on it as a ``sensor_msgs/JointState``: ``name`` the joint names, ``position`` the
@@ -24,7 +27,17 @@ from collections.abc import Sequence
 
 import roslibpy
 
-from drivers.base import DeviceReplyError, DeviceTimeout, DeviceUnreachable, Driver, Field, Reading
+from drivers.base import (
+    MAX_JOINT_DEG,
+    DeviceReplyError,
+    DeviceTimeout,
+    DeviceUnreachable,
+    Driver,
+    Field,
+    GarbledReply,
+    Reading,
+    excerpt,
+)
 
 logging.getLogger("roslibpy").setLevel(logging.CRITICAL)  # its reconnect chatter: the driver reports
 
@@ -72,7 +85,9 @@ class RosJointSource(Driver):
         return f"rosbridge ws://{self.host}:{self.port} {self.topic}"
 
     def open(self) -> None:
-        """Connect to the bridge, subscribe, and wait for the first message."""
+        """Connect to the bridge (a connection still open closed first), subscribe, and wait for
+        the first message."""
+        self.close()
         self._latest, self._previous = None, None
         self._arrived.clear()
         ros = roslibpy.Ros(self.host, self.port)
@@ -114,21 +129,9 @@ class RosJointSource(Driver):
         age = time.monotonic() - arrived
         if age > self.stale_s:
             raise DeviceTimeout(self.name, f"no new message on {self._where} for {age:.2f} s")
-        names = message.get("name", [])
-        missing = [n for n in self.joint_names if n not in names]
-        if missing:
-            raise DeviceReplyError(
-                self.name,
-                f"{self._where}: no joint {missing[0]!r} in the message (it names {names})",
-                "NO_JOINT",
-            )
-        index = [names.index(n) for n in self.joint_names]
-        stamp = message["header"]["stamp"]
-        t = stamp.get("secs", stamp.get("sec", 0)) + stamp.get("nsecs", stamp.get("nanosec", 0)) * 1e-9
-        q = tuple(math.degrees(message["position"][i]) for i in index)
-        velocity = message.get("velocity") or []
-        if len(velocity) == len(names):
-            qd = tuple(math.degrees(velocity[i]) for i in index)
+        t, q, velocity = self._parse(message)
+        if velocity is not None:
+            qd = velocity
         elif self._previous is None or t <= self._previous[0]:
             qd = (math.inf,) * JOINTS  # unknown until a second message: not settled
         else:
@@ -137,6 +140,72 @@ class RosJointSource(Driver):
             self._previous = (t, q)
         values = {"q_deg": q, "qd_deg_s": qd, "robot_mode": RUNNING, "controller_time_s": t}
         return Reading.now(self.name, values, ROS_FIELDS)
+
+    def _parse(self, message) -> tuple[float, tuple[float, ...], tuple[float, ...] | None]:
+        """A JointState's stamp [s], joints [deg] and velocities [deg/s] (None: it has none), in
+        ``joint_names``' order; a malformed message is a GarbledReply saying what is wrong."""
+        if not isinstance(message, dict):
+            raise self._garbled(f"a {type(message).__name__}, not a JointState", message)
+        index = self._index(message)
+        t = _stamp(message.get("header"))
+        if t is None:
+            raise self._garbled("its header.stamp is no time", message)
+        q = self._angles(message, index)
+        if not message.get("velocity"):
+            return t, q, None
+        velocity = _numbers(message["velocity"], len(message["name"]))
+        if velocity is None:
+            raise self._garbled(f"its velocity is neither empty nor {len(message['name'])} numbers", message)
+        return t, q, tuple(math.degrees(velocity[i]) for i in index)
+
+    def _index(self, message: dict) -> list[int]:
+        """Where each of ``joint_names`` is in the message (a name it lacks: DeviceReplyError)."""
+        names = message.get("name")
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise self._garbled("its name is no list of joint names", message)
+        missing = [n for n in self.joint_names if n not in names]
+        if missing:
+            raise DeviceReplyError(
+                self.name,
+                f"{self._where}: no joint {missing[0]!r} in the message (it names {excerpt(repr(names))})",
+                "NO_JOINT",
+            )
+        return [names.index(n) for n in self.joint_names]
+
+    def _angles(self, message: dict, index: list[int]) -> tuple[float, ...]:
+        """The joints at ``index`` [deg], each within ``MAX_JOINT_DEG``."""
+        position = _numbers(message.get("position"), len(message["name"]))
+        if position is None:
+            raise self._garbled(f"its position is not {len(message['name'])} numbers", message)
+        q = tuple(math.degrees(position[i]) for i in index)
+        far = next((k for k, v in enumerate(q) if abs(v) > MAX_JOINT_DEG), None)
+        if far is not None:
+            what = f"{self.joint_names[far]} at {q[far]:g} deg, not an angle within +-{MAX_JOINT_DEG:g} deg"
+            raise self._garbled(what, message)
+        return q
+
+    def _garbled(self, what: str, message) -> GarbledReply:
+        return GarbledReply(
+            self.name,
+            f"{self._where} sent a message that is no JointState: {what} ({excerpt(repr(message))})",
+        )
+
+
+def _numbers(values, n: int) -> list[float] | None:
+    """``values`` if a list of ``n`` finite numbers (not booleans), else None."""
+    if not isinstance(values, list) or len(values) != n:
+        return None
+    ok = all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+    return [float(v) for v in values] if ok else None
+
+
+def _stamp(header) -> float | None:
+    """A header's stamp, s (ROS 1 ``secs``/``nsecs``, ROS 2 ``sec``/``nanosec``); None: none."""
+    stamp = header.get("stamp") if isinstance(header, dict) else None
+    if not isinstance(stamp, dict):
+        return None
+    parts = _numbers([stamp.get("secs", stamp.get("sec")), stamp.get("nsecs", stamp.get("nanosec"))], 2)
+    return None if parts is None else parts[0] + parts[1] * 1e-9
 
 
 class RosTargets:

@@ -10,7 +10,8 @@ ROS-Industrial ``joint_1`` .. ``joint_6``), ``position`` [rad], ``velocity`` [ra
 A client's ``{"op": "publish", "topic": target_topic, "msg": JointState}`` (the station's corrected
 targets: ``header.frame_id`` the target id, ``position`` [rad] in ``JOINT_NAMES``' order) goes to
 ``hand(target, q_deg)``, the program's channel. Other operations are ignored (``advertise``: a
-bridge answers it; the station sends no others).
+bridge answers it; the station sends no others). A hostile or unusual publisher (tests):
+``edit(message)`` returns what is published instead of each message (any JSON value).
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ class RosbridgeServer:
     ):
         self.state, self.host, self.port, self.topic, self.rate_hz = state, host, port, topic, rate_hz
         self.target_topic, self.hand = target_topic, hand
+        self.edit = None  # message -> what is published instead (module notes)
         self.url = f"ws://{host}:{port}"
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server = None
@@ -148,7 +150,8 @@ class RosbridgeServer:
 
     async def _publish(self, writer: asyncio.StreamWriter) -> None:
         while True:
-            text = json.dumps({"op": "publish", "topic": self.topic, "msg": self.message()})
+            message = self.message() if self.edit is None else self.edit(self.message())
+            text = json.dumps({"op": "publish", "topic": self.topic, "msg": message})
             writer.write(_frame(text.encode("utf8")))
             await writer.drain()
             await asyncio.sleep(1.0 / self.rate_hz)

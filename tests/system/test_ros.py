@@ -3,18 +3,25 @@ server publishing the simulated robot program's ``sensor_msgs/JointState``; a jo
 message lacks is named, a publisher gone is retryable, and ``sim serve``'s station reads its robot
 through it and hands a rehearsed program corrected targets on its target topic."""
 
+import contextlib
+import itertools
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
+import tomli_w
 
 import configs
-from drivers.base import DeviceReplyError
+from drivers.base import Backoff, DeviceReplyError, GarbledReply, call_with_reconnect
 from drivers.ros import RosJointSource
 from errors import InputError
 from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.station_sim import SimStation
+from station import cli
+from station.commands.sim import publish_plan
 from station.config import station_config
+from station.formats.plan import Plan
 from tests.system.moving import fails_retryably, free_address, two_targets
 
 
@@ -118,3 +125,130 @@ def test_a_rehearsed_ros_robot_takes_the_stations_corrected_targets_on_its_topic
         np.testing.assert_allclose(held[1], q, atol=1e-9)
     finally:
         station.stop()
+
+
+AT_REST = [10.0, -20.0, 30.0, 0.0, 45.0, 5.0]
+
+
+@pytest.fixture(scope="module")
+def still_bridge():
+    """A rosbridge publishing a robot at rest at ``AT_REST`` at 20 Hz (a message stays the latest
+    for 50 ms), shared by the tests of malformed messages."""
+    server = RosbridgeServer(lambda: (AT_REST, [0.0] * 6), *free_address(), rate_hz=20.0).start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def bridge_at_rest(still_bridge):
+    """The shared bridge, its ``edit`` cleared after the test."""
+    yield still_bridge
+    still_bridge.edit = None
+
+
+def malformed(edit, times: int = 10**9):
+    """An ``edit`` of the bridge: ``edit(message)`` published for the first ``times`` messages."""
+    left = [times]
+
+    def apply(message):
+        left[0] -= 1
+        return edit(message) if left[0] >= 0 else message
+
+    return apply
+
+
+def _set(message: dict, key: str, value) -> dict:
+    return {**message, key: value}
+
+
+def _velocity_2_null(message: dict) -> dict:
+    return _set(message, "velocity", [*message["velocity"][:2], None, *message["velocity"][3:]])
+
+
+@pytest.mark.parametrize(
+    "edit, says",
+    [
+        (_velocity_2_null, "its velocity is neither empty nor 6 numbers"),
+        (lambda m: _set(m, "position", None), "its position is not 6 numbers"),
+        (lambda m: _set(m, "position", "0.1 0.2"), "its position is not 6 numbers"),
+        (lambda m: _set(m, "position", m["position"][:3]), "its position is not 6 numbers"),
+        (lambda m: _set(m, "position", [float("nan")] * 6), "its position is not 6 numbers"),
+        (lambda m: _set(m, "position", [True] * 6), "its position is not 6 numbers"),
+        (lambda m: _set(m, "position", [1e300] * 6), r"joint_1 at 5\.7\d*e\+301 deg, not an angle within"),
+        (lambda m: {k: v for k, v in m.items() if k != "header"}, "its header.stamp is no time"),
+        (lambda m: _set(m, "header", {"stamp": "now", "frame_id": ""}), "its header.stamp is no time"),
+        (lambda m: _set(m, "name", " ".join(JOINT_NAMES)), "its name is no list of joint names"),
+        (lambda m: [m], "a list, not a JointState"),
+    ],
+)
+def test_a_malformed_message_is_refused_naming_it(bridge_at_rest, edit, says):
+    """Issue 34, item 2: each was a TypeError, IndexError, KeyError or AttributeError out of read()."""
+    bridge_at_rest.edit = malformed(edit)
+    with RosJointSource(bridge_at_rest.host, bridge_at_rest.port, "/joint_states", JOINT_NAMES) as source:
+        with pytest.raises(GarbledReply, match=says) as caught:
+            source.read()
+    assert str(caught.value).startswith(f"robot: rosbridge ws://{bridge_at_rest.host}:")
+
+
+def test_a_malformed_message_is_retried_and_the_next_read(bridge_at_rest):
+    bridge_at_rest.edit = malformed(_velocity_2_null, times=1)
+    source = RosJointSource(bridge_at_rest.host, bridge_at_rest.port, "/joint_states", JOINT_NAMES)
+    retried = []
+    try:
+        source.open()
+        reading = call_with_reconnect(source, source.read, Backoff(2, 0.01), on_retry=retried.append)
+    finally:
+        source.close()
+    np.testing.assert_allclose(reading.values["q_deg"], AT_REST)
+    assert [type(e) for e in retried] == [GarbledReply]
+
+
+@contextlib.contextmanager
+def ros_cell(tmp_path):
+    """``station sim serve``'s cell with its robot on a rosbridge (3 targets per line, 30x, no dial)
+    and the plan it walks published: the config's path and the simulated station."""
+    host, port = free_address()
+    _, ds_port = free_address()
+    raw = {
+        "time_scale": 30.0,
+        "robot": {"kind": "ros", "host": host, "port": port},
+        "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": ds_port},
+        "reconnect": {"attempts": 2, "initial_s": 0.05},
+        "session": {"plan": "plan.csv"},
+        "sim": {"speed_deg_s": 120.0, "accel_deg_s2": 480.0, "dwell_s": 2.0, "targets_per_line": 3},
+    }
+    raw["sim"]["plan_csv"] = str(tmp_path / "plan.csv")
+    config = tmp_path / "station.toml"
+    config.write_text(tomli_w.dumps(raw))
+    station = SimStation(station_config(raw, str(config)))
+    publish_plan(tmp_path / "plan.csv", Plan.of(station.plan_deg, station.plan_lines))
+    station.start()
+    try:
+        yield config, station
+    finally:
+        station.stop()
+
+
+def sample(config: Path, capsys) -> tuple[int, str, list[str]]:
+    """``station sample`` on ``config`` in this process: exit code, its output, the samples' lines."""
+    code = cli.main(["sample", "--config", str(config), "--out", str(config.parent / "sess")])
+    out = capsys.readouterr()
+    samples = config.parent / "sess" / "samples.csv"
+    return code, out.out + out.err, samples.read_text().splitlines()[1:] if samples.exists() else []
+
+
+def test_a_session_meets_a_burst_of_malformed_messages_names_them_and_measures_on(tmp_path, capsys):
+    """Issue 34, item 2: one malformed message ended the session with a traceback, exit 1. Here
+    15 (0.15 s) once two samples are stored."""
+    with ros_cell(tmp_path) as (config, station):
+        samples, burst = tmp_path / "sess" / "samples.csv", itertools.count()
+
+        def edit(message: dict):
+            stored = len(samples.read_text().splitlines()) - 1 if samples.exists() else 0
+            return _velocity_2_null(message) if stored >= 2 and next(burst) < 15 else message
+
+        station.devices["robot"].edit = edit
+        code, log, rows = sample(config, capsys)
+    assert code == 0 and len(rows) == 9, log
+    assert "sent a message that is no JointState: its velocity is neither empty nor 6 numbers" in log
+    assert "; retrying" in log and "Traceback" not in log
