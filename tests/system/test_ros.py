@@ -3,14 +3,11 @@ server publishing the simulated robot program's ``sensor_msgs/JointState``; a jo
 message lacks is named, a publisher gone is retryable, and ``sim serve``'s station reads its robot
 through it and hands a rehearsed program corrected targets on its target topic."""
 
-import contextlib
 import itertools
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
-import tomli_w
 
 import configs
 from drivers.base import Backoff, DeviceReplyError, GarbledReply, call_with_reconnect
@@ -18,11 +15,8 @@ from drivers.ros import RosJointSource
 from errors import InputError
 from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.station_sim import SimStation
-from station import cli
-from station.commands.sim import publish_plan
 from station.config import station_config
-from station.formats.plan import Plan
-from tests.system.moving import fails_retryably, free_address, two_targets
+from tests.system.moving import fails_retryably, free_address, sample, simulated_cell, two_targets
 
 
 @pytest.fixture
@@ -203,44 +197,10 @@ def test_a_malformed_message_is_retried_and_the_next_read(bridge_at_rest):
     assert [type(e) for e in retried] == [GarbledReply]
 
 
-@contextlib.contextmanager
-def ros_cell(tmp_path):
-    """``station sim serve``'s cell with its robot on a rosbridge (3 targets per line, 30x, no dial)
-    and the plan it walks published: the config's path and the simulated station."""
-    host, port = free_address()
-    _, ds_port = free_address()
-    raw = {
-        "time_scale": 30.0,
-        "robot": {"kind": "ros", "host": host, "port": port},
-        "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": ds_port},
-        "reconnect": {"attempts": 2, "initial_s": 0.05},
-        "session": {"plan": "plan.csv"},
-        "sim": {"speed_deg_s": 120.0, "accel_deg_s2": 480.0, "dwell_s": 2.0, "targets_per_line": 3},
-    }
-    raw["sim"]["plan_csv"] = str(tmp_path / "plan.csv")
-    config = tmp_path / "station.toml"
-    config.write_text(tomli_w.dumps(raw))
-    station = SimStation(station_config(raw, str(config)))
-    publish_plan(tmp_path / "plan.csv", Plan.of(station.plan_deg, station.plan_lines))
-    station.start()
-    try:
-        yield config, station
-    finally:
-        station.stop()
-
-
-def sample(config: Path, capsys) -> tuple[int, str, list[str]]:
-    """``station sample`` on ``config`` in this process: exit code, its output, the samples' lines."""
-    code = cli.main(["sample", "--config", str(config), "--out", str(config.parent / "sess")])
-    out = capsys.readouterr()
-    samples = config.parent / "sess" / "samples.csv"
-    return code, out.out + out.err, samples.read_text().splitlines()[1:] if samples.exists() else []
-
-
 def test_a_session_meets_a_burst_of_malformed_messages_names_them_and_measures_on(tmp_path, capsys):
     """Issue 34, item 2: one malformed message ended the session with a traceback, exit 1. Here
     15 (0.15 s) once two samples are stored."""
-    with ros_cell(tmp_path) as (config, station):
+    with simulated_cell(tmp_path, {"kind": "ros"}) as (config, station):
         samples, burst = tmp_path / "sess" / "samples.csv", itertools.count()
 
         def edit(message: dict):
