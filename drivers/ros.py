@@ -5,7 +5,8 @@ the latest and its arrival time. ``read()`` gives the latest message's joints in
 order (a name the message lacks: :class:`~drivers.base.DeviceReplyError` naming it), in degrees
 (ROS: rad, rad/s); a message older than ``stale_s`` (the publisher stopped) raises
 :class:`~drivers.base.DeviceTimeout`, a closed bridge :class:`~drivers.base.DeviceUnreachable`.
-Without velocities the speed is the change between two messages over their stamps. JointState has
+Without velocities the speed is the change between two messages over their stamps (over their
+arrivals where the stamps do not advance: a stamp of 0 is legal). JointState has
 no controller mode: ``robot_mode`` reads RUNNING (7, as over RTDE) while messages arrive. A
 message that is no JointState (not an object; no list of names; no stamp; a position, or a velocity
 that is not empty, other than one finite number per name; a joint beyond ``MAX_JOINT_DEG``) is a
@@ -77,7 +78,7 @@ class RosJointSource(Driver):
         self._ros = self._topic = self._targets = None
         self._lock = threading.Lock()
         self._latest: tuple[float, dict] | None = None
-        self._previous: tuple[float, tuple[float, ...]] | None = None
+        self._previous: tuple[float, float, tuple, tuple] | None = None  # arrival, stamp, q, qd
         self._arrived = threading.Event()
 
     @property
@@ -130,16 +131,24 @@ class RosJointSource(Driver):
         if age > self.stale_s:
             raise DeviceTimeout(self.name, f"no new message on {self._where} for {age:.2f} s")
         t, q, velocity = self._parse(message)
-        if velocity is not None:
-            qd = velocity
-        elif self._previous is None or t <= self._previous[0]:
-            qd = (math.inf,) * JOINTS  # unknown until a second message: not settled
-        else:
-            qd = tuple((a - b) / (t - self._previous[0]) for a, b in zip(q, self._previous[1], strict=True))
-        if self._previous is None or t > self._previous[0]:
-            self._previous = (t, q)
+        qd = velocity if velocity is not None else self._speed(arrived, t, q)
         values = {"q_deg": q, "qd_deg_s": qd, "robot_mode": RUNNING, "controller_time_s": t}
         return Reading.now(self.name, values, ROS_FIELDS)
+
+    def _speed(self, arrived: float, t: float, q: tuple[float, ...]) -> tuple[float, ...]:
+        """The joints' change [deg/s] since the message before, over the stamps or, where they do
+        not advance, over the arrivals; the same message read again, its speed; inf until a second
+        message (not settled)."""
+        if self._previous is not None and self._previous[0] == arrived:
+            return self._previous[3]
+        if self._previous is None:
+            qd = (math.inf,) * JOINTS
+        else:
+            before, t_before, q_before, _ = self._previous
+            dt = t - t_before if t > t_before else arrived - before
+            qd = tuple((a - b) / dt for a, b in zip(q, q_before, strict=True))
+        self._previous = (arrived, t, q, qd)
+        return qd
 
     def _parse(self, message) -> tuple[float, tuple[float, ...], tuple[float, ...] | None]:
         """A JointState's stamp [s], joints [deg] and velocities [deg/s] (None: it has none), in

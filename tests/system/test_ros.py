@@ -212,3 +212,14 @@ def test_a_session_meets_a_burst_of_malformed_messages_names_them_and_measures_o
     assert code == 0 and len(rows) == 9, log
     assert "sent a message that is no JointState: its velocity is neither empty nor 6 numbers" in log
     assert "; retrying" in log and "Traceback" not in log
+
+
+def test_without_velocities_or_advancing_stamps_the_speed_is_the_change_between_arrivals(bridge_at_rest):
+    """Stamped 0 and without velocities, every message's speed was inf (over no time): never still."""
+    zero = {"stamp": {"secs": 0, "nsecs": 0}, "frame_id": ""}
+    bridge_at_rest.edit = lambda message: {**message, "header": zero, "velocity": []}
+    with RosJointSource(bridge_at_rest.host, bridge_at_rest.port, "/joint_states", JOINT_NAMES) as source:
+        assert np.isinf(source.read().values["qd_deg_s"]).all()  # one message: no speed yet
+        time.sleep(0.12)  # 20 Hz: two messages later
+        assert source.read().values["qd_deg_s"] == (0.0,) * 6
+        assert source.read().values["qd_deg_s"] == (0.0,) * 6  # the same message again: its speed
