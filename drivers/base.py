@@ -131,6 +131,10 @@ class Driver(abc.ABC):
     fields: Mapping[str, Field]
     no_channel: str | None = "a robot connection of this kind has none"
     """Why :meth:`target_channel` gives None (where it does)."""
+    clock_may_stand_still: bool = False
+    """Whether the source's clock (a robot's ``controller_time_s``) may stand still while its readings
+    are fresh (a value stamped when it changes, or not at all): a session then times the robot's
+    rest on their arrival. False: a clock standing still is a stalled stream repeating old data."""
 
     @abc.abstractmethod
     def open(self) -> None:

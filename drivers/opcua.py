@@ -71,6 +71,7 @@ class OpcUaJointSource(Driver):
     same unit per second)."""
 
     fields = OPCUA_FIELDS
+    clock_may_stand_still = True  # a SourceTimestamp may be when the value last changed (Part 4)
 
     def __init__(
         self,

@@ -59,6 +59,7 @@ class RosJointSource(Driver):
 
     fields = ROS_FIELDS
     no_channel = "no [robot] target_topic"
+    clock_may_stand_still = True  # header.stamp 0 is legal; a message is at most stale_s old
 
     def __init__(
         self,

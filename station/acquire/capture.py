@@ -121,18 +121,26 @@ class Settle:
     began. ``ever`` says whether it settled at all since the last :meth:`reset`. The still period
     is timed on the controller's clock where the robot reports one (``controller_time_s``), and
     a package later than the capture window (``package_age_s``) breaks it: a stream that stalls
-    repeats its last package, which is no evidence of a robot at rest."""
+    repeats its last package, which is no evidence of a robot at rest. A source whose clock may
+    stand still on fresh readings (``clock_may_stand_still``: a value stamped when it changes, or
+    not at all) and holds it for ``settle_s`` is timed on the readings' arrival from then on, and
+    ``note(text)`` says so once."""
 
-    def __init__(self, rules: Rules):
-        self.rules = rules
+    def __init__(
+        self, rules: Rules, note: Callable[[str], None] = lambda text: None, clock_may_stand_still=False
+    ):
+        self.rules, self.note, self.clock_may_stand_still = rules, note, clock_may_stand_still
         self.ever = False
+        self.on_arrival = False  # timed on the readings' arrival (the source's clock stands still)
+        self._latest: tuple[float, float] | None = None  # the source's latest time, its arrival
         self.reset()
 
     def reset(self) -> None:
-        self.since: float | None = None
+        self.since: tuple[float, float] | None = None  # (source, arrival) time the still period began
         self.q0: np.ndarray | None = None
 
     def update(self, robot: Reading) -> bool:
+        t = self._times(robot)
         q = np.asarray(robot.values["q_deg"], float)
         speed = float(np.max(np.abs(robot.values["qd_deg_s"])))
         drift = 0.0 if self.q0 is None else float(np.max(np.abs(q - self.q0)))
@@ -144,12 +152,28 @@ class Settle:
         ):
             self.reset()
             return False
-        t = float(robot.values.get("controller_time_s", robot.t_monotonic))
         if self.since is None:
             self.since, self.q0 = t, q
-        settled = t - self.since >= self.rules.settle_s
+        clock = 1 if self.on_arrival else 0
+        settled = t[clock] - self.since[clock] >= self.rules.settle_s
         self.ever |= settled
         return settled
+
+    def _times(self, robot: Reading) -> tuple[float, float]:
+        """The reading's time on the source's clock and on arrival [s]; turns to the arrival clock
+        (saying so) once a source that may hold its clock has held it for ``settle_s``."""
+        source, arrival = float(robot.values.get("controller_time_s", robot.t_monotonic)), robot.t_monotonic
+        if self._latest is None or source > self._latest[0]:
+            self._latest = (source, arrival)
+        held = arrival - self._latest[1]
+        if self.on_arrival or not self.clock_may_stand_still or held < self.rules.settle_s:
+            return source, arrival
+        self.on_arrival = True
+        self.note(
+            f"{robot.device}: its clock stands still (controller_time_s {source:g} over {held:.2f} s of "
+            "readings): the robot's rest is timed on their arrival instead"
+        )
+        return source, arrival
 
 
 def check_running(robot: Reading) -> None:

@@ -128,7 +128,7 @@ class Session:
         self.clock, self.sleep = clock, sleep
         self.state = State.WAITING
         self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
-        self.settle = Settle(rules)
+        self.settle = Settle(rules, self.listener.message, devices.drivers["robot"].clock_may_stand_still)
         self.rejected = 0
         self._visited: set[int] = set()  # plan targets settled at since the last capture
         self._reached: set[int] = set()  # plan targets settled at in this run

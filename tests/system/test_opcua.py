@@ -24,7 +24,7 @@ from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_nod
 from sim_fixtures.station_sim import SimStation
 from station import cli
 from station.config import station_config
-from tests.system.moving import fails_retryably, free_address, two_targets
+from tests.system.moving import fails_retryably, free_address, sample, simulated_cell, two_targets
 
 ROOT = Path(__file__).resolve().parents[2]
 POSITIONS = [position_node(i) for i in range(1, 7)]
@@ -270,3 +270,27 @@ def test_a_value_that_is_no_angle_once_is_retried_and_read(at_rest, tmp_path):
     proc = station_read(tmp_path, server.url, drawstring=drawstring)
     assert proc.returncode == 0 and proc.stderr == ""
     assert json.loads(proc.stdout)["q_deg"] == AT_REST
+
+
+def stamped_on_change():
+    """An ``edit`` of the simulated server: each value's SourceTimestamp is when it last changed
+    (a server sampling on change, as OPC UA Part 4 allows), not when it was read."""
+    changed = {}
+
+    def edit(joint, index, answer):
+        value, stamp = changed.get((joint, index), (None, None))
+        if value != answer.Value.Value:
+            changed[joint, index] = value, stamp = answer.Value.Value, answer.SourceTimestamp
+        return ua.DataValue(answer.Value, SourceTimestamp=stamp, ServerTimestamp=answer.ServerTimestamp)
+
+    return edit
+
+
+def test_a_server_stamping_values_on_change_is_measured_timed_on_arrival(tmp_path, capsys):
+    """Issue 34, item 1: the robot at rest holds its SourceTimestamp, so its rest, timed on that
+    clock, never lasted: 0 samples, "the robot never settled"."""
+    with simulated_cell(tmp_path, {"kind": "opcua"}) as (config, station):
+        station.devices["robot"].edit = stamped_on_change()
+        code, log, rows = sample(config, capsys)
+    assert code == 0 and len(rows) == 9, log
+    assert log.count("its clock stands still") == 1, log

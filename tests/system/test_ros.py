@@ -214,6 +214,17 @@ def test_a_session_meets_a_burst_of_malformed_messages_names_them_and_measures_o
     assert "; retrying" in log and "Traceback" not in log
 
 
+def test_a_publisher_stamping_every_message_0_is_measured_timed_on_arrival(tmp_path, capsys):
+    """Issue 34, item 1: header.stamp 0 (a legal JointState) timed the robot's rest on a clock that
+    never advances: 0 samples, "the robot never settled"."""
+    with simulated_cell(tmp_path, {"kind": "ros"}) as (config, station):
+        zero = {"stamp": {"secs": 0, "nsecs": 0}, "frame_id": ""}
+        station.devices["robot"].edit = lambda message: {**message, "header": zero}
+        code, log, rows = sample(config, capsys)
+    assert code == 0 and len(rows) == 9, log
+    assert log.count("its clock stands still") == 1, log
+
+
 def test_without_velocities_or_advancing_stamps_the_speed_is_the_change_between_arrivals(bridge_at_rest):
     """Stamped 0 and without velocities, every message's speed was inf (over no time): never still."""
     zero = {"stamp": {"secs": 0, "nsecs": 0}, "frame_id": ""}

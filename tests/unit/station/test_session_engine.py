@@ -688,3 +688,28 @@ def test_captures_rejected_at_a_target_each_round_end_the_session_naming_it(tmp_
     told = f"rejected or suspended (see above){f': {remedy}' if remedy else ''}; 2 samples in"
     assert cell.messages[-1].endswith(f"{told} {cell.folder.path}")
     assert session.rejected > ATTEMPTS_PER_TARGET
+
+
+def segment_start(segments, t: float) -> float:
+    """When the segment of ``timeline(*segments)`` holding at ``t`` began."""
+    return max([0.0] + [until for until, _ in segments if until <= t])
+
+
+@pytest.mark.parametrize("stamp", ["zero", "on change"])
+def test_a_source_whose_clock_may_stand_still_is_timed_on_arrival_and_says_so_once(tmp_path, clock, stamp):
+    """Issue 34, item 1: a ROS publisher stamping 0, or an OPC UA server stamping a value when it
+    changes, holds its clock while the robot rests: timed on it, the rest never lasted."""
+    segments = walk(PLAN.q_deg)
+    script = timeline(*segments)
+
+    def robot(t: float) -> dict:
+        at = 0.0 if stamp == "zero" else segment_start(segments, t)
+        return {**script(t), "controller_time_s": at}
+
+    cell = Cell(tmp_path, clock, robot)
+    cell.robot.fields = {**ROBOT_FIELDS, "controller_time_s": Field("s")}
+    cell.robot.clock_may_stand_still = True
+    assert cell.run() is State.DONE
+    assert cell.targets() == [0, 1, 2]
+    said = [m for m in cell.messages if "its clock stands still" in m]
+    assert len(said) == 1 and said[0].startswith("robot: its clock stands still"), cell.messages
