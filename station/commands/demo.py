@@ -26,7 +26,10 @@ from typing import TYPE_CHECKING
 
 from calib.methods import DEFAULT_TERM_MODEL
 from errors import DeviceError, InputError
-from station.commands.flags import seed
+from station.commands.flags import parameters_as_flags, seed
+
+DEMO_FLAGS = {"n_select": "--plan-size", "per_line": "the candidates per line (station plan --per-line)"}
+"""The planning job's parameters as the demo's user sets them."""
 
 if TYPE_CHECKING:
     from station.acquire.runner import SessionRun
@@ -112,9 +115,10 @@ def _plan(out: Path, config_path: Path, plan_size: int | None) -> Plan:
     setup_path = runner.resolve(cfg.session.setup, config_path)
     setup = load_setup(setup_path)
     readings = cfg.session.readings
-    design = planning.design(
-        robot, setup, str(setup_path), n_select=plan_size, suggest=False, readings=readings
-    )
+    with parameters_as_flags(DEMO_FLAGS):
+        design = planning.design(
+            robot, setup, str(setup_path), n_select=plan_size, suggest=False, readings=readings
+        )
     atomic_write(out / "plan.csv", design.plan.csv_text())
     promise = design.report["predicted"]["plan"]
     print(

@@ -108,3 +108,17 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path):
     stderr = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 1
     assert stderr == ""
+
+
+def test_a_demo_plan_too_small_is_said_in_the_demos_own_flags(tmp_path):
+    """``station demo --plan-size 20``: the planning job's n_select and per_line reached the user."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "station.cli", "demo", "--no-viewer", "--plan-size", "20", "--out", "d"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert proc.stderr.startswith("station: error: --plan-size 20: ") and "or change --plan-size" in proc.stderr
+    assert "n_select" not in proc.stderr and "per_line" not in proc.stderr
