@@ -120,5 +120,6 @@ def test_a_demo_plan_too_small_is_said_in_the_demos_own_flags(tmp_path):
         cwd=tmp_path,
     )
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
-    assert proc.stderr.startswith("station: error: --plan-size 20: ") and "or change --plan-size" in proc.stderr
+    assert proc.stderr.startswith("station: error: --plan-size 20: ")
+    assert "or change --plan-size" in proc.stderr
     assert "n_select" not in proc.stderr and "per_line" not in proc.stderr
