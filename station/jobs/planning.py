@@ -438,6 +438,7 @@ def verify_design(
             "move the gauge block or plan fewer poses"
         )
     _, lid, q = best
-    plan = Plan(np.arange(len(q)), np.full(len(q), lid), np.degrees(q))
+    approach = np.tile(lines[lid][3], (len(q), 1))
+    plan = Plan(np.arange(len(q)), np.full(len(q), lid), np.degrees(q), contact_poses(robot, q), approach)
     report = {"verify": True, "line": int(lid), "n": len(q), "sensitive_to": list(USUALLY_MOVE)}
     return Design(plan, report)

@@ -221,3 +221,20 @@ def test_a_plan_row_whose_orientation_disagrees_with_its_joints_is_refused(irb_p
     assert (
         main(["program", str(path), "--robot", str(IRB2600), "--format", "urscript", "--out", str(out)]) == 0
     )
+
+
+def test_a_verification_plan_carries_its_contact_poses_into_the_program(tmp_path, capsys):
+    """``station program`` called a plan ``station plan --verify`` had just written 'an older plan':
+    that plan carried no contact poses."""
+    plan, out = tmp_path / "check.csv", tmp_path / "check.script"
+    robot, setup = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.toml")
+    argv = ["plan", "--verify", "12", "--robot", str(robot), "--setup", str(setup), "--out", str(plan)]
+    assert main(argv) == 0
+    written = load_plan(plan)
+    assert written.pose is not None and written.approach is not None
+    nominal = contact_poses(load_robot(robot), np.radians(written.q_deg))
+    np.testing.assert_allclose(written.pose, nominal, atol=1e-3)
+    capsys.readouterr()
+    assert main(["program", str(plan), "--robot", str(robot), "--format", "urscript", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "contact poses from the plan" in said and "older plan" not in said
