@@ -89,3 +89,12 @@ def test_the_shipped_file_loads_with_its_active_sections():
     assert (cfg.robot.kind, cfg.drawstring.kind, cfg.dial.dialect) == ("rtde", "modbus_tcp", "sylvac")
     assert cfg.session == StationConfig.model_fields["session"].default
     assert cfg.sim == StationConfig.model_fields["sim"].default
+
+
+def test_the_shipped_robot_files_say_tool_mm_is_the_tcp_as_the_readme_does():
+    """The ABB file said 'tool_mm is the flange', the README that it is the ball's centre (issue 35)."""
+    for path in sorted(configs.path("robots").glob("*.toml")):
+        said = [line for line in path.read_text().splitlines() if line.startswith("#") and "tool_mm" in line]
+        for line in said:
+            assert "is the flange" not in line, (path.name, line)
+        assert not said or any("the TCP in the flange frame" in line for line in said), path.name
