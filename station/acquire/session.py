@@ -128,7 +128,8 @@ class Session:
         self.clock, self.sleep = clock, sleep
         self.state = State.WAITING
         self.pending = [i for i, t in enumerate(plan.target) if int(t) not in folder.finished_targets]
-        self.settle = Settle(rules, self.listener.message, devices.drivers["robot"].clock_may_stand_still)
+        stands_still = getattr(devices.drivers.get("robot"), "clock_may_stand_still", False)
+        self.settle = Settle(rules, self.listener.message, stands_still)
         self.rejected = 0
         self._visited: set[int] = set()  # plan targets settled at since the last capture
         self._reached: set[int] = set()  # plan targets settled at in this run
