@@ -6,10 +6,10 @@ order (a name the message lacks: :class:`~drivers.base.DeviceReplyError` naming 
 (ROS: rad, rad/s); a message older than ``stale_s`` (the publisher stopped) raises
 :class:`~drivers.base.DeviceTimeout`, a closed bridge :class:`~drivers.base.DeviceUnreachable`.
 Without velocities the speed is the change between two messages over their stamps (over their
-arrivals where the stamps do not advance: a stamp of 0 is legal). JointState has
-no controller mode: ``robot_mode`` reads RUNNING (7, as over RTDE) while messages arrive. A
-message that is no JointState (not an object; no list of names; no stamp; a position, or a velocity
-that is not empty, other than one finite number per name; a joint beyond ``MAX_JOINT_DEG``) is a
+arrivals where the stamps do not advance: a stamp of 0 is legal). JointState has no controller
+mode: ``robot_mode`` reads RUNNING (7, as over RTDE) while messages arrive. A message that is no
+JointState (not an object; no list of names; no stamp; a position, or a velocity that is not empty,
+other than one finite number per name; a joint beyond ``MAX_JOINT_DEG``) is a
 :class:`~drivers.base.GarbledReply` saying what is wrong, retried as RTDE's garbage is.
 
 The target channel (``target_topic``): the driver advertises that topic, latched, and publishes each
