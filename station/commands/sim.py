@@ -87,15 +87,16 @@ def run(args) -> int:
     model, cell = _rehearsal(args, cfg, joints, None if plan is None else plan.target)
     once = cell is not None and cfg.robot.kind == "opcua"  # a program run once, started by the station
     station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell, once=once)
+    # Children start with Ctrl-C ignored (a terminal sends it to the whole process group): this
+    # process alone handles it and stops them.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        addresses = station.start()
+    except (OSError, RuntimeError) as exc:  # another simulator holds the addresses: leave its plan be
+        station.stop()
+        raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
     publish_plan(Path(cfg.sim.plan_csv), plan or Plan.of(station.plan_deg, station.plan_lines))
     try:
-        # Children start with Ctrl-C ignored (a terminal sends it to the whole process group):
-        # this process alone handles it and stops them.
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            addresses = station.start()
-        except (OSError, RuntimeError) as exc:
-            raise DeviceError(f"cannot start the simulated devices: {exc}") from exc
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: stop.set())
         _announce(cfg, model)

@@ -320,3 +320,16 @@ def test_serial_drawstrings_are_served_where_the_config_says(tmp_path, drawstrin
     expected = make_cell(0).true_length_mm(make_cell(0).plan_deg[0])[0]
     assert reading.values["length_mm"] == pytest.approx(expected, abs=0.1)
     assert not (tmp_path / "ds-rtu").exists() and not (tmp_path / "ds-ascii").exists()
+
+
+def test_a_second_sim_serve_that_cannot_start_leaves_the_first_ones_plan(tmp_path):
+    """A second ``sim serve`` on addresses in use overwrote the published plan (another seed's) and,
+    ending, withdrew it: the next session followed the wrong plan. Nothing may be written by a
+    command that fails to start."""
+    plan_path = tmp_path / "published" / "plan.csv"
+    with serving(tmp_path, extra_config=FAST_SESSION.format(plan=plan_path)) as (_, config, _):
+        published = plan_path.read_text()
+        second = run_cli("sim", "serve", "--config", str(config), "--seed", "5")
+        assert second.returncode == 1 and "cannot start the simulated devices" in second.stderr
+        assert plan_path.read_text() == published
+        assert run_cli("read", "--config", str(config)).returncode == 0  # the first still serves
