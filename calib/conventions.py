@@ -87,3 +87,16 @@ def com_to_mdh(com_dh: np.ndarray, dh: np.ndarray) -> np.ndarray:
     a, (c, s) = _link_end(dh)
     x, y, z = np.asarray(com_dh, float).T
     return np.column_stack([x + a, c * y - s * z, s * y + c * z])
+
+
+def model_joints(reading_deg, sign, offset_deg) -> np.ndarray:
+    """The model's joints [deg] (..., 6) of a controller's readings ``reading_deg`` (..., 6) under
+    its joint convention: ``q_model = sign * reading + offset_deg`` (``sign`` (6,) of +-1,
+    ``offset_deg`` (6,) [deg]; contract: a robot file's ``[controller]``)."""
+    return np.asarray(sign, float) * np.asarray(reading_deg, float) + np.asarray(offset_deg, float)
+
+
+def controller_joints(q_deg, sign, offset_deg) -> np.ndarray:
+    """The controller's readings [deg] (..., 6) of the model's joints ``q_deg`` (..., 6): the
+    inverse of :func:`model_joints` (``sign`` is its own inverse)."""
+    return np.asarray(sign, float) * (np.asarray(q_deg, float) - np.asarray(offset_deg, float))

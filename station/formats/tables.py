@@ -11,7 +11,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, NonNegativeFloat, model_validator
 
-from calib.conventions import com_from_mdh, dh_from_mdh, dh_name, mdh_name
+from calib.conventions import com_from_mdh, controller_joints, dh_from_mdh, dh_name, mdh_name, model_joints
 from calib.joint_terms import TERM_KINDS, JointTerms, LinkMasses, Term
 from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees, display_factor
 from calib.robot_model import RobotModel
@@ -34,6 +34,7 @@ from station.formats.units import check_positions_in_mm, check_robot_units
 
 Mass = Annotated[float, Field(ge=0, le=1e4)]  # kg: a link or a payload, up to 10 t
 Compliance = Annotated[float, Field(ge=-1e6, le=1e6)]  # urad/(N m)
+
 
 class Joint(Strict):
     """One D-H joint; optionally its link's mass and centre of mass (in D-H frame i) for the
@@ -76,6 +77,34 @@ class Flange(Strict):
     alpha_deg: Angle = 0.0
 
 
+JointSign = Literal[1, -1]
+
+
+class Controller(Strict):
+    """How the robot's controller numbers its joints (contract: ``[controller]``): the model's joint
+    is ``joint_sign * reading + joint_offset_deg``, joint by joint (KUKA's A1, A4 and A6 turn
+    against the usual D-H axes: sign -1)."""
+
+    joint_sign: Annotated[list[JointSign], Field(min_length=6, max_length=6)] = [1] * 6
+    joint_offset_deg: Annotated[list[Angle], Field(min_length=6, max_length=6)] = [0.0] * 6
+
+    @property
+    def identity(self) -> bool:
+        return all(s == 1 for s in self.joint_sign) and not any(self.joint_offset_deg)
+
+    def model_deg(self, reading_deg) -> np.ndarray:
+        """The model's joints [deg] (..., 6) of controller readings (..., 6) [deg]."""
+        return model_joints(reading_deg, self.joint_sign, self.joint_offset_deg)
+
+    def controller_deg(self, q_deg) -> np.ndarray:
+        """The controller's readings [deg] (..., 6) of the model's joints (..., 6) [deg]."""
+        return controller_joints(q_deg, self.joint_sign, self.joint_offset_deg)
+
+    def model_speed(self, reading_deg_s) -> np.ndarray:
+        """The model's joint speeds (..., 6) of the controller's (offsets do not move)."""
+        return np.asarray(self.joint_sign, float) * np.asarray(reading_deg_s, float)
+
+
 class RobotFile(Strict):
     """A robot model (contract: robot model TOML); a corrected table adds ``calibration`` and,
     where it identified compliances, the ``payload`` they were identified with. ``convention``
@@ -91,6 +120,7 @@ class RobotFile(Strict):
     payload: Payload | None = None
     calibration: dict | None = None
     controller_hash: str | None = None  # the controller's factory-calibration id (UR: ``hash``)
+    controller: Controller = Controller()  # the controller's joint convention (default: the identity)
 
     @model_validator(mode="after")
     def _serial_names_a_robot(self) -> RobotFile:

@@ -320,6 +320,7 @@ def corrected_table(
             **_noise_scale(cal, samples.kind),
         },
         **({"controller_hash": robot.controller_hash} if robot.controller_hash else {}),
+        **({} if robot.controller.identity else {"controller": robot.controller.model_dump()}),
         "joints": joints,
     }
     if flange is not None:
