@@ -3,8 +3,12 @@ program that brings the tool onto each planned contact (``station.jobs.measureme
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
+from errors import InputError
 from station.commands.flags import number
 
 _positive = number(float, "a number", lambda v: 0 < v < 1e4, "{:g} must be above 0 and below 10000")
@@ -37,15 +41,19 @@ def register(sub) -> None:
     p.add_argument(
         "--table",
         type=Path,
-        help="a corrected table (station calibrate --out): the plan's joints are corrected to land the "
-        "contact poses on the edge (station compensate PLAN --table T --robot R), the stand-offs follow it",
+        help="the offline second pass: a corrected table (station calibrate --out) whose model brings the "
+        "tool onto each planned contact pose: the contact joints are corrected, the stand-offs follow",
+    )
+    p.add_argument(
+        "--session",
+        type=Path,
+        metavar="DIR",
+        help="with --table: the first pass's session folder; the targets it has not measured go first",
     )
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    import numpy as np
-
     from station.formats.base import Output, check_writable, write_outputs
     from station.formats.plan import load_plan
     from station.formats.tables import load_robot
@@ -53,13 +61,10 @@ def run(args) -> int:
 
     check_writable(args.out, "--out")
     plan, robot = load_plan(args.plan), load_robot(args.robot)
+    if args.session is not None and args.table is None:
+        raise InputError("--session goes with --table: the second pass orders the corrected targets by it")
     if args.table is not None:
-        from station.formats.tables import check_same_robot, check_same_tool
-
-        table = load_robot(args.table)
-        check_same_robot(table, str(args.table), robot, str(args.robot))
-        check_same_tool(table, str(args.table), robot, str(args.robot))
-        robot = table
+        plan, robot = _second_pass(args, plan, robot)
     motion = measurement.Motion(standoff_mm=args.standoff_mm, dwell_s=args.dwell_s)
     found = measurement.measurement(plan, robot, str(args.plan), motion)
     if args.format == "urscript":
@@ -77,3 +82,37 @@ def run(args) -> int:
         print(f"{short} targets near a joint limit get a shorter stand-off (down to {least:g} mm)")
     print(f"{len(plan)} targets, contact poses from {source}; wrote {args.out}")
     return 0
+
+
+def _second_pass(args, plan, nominal):
+    """The plan with its contact joints corrected by ``--table`` (the targets ``--session`` did not
+    measure first) and the table to write the program with; says what it did."""
+    from station.formats.session_folder import measured_targets
+    from station.formats.tables import check_same_robot, check_same_tool, load_robot
+    from station.jobs.correction import offline_correction, unmeasured_first
+
+    table = load_robot(args.table)
+    check_same_robot(table, str(args.table), nominal, str(args.robot))
+    check_same_tool(table, str(args.table), nominal, str(args.robot))
+    fix = offline_correction(plan, nominal, table)
+    plan = replace(plan, q_deg=fix.q_deg)
+    moved = fix.shift_mm[fix.ok]
+    print(
+        f"second pass: {int(fix.ok.sum())} of {len(plan)} contact joints corrected by {args.table} "
+        f"(the contacts move {np.sqrt(np.mean(moved**2)) if moved.size else 0.0:.3f} mm RMS, "
+        f"max {moved.max(initial=0.0):.3f}); the stand-offs follow"
+    )
+    if not fix.ok.all():
+        kept = ", ".join(str(int(t)) for t in plan.target[~fix.ok])
+        print(f"kept their planned joints (a joint limit, the wrist or a large move): targets {kept}")
+    if args.session is not None:
+        measured = measured_targets(args.session)
+        unknown = measured - {int(t) for t in plan.target}
+        if unknown:
+            raise InputError(
+                f"{args.session}: measured target {min(unknown)}, which {args.plan} does not have: "
+                "another plan's session"
+            )
+        plan, first = unmeasured_first(plan, measured)
+        print(f"{first} targets not measured in {args.session} first, then the {len(plan) - first} measured")
+    return plan, table

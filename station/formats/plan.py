@@ -66,6 +66,16 @@ class Plan:
             writer.writerow([int(t), int(ln), *(f"{v:.6f}" for v in q), *extra])
         return out.getvalue()
 
+    def take(self, index) -> Plan:
+        """The targets at positions ``index`` (an integer array), in that order."""
+        return Plan(
+            self.target[index],
+            self.line[index],
+            self.q_deg[index],
+            None if self.pose is None else self.pose[index],
+            None if self.approach is None else self.approach[index],
+        )
+
     def rows(self) -> list[dict]:
         """As TOML-ready rows (embedded in ``session.toml``)."""
         return [

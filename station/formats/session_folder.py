@@ -537,6 +537,15 @@ def check_session_folder(folder: Path) -> Path:
     return folder
 
 
+def measured_targets(folder: Path) -> set[int]:
+    """The target ids a session folder's ``samples.csv`` holds a whole row for (read only: a
+    running session may hold the folder)."""
+    folder = check_session_folder(folder)
+    found = _whole_rows(folder / "samples.csv", SAMPLE_COLUMNS)
+    _check_cells(folder / "samples.csv", found.rows, SAMPLE_CHECKS)
+    return {int(r["target"]) for r in found.rows}
+
+
 def samples_path(path: Path) -> Path:
     """The samples CSV that ``path`` names: the file itself, or a session folder's samples.csv."""
     path = Path(path)

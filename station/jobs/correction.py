@@ -9,6 +9,11 @@ the tool's orientation kept), a target elsewhere is the contact pose carried ove
 joints are where the calibrated model reaches that pose, by ``station compensate``'s maths
 (``calib.compensation.compensate``, damped Newton from the planned joints); a row that cannot be
 corrected (a joint limit, the wrist singularity, a large move) keeps its planned joints.
+
+Offline (a controller without a target channel: ``station program PLAN --table T``), the corrected
+table stands for the refit: each contact pose is reached by the table's model from the planned
+joints, as ``station compensate`` does (the table's frame is the nominal's up to the base fit the
+calibration held), and the targets a first pass left unmeasured go first.
 """
 
 from __future__ import annotations
@@ -16,10 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from calib.compensation import Status, compensate
 from calib.registration import register_lines
 from calib.robot_model import RobotModel
+from station.formats.plan import Plan
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.running import Refit
 
@@ -86,3 +93,24 @@ def correct_targets(
         p_cal[rows] = point + np.outer((p_cal[rows] - point) @ direction, direction)
     comp = compensate(nominal, calibrated_model(robot, fit), q0, meant=(p_cal, rot_cal))
     return TargetCorrection(fit.n, np.degrees(comp.q), comp.status == Status.OK, comp.shift)
+
+
+def offline_correction(plan: Plan, nominal: RobotFile, table: RobotFile) -> TargetCorrection:
+    """The joints at which the corrected ``table`` puts the TCP on each of ``plan``'s contact poses
+    (its ``x_mm..rz_deg``, else the ``nominal`` model's TCP at the planned joints), from the
+    planned joints; ``n``: the samples the table was calibrated on (0 if it does not say)."""
+    q0 = np.radians(plan.q_deg)
+    meant = None
+    if plan.pose is not None:
+        meant = (plan.pose[:, :3], Rotation.from_rotvec(plan.pose[:, 3:], degrees=True).as_matrix())
+    comp = compensate(nominal.model(), table.model(), q0, meant=meant)
+    n = int((table.calibration or {}).get("n_samples", 0))
+    return TargetCorrection(n, np.degrees(comp.q), comp.status == Status.OK, comp.shift)
+
+
+def unmeasured_first(plan: Plan, measured) -> tuple[Plan, int]:
+    """``plan`` reordered with the targets whose ids are not in ``measured`` first (each group in
+    plan order), and how many those are."""
+    done = np.isin(plan.target, np.fromiter(measured, int))
+    order = np.concatenate([np.flatnonzero(~done), np.flatnonzero(done)])
+    return plan.take(order), int((~done).sum())
