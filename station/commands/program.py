@@ -1,5 +1,6 @@
-"""``station program PLAN.csv --robot R --format urscript|poses-csv --out F``: the measurement
-program that brings the tool onto each planned contact (``station.jobs.measurement``)."""
+"""``station program PLAN.csv --robot R --format urscript|poses-csv|krl|rapid|fanuc-ls --out F``: the
+measurement program that brings the tool onto each planned contact (the geometry:
+``station.jobs.measurement``; the writers and their table of formats: ``station.jobs.programs``)."""
 
 from __future__ import annotations
 
@@ -10,20 +11,26 @@ import numpy as np
 
 from errors import InputError
 from station.commands.flags import number
+from station.jobs.programs import FORMATS
 
 _positive = number(float, "a number", lambda v: 0 < v < 1e4, "{:g} must be above 0 and below 10000")
 
-FORMATS = ("urscript", "poses-csv")
-
 
 def register(sub) -> None:
-    p = sub.add_parser("program", help="write the measurement program for a plan (URScript or a pose list)")
+    p = sub.add_parser(
+        "program",
+        help="write the measurement program for a plan (URScript, KRL, RAPID, Fanuc LS or a pose list)",
+    )
     p.add_argument("plan", type=Path, help="plan CSV (station plan): targets, joints, contact poses")
     p.add_argument("--robot", type=Path, required=True, help="nominal robot TOML the plan was made for")
     p.add_argument(
-        "--format", choices=FORMATS, required=True, help="urscript (UR) or poses-csv (any controller)"
+        "--format",
+        choices=tuple(FORMATS),
+        required=True,
+        help="; ".join(f"{name}: {f.help} ({f.extension})" for name, f in FORMATS.items())
+        + "; joints in the controller's convention (the robot file's [controller])",
     )
-    p.add_argument("--out", type=Path, required=True, help="program file to write")
+    p.add_argument("--out", type=Path, required=True, help="program file to write (krl: the .src)")
     p.add_argument(
         "--standoff-mm",
         type=_positive,
@@ -57,9 +64,11 @@ def run(args) -> int:
     from station.formats.base import Output, check_writable, write_outputs
     from station.formats.plan import load_plan
     from station.formats.tables import load_robot
-    from station.jobs import measurement
+    from station.jobs import measurement, programs
+    from station.jobs.programs.common import Program
 
-    check_writable(args.out, "--out")
+    for path in programs.paths(args.format, args.out):
+        check_writable(path, "--out")
     plan, robot = load_plan(args.plan), load_robot(args.robot)
     if args.session is not None and args.table is None:
         raise InputError("--session goes with --table: the second pass orders the corrected targets by it")
@@ -67,11 +76,8 @@ def run(args) -> int:
         plan, robot = _second_pass(args, plan, robot)
     motion = measurement.Motion(standoff_mm=args.standoff_mm, dwell_s=args.dwell_s)
     found = measurement.measurement(plan, robot, str(args.plan), motion)
-    if args.format == "urscript":
-        text = measurement.urscript(found, robot, str(args.plan), motion)
-    else:
-        text = measurement.poses_csv(found, motion)
-    write_outputs([Output.text(args.out, "--out", text)])
+    files = programs.write(args.format, Program(found, robot, str(args.plan), motion, args.out))
+    write_outputs([Output.text(path, "--out", text) for path, text in files])
     source = "the plan" if plan.pose is not None else "the nominal TCP at the plan's joints (an older plan)"
     if found.skipped.any():
         left = ", ".join(str(int(t)) for t in plan.target[found.skipped])
@@ -80,7 +86,7 @@ def run(args) -> int:
     if short:
         least = np.nanmin(found.distance_mm)
         print(f"{short} targets near a joint limit get a shorter stand-off (down to {least:g} mm)")
-    print(f"{len(plan)} targets, contact poses from {source}; wrote {args.out}")
+    print(f"{len(plan)} targets, contact poses from {source}; wrote {', '.join(str(p) for p, _ in files)}")
     return 0
 
 

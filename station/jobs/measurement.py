@@ -1,21 +1,13 @@
-"""``station program``: the measurement program that brings the tool onto each planned contact.
+"""``station program``: the geometry of the measurement program that brings the tool onto each
+planned contact (the writers, one per controller language: ``station.jobs.programs``).
 
 Per target: a joint move to a stand-off pose ``standoff_mm`` back along the approach, a slow linear
 approach to the contact pose, a dwell the station captures in, a linear retreat to the stand-off.
 The contact poses are the nominal model's (the plan's ``x_mm..rz_deg``, or, in a plan written
 before them, the nominal TCP at its joints): on a real robot the tool lands off the edge by the
-robot's error, which the dial reads and its gate judges. ``urscript`` moves by joint positions
-(the controller's own kinematics make the straight line between them), so no frame convention
-between this base frame and the controller's enters; ``poses-csv`` lists every pose and joint set
-for any other controller (position, rotation vector, quaternion).
-
-The URScript takes corrected targets from the station (``station sample`` corrects the remaining
-targets once its running calibration has determined the model): before it moves to target k it
-reads the RTDE input registers ur_rtde's ``RTDEIOInterface`` writes (``drivers.robot``: the index
-plus one in ``input_int_register_42``, 0 for none, joints 1-5 [rad] in
-``input_double_register_42..46``, joint 6 [urad] in ``input_int_register_43``); if the index names
-k (read before and after the joints, so a target being rewritten is not taken half), the contact
-is those joints and the stand-off moves by the same joint change, else the planned joints.
+robot's error, which the dial reads and its gate judges. The stand-off keeps the contact's tool
+orientation, so the linear moves between them do not turn the tool: every point of it, the flange
+as the ball, moves on a straight line.
 """
 
 from __future__ import annotations
@@ -26,10 +18,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from calib import ik
-from drivers.robot import TARGET_INDEX_INPUT, TARGET_JOINT6_INPUT, TARGET_JOINT_INPUTS, URAD
 from errors import InputError
-from station.formats.plan import APPROACH_COLUMNS, POSE_COLUMNS, Plan
-from station.formats.samples import Q_COLUMNS
+from station.formats.plan import Plan
 from station.formats.tables import RobotFile
 from station.jobs.planning import contact_poses, robot_arrays
 
@@ -47,7 +37,9 @@ approach onto such a pose would turn the wrist on the way in."""
 @dataclass(frozen=True)
 class Motion:
     """How the program moves: stand-off distance [mm], dwell at the contact [s], the approach and
-    retreat speeds [mm/s], the joint moves' speed [deg/s] and acceleration [deg/s^2]."""
+    retreat speeds [mm/s], the joint moves' speed [deg/s] and acceleration [deg/s^2], as a share
+    of each axis' top speed where a controller sets it so (KRL, Fanuc) [%], and their TCP speed
+    where a controller limits them by it (RAPID's speeddata) [mm/s]."""
 
     standoff_mm: float = 20.0
     dwell_s: float = 3.0
@@ -55,6 +47,8 @@ class Motion:
     retreat_mm_s: float = 50.0
     joint_deg_s: float = 30.0
     joint_deg_s2: float = 60.0
+    joint_percent: float = 10.0
+    joint_mm_s: float = 250.0
 
 
 @dataclass(frozen=True)
@@ -127,115 +121,8 @@ def _standoff(robot: RobotFile, pose, rot, approach, q, distance) -> tuple[np.nd
     return q_deg, (err > 1e-3) | outside.any(axis=1)
 
 
-def urscript(m: Measurement, robot: RobotFile, source: str, motion: Motion = Motion()) -> str:
-    """A URScript program (``def station_measurement(): ... end``) for the measurement ``m``."""
-    deg = np.radians
-    joint_v, joint_a = deg(motion.joint_deg_s), deg(motion.joint_deg_s2)
-    lines = [
-        f"# Measurement program for {program_text(robot.name)}: {len(m.plan)} targets from "
-        f"{program_text(source)} (station program).",
-        f"# Per target: movej to a stand-off {motion.standoff_mm:g} mm back along the approach, movel at "
-        f"{motion.approach_mm_s:g} mm/s onto the contact pose,",
-        f"# a {motion.dwell_s:g} s dwell (station sample captures there), movel back to the stand-off. "
-        "Joints in rad; poses (comments) in mm/deg, base frame.",
-        "# The contact poses are the nominal model's: the dial reads how far the real tool lands off it.",
-        "# Corrected targets: station sample writes target k's contact joints to the RTDE input registers",
-        f"# int {TARGET_INDEX_INPUT} (k + 1, written last; 0: none), "
-        f"double {TARGET_JOINT_INPUTS[0]}..{TARGET_JOINT_INPUTS[-1]} (joints 1-5, rad), "
-        f"int {TARGET_JOINT6_INPUT} (joint 6, urad);",
-        "# before target k the program takes them if the index names k (the stand-off moves with them).",
-        "def station_measurement():",
-        "  set_tcp(p[{:.6f}, {:.6f}, {:.6f}, 0, 0, 0])".format(*(np.asarray(robot.tool_mm) / 1000.0)),
-        *_CORRECTED,
-    ]
-    for k in range(len(m.plan)):
-        q, q_off = deg(m.plan.q_deg[k]), deg(m.standoff_q_deg[k])
-        target = int(m.plan.target[k])
-        if m.skipped[k]:
-            lines.append(f"  # target {target} left out: no stand-off within the joint limits")
-            continue
-        lines += [
-            f"  # target {target}, line {int(m.plan.line[k])}: contact "
-            f"{_numbers(m.pose[k], 3)}, approach {_numbers(m.approach[k], 4)}, "
-            f"stand-off {m.distance_mm[k]:g} mm",
-            f"  q = station_target({target}, {_numbers(q, 6)})",
-            f"  q_off = station_standoff({_numbers(q_off, 6)}, {_numbers(q, 6)}, q)",
-            f"  movej(q_off, a={joint_a:.4f}, v={joint_v:.4f})",
-            f"  movel(q, a=0.1, v={motion.approach_mm_s / 1000.0:.4f})",
-            f"  sleep({motion.dwell_s:g})",
-            f"  movel(q_off, a=0.5, v={motion.retreat_mm_s / 1000.0:.4f})",
-        ]
-    lines += ["end", "station_measurement()", ""]
-    return "\n".join(lines)
-
-
-_INDEX = f"read_input_integer_register({TARGET_INDEX_INPUT})"
-_CORRECTED = (
-    "  def station_target(k, q):",
-    "    # target k's contact joints: the station's corrected ones if the registers name k, else q",
-    f"    if {_INDEX} == k + 1:",
-    "      c = ["
-    + ", ".join(f"read_input_float_register({r})" for r in TARGET_JOINT_INPUTS)
-    + f", read_input_integer_register({TARGET_JOINT6_INPUT}) / {URAD:.1f}]",
-    f"      if {_INDEX} == k + 1:",
-    "        return c",
-    "      end",
-    "    end",
-    "    return q",
-    "  end",
-    "  def station_standoff(q_off, q, c):",
-    "    # the stand-off moved by the contact's joint change",
-    "    return [" + ", ".join(f"q_off[{i}] + c[{i}] - q[{i}]" for i in range(6)) + "]",
-    "  end",
-)
-"""The URScript functions that take a corrected target (module notes)."""
-
-
-POSES_COLUMNS = (
-    "target",
-    "line",
-    *POSE_COLUMNS,
-    "qw",
-    "qx",
-    "qy",
-    "qz",
-    *APPROACH_COLUMNS,
-    "standoff_x_mm",
-    "standoff_y_mm",
-    "standoff_z_mm",
-    *Q_COLUMNS,
-    *(f"standoff_{c}" for c in Q_COLUMNS),
-    "dwell_s",
-)
-
-
-def poses_csv(m: Measurement, motion: Motion = Motion()) -> str:
-    """One row per target (``POSES_COLUMNS``): the contact pose (position, rotation vector and
-    quaternion w, x, y, z), the approach, the stand-off position, both joint sets, the dwell."""
-    quat = Rotation.from_rotvec(m.pose[:, 3:], degrees=True).as_quat()[:, [3, 0, 1, 2]]
-    out = [",".join(POSES_COLUMNS)]
-    for k in np.flatnonzero(~m.skipped):
-        cells = [
-            str(int(m.plan.target[k])),
-            str(int(m.plan.line[k])),
-            *(f"{v:.4f}" for v in m.pose[k]),
-            *(f"{v:.8f}" for v in quat[k]),
-            *(f"{v:.6f}" for v in m.approach[k]),
-            *(f"{v:.4f}" for v in m.standoff_mm[k]),
-            *(f"{v:.6f}" for v in m.plan.q_deg[k]),
-            *(f"{v:.6f}" for v in m.standoff_q_deg[k]),
-            f"{motion.dwell_s:g}",
-        ]
-        out.append(",".join(cells))
-    return "\n".join(out) + "\n"
-
-
 def program_text(text: str) -> str:
     """``text`` as it may stand in a program's comment or string, in any controller's language:
     every character outside printable ASCII escaped (``\\n``, ``\\x1b``, ``\\u00e9``), so that
     a robot's or a file's name with a line break cannot start a line of code."""
     return "".join(c if " " <= c <= "~" and c != "\\" else c.encode("unicode_escape").decode() for c in text)
-
-
-def _numbers(v, digits: int) -> str:
-    return "[" + ", ".join(f"{x:.{digits}f}" for x in v) + "]"

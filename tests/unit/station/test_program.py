@@ -3,6 +3,7 @@ the measurement program moves to a stand-off on the approach, slowly onto the co
 retreats, each pose where the nominal model puts it."""
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,27 +12,14 @@ from scipy.spatial.transform import Rotation
 import configs
 from calib import ik
 from errors import InputError
-from sim_fixtures.world import GaugeLine, Robot, World
 from station.cli import main
 from station.formats.plan import Plan, load_plan
 from station.formats.tables import load_robot
-from station.jobs import measurement
+from station.jobs import measurement, programs
 from station.jobs.planning import contact_poses, robot_arrays
+from station.jobs.programs.common import Program
 
 IRB2600 = configs.path("robots/abb_irb2600.toml")
-LINE = GaugeLine(
-    0, np.array([1000.0, 0, 300]), np.array([0, 1.0, 0]), 400.0, np.array([0, 0, 1.0]), np.array([0, 0, -1.0])
-)
-
-
-@pytest.fixture(scope="module")
-def irb_plan():
-    robot = load_robot(IRB2600)
-    nominal = Robot(robot.table_deg(), np.zeros(3), robot.limits_deg())
-    world = World(nominal, nominal, np.zeros(3), 0.0, (LINE,))
-    q, lines = world.line_configurations(8, np.random.default_rng(0), max_tilt_deg=10.0)
-    pose = contact_poses(robot, np.radians(q))
-    return robot, Plan(np.arange(8), lines, q, pose, np.tile(LINE.approach, (8, 1)))
 
 
 def test_plan_rows_carry_the_contact_pose_and_older_plans_still_read(irb_plan, tmp_path):
@@ -58,6 +46,16 @@ def test_plan_rows_carry_the_contact_pose_and_older_plans_still_read(irb_plan, t
         load_plan(path)
 
 
+def program_text_of(fmt: str, found, robot) -> str:
+    """The text of the first file ``station program --format fmt`` writes for ``found``."""
+    return programs.write(
+        fmt,
+        Program(
+            found, robot, "plan.csv", measurement.Motion(), Path("prog" + programs.FORMATS[fmt].extension)
+        ),
+    )[0][1]
+
+
 def _tcp(robot, q_deg):
     dh, tool = robot_arrays(robot)
     return ik.tool_frames(dh, np.radians(np.atleast_2d(q_deg)), tool)
@@ -73,7 +71,7 @@ def test_the_program_backs_off_along_the_approach_and_comes_back_onto_the_contac
     np.testing.assert_allclose(r_off, r_contact, atol=1e-6)  # the same tool orientation
     assert (found.distance_mm == 20.0).all()
 
-    script = measurement.urscript(found, robot, "plan.csv")
+    script = program_text_of("urscript", found, robot)
     moves = run_urscript(script, {}, {})  # registers at power-on: no corrected target
     assert [m[0] for m in moves] == ["movej", "movel", "sleep", "movel"] * len(plan)
     joints = [np.degrees(m[1]) for m in moves if m[0] != "sleep"]
@@ -84,7 +82,7 @@ def test_the_program_backs_off_along_the_approach_and_comes_back_onto_the_contac
         np.testing.assert_allclose(back, found.standoff_q_deg[k], atol=1e-4)  # 1e-6 rad written
     assert script.count("sleep(3)") == len(plan) and "v=0.0050" in script  # 5 mm/s onto the edge
 
-    rows = measurement.poses_csv(found).splitlines()
+    rows = program_text_of("poses-csv", found, robot).splitlines()
     assert rows[0].split(",")[:9] == [
         "target",
         "line",
@@ -125,7 +123,7 @@ def run_urscript(script: str, ints: dict, floats: dict) -> list[tuple[str, objec
 def test_the_program_moves_to_the_corrected_target_the_registers_name_and_only_that(irb_plan):
     robot, plan = irb_plan
     found = measurement.measurement(plan, robot, "plan.csv")
-    script = measurement.urscript(found, robot, "plan.csv")
+    script = program_text_of("urscript", found, robot)
     k = 3
     change = np.radians([0.2, -0.1, 0.15, -0.3, 0.25, 0.35])  # a correction of a few tenths of a degree
     corrected = np.radians(plan.q_deg[k]) + change
@@ -168,10 +166,10 @@ def test_a_target_without_a_stand_off_within_the_limits_is_left_out_and_said(irb
     pinned = robot.model_copy(update={"joints": joints})  # joint 3 cannot move from target 0's angle
     found = measurement.measurement(plan, pinned, "plan.csv")
     assert found.skipped[0]
-    script = measurement.urscript(found, pinned, "plan.csv")
+    script = program_text_of("urscript", found, pinned)
     assert "# target 0 left out: no stand-off within the joint limits" in script
     assert script.count("movej(") == int((~found.skipped).sum())
-    rows = measurement.poses_csv(found).splitlines()[1:]
+    rows = program_text_of("poses-csv", found, robot).splitlines()[1:]
     assert [int(r.split(",")[0]) for r in rows] == plan.target[~found.skipped].tolist()
 
 

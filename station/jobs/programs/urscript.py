@@ -1,0 +1,87 @@
+"""URScript (Universal Robots): ``def station_measurement(): ... end``, joints in rad.
+
+Moves by joint positions (``movej`` to the stand-off, ``movel`` onto the contact and back: the
+controller's own kinematics make the straight line between them), so no frame convention between
+the model's base frame and the controller's enters. The contact pose stands in a comment (mm, and
+the rotation vector in deg). The program takes corrected targets from the station (``station
+sample`` corrects the remaining targets once its running calibration has determined the model):
+before it moves to target k it reads the RTDE input registers ur_rtde's ``RTDEIOInterface`` writes
+(``drivers.robot``: the index plus one in ``input_int_register_42``, 0 for none, joints 1-5 [rad]
+in ``input_double_register_42..46``, joint 6 [urad] in ``input_int_register_43``); if the index
+names k (read before and after the joints, so a target being rewritten is not taken half), the
+contact is those joints and the stand-off moves by the same joint change, else the planned joints.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from drivers.robot import TARGET_INDEX_INPUT, TARGET_JOINT6_INPUT, TARGET_JOINT_INPUTS, URAD
+from station.jobs.programs.common import Program, comment_text, header, numbers
+
+
+def paths(out: Path) -> tuple[Path]:
+    return (out,)
+
+
+def write(p: Program) -> tuple[str]:
+    """The URScript program of ``p``."""
+    mo = p.motion
+    joint_v, joint_a = np.radians(mo.joint_deg_s), np.radians(mo.joint_deg_s2)
+    contact, standoff = np.radians(p.contact_deg()), np.radians(p.standoff_deg())
+    notes = [
+        *header(p, "mm and rotation vector in deg", units="rad"),
+        "Corrected targets: station sample writes target k's contact joints to the RTDE input registers",
+        f"int {TARGET_INDEX_INPUT} (k + 1, written last; 0: none), "
+        f"double {TARGET_JOINT_INPUTS[0]}..{TARGET_JOINT_INPUTS[-1]} (joints 1-5, rad), "
+        f"int {TARGET_JOINT6_INPUT} (joint 6, urad);",
+        "before target k the program takes them if the index names k (the stand-off moves with them).",
+    ]
+    lines = [
+        *(f"# {comment_text(n)}" for n in notes),
+        "def station_measurement():",
+        "  set_tcp(p[{:.6f}, {:.6f}, {:.6f}, 0, 0, 0])".format(*(np.asarray(p.robot.tool_mm) / 1000.0)),
+        *_CORRECTED,
+    ]
+    m = p.m
+    for k, target, line, skipped in p.targets():
+        if skipped:
+            lines.append(f"  # target {target} left out: no stand-off within the joint limits")
+            continue
+        q, q_off = f"[{numbers(contact[k], 6)}]", f"[{numbers(standoff[k], 6)}]"
+        lines += [
+            f"  # target {target}, line {line}: contact [{numbers(m.pose[k], 3)}], "
+            f"approach [{numbers(m.approach[k], 4)}], stand-off {m.distance_mm[k]:g} mm",
+            f"  q = station_target({target}, {q})",
+            f"  q_off = station_standoff({q_off}, {q}, q)",
+            f"  movej(q_off, a={joint_a:.4f}, v={joint_v:.4f})",
+            f"  movel(q, a=0.1, v={mo.approach_mm_s / 1000.0:.4f})",
+            f"  sleep({mo.dwell_s:g})",
+            f"  movel(q_off, a=0.5, v={mo.retreat_mm_s / 1000.0:.4f})",
+        ]
+    lines += ["end", "station_measurement()", ""]
+    return ("\n".join(lines),)
+
+
+_INDEX = f"read_input_integer_register({TARGET_INDEX_INPUT})"
+_CORRECTED = (
+    "  def station_target(k, q):",
+    "    # target k's contact joints: the station's corrected ones if the registers name k, else q",
+    f"    if {_INDEX} == k + 1:",
+    "      c = ["
+    + ", ".join(f"read_input_float_register({r})" for r in TARGET_JOINT_INPUTS)
+    + f", read_input_integer_register({TARGET_JOINT6_INPUT}) / {URAD:.1f}]",
+    f"      if {_INDEX} == k + 1:",
+    "        return c",
+    "      end",
+    "    end",
+    "    return q",
+    "  end",
+    "  def station_standoff(q_off, q, c):",
+    "    # the stand-off moved by the contact's joint change",
+    "    return [" + ", ".join(f"q_off[{i}] + c[{i}] - q[{i}]" for i in range(6)) + "]",
+    "  end",
+)
+"""The URScript functions that take a corrected target (module notes)."""
