@@ -100,7 +100,8 @@ def comment_text(text: str, ends: str = "") -> str:
 
 
 def wrapped(lines: list[str], width: int) -> list[str]:
-    """``lines`` wrapped to ``width`` characters (for languages whose comments are short)."""
+    """``lines`` (escaped: no line breaks left to fold) wrapped to ``width`` characters, for
+    languages whose comments are short."""
     return [part for line in lines for part in textwrap.wrap(line, width, break_on_hyphens=False)]
 
 

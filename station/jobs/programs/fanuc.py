@@ -47,7 +47,7 @@ def paths(out: Path) -> tuple[Path]:
 def write(p: Program) -> tuple[str]:
     """The ``.ls`` program of ``p``."""
     notes = header(p, "X Y Z mm, W P R deg: turns about the fixed x, y, z", "world frame")
-    body = [f"! {comment_text(n, ';')} ;" for n in wrapped(notes, COMMENT_MAX)]
+    body = [f"! {n} ;" for n in wrapped([comment_text(n, ";") for n in notes], COMMENT_MAX)]
     body += ["UFRAME_NUM=0 ;", "UTOOL_NUM=1 ;", *_moves(p)]
     lines = [
         f"/PROG  {p.out.stem.upper()}",
