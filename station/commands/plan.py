@@ -56,8 +56,11 @@ def run(args) -> int:
         if path:
             check_writable(path, flag)
     robot, setup, where = _inputs(args)
+    robot_where = str(args.robot) if args.robot else f"{args.session / 'session.toml'} [robot]"
     if args.verify:
-        design = planning.verify_design(robot, setup, where, n_select=args.verify, seed=args.seed)
+        design = planning.verify_design(
+            robot, setup, where, n_select=args.verify, seed=args.seed, robot_where=robot_where
+        )
         write_outputs([Output.text(args.out, "--out", design.plan.csv_text())])
         print(
             f"verification plan: {len(design.plan)} poses on gauge line {design.report['line']}, chosen "
@@ -74,6 +77,7 @@ def run(args) -> int:
             seed=args.seed,
             suggest=not args.no_suggest,
             readings=_readings(args),
+            robot_where=robot_where,
             progress=lambda message: print(f"... {message}", file=sys.stderr, flush=True),
         )
     outputs = [Output.text(args.out, "--out", design.plan.csv_text())]

@@ -157,8 +157,10 @@ class RobotFile(Strict):
         first = self.joints[0]
         if first.alpha_deg != 0.0 or first.a_mm != 0.0:
             raise ValueError(
-                'joints.0: under convention = "mdh" its alpha_deg and a_mm place joint 1 in a base frame '
-                "of their own; the station's base frame is joint 1's: give 0 for both"
+                f'joints.0: alpha_deg {first.alpha_deg:g} and a_mm {first.a_mm:g} under convention = "mdh": '
+                "a table whose row 1 holds a twist or an offset is likely standard D-H: then set "
+                'convention = "dh"; a modified table gives 0 for both (the station\'s base frame is '
+                "joint 1's)"
             )
         return self
 

@@ -18,8 +18,9 @@ import numpy as np
 from calib import ik
 from calib.accuracy import predicted_workspace_rmse, workspace_rmse_bound
 from calib.calibrate import setup_unknowns
+from calib.conventions import dh_from_mdh
 from calib.experiment import design_model, expected_modes, line_candidates
-from calib.kinematics import N_DH
+from calib.kinematics import ALPHA, N_DH, A
 from calib.params import dh_from_degrees
 from calib.verification import sensitive_rows
 from errors import InputError, ParameterError
@@ -96,11 +97,14 @@ def design(
     seed: int = 0,
     suggest: bool = True,
     readings: int = 1,
+    robot_where: str = "the robot file",
     progress=lambda message: None,
 ) -> Design:
     """Candidates on every line, the MCS plan, its promise next to all candidates', every subset
     of the lines, and (``suggest``) the best next line placements; every promise with ``readings``
-    readings averaged per capture."""
+    readings averaged per capture. A line the arm cannot reach (under 4 points) is refused with its
+    likely cause: a robot file in the wrong convention (``convention_cause``; ``robot_where`` names
+    the file), else as ``unreachable_cause`` finds."""
     lines = placements(setup, where)
     ds_setup = drawstring_setup(setup, where)
     dh, tool = robot_arrays(robot)
@@ -110,12 +114,12 @@ def design(
     for lid, line in lines.items():
         progress(f"candidates on line {lid}")
         q, ok = line_candidates(dh, tool, limits, line, per_line, rng)
+        found = f"{where}: [[lines]] id {lid}: only {int(ok.sum())} of {per_line} points reachable"
         if ok.sum() < 4:
-            cause = unreachable_cause(dh, tool, limits, line, rng)
-            raise InputError(
-                f"{where}: [[lines]] id {lid}: only {int(ok.sum())} of {per_line} points reachable "
-                f"within the joint limits away from singularities; {cause}"
+            cause = convention_cause(robot, robot_where, line) or unreachable_cause(
+                dh, tool, limits, line, rng
             )
+            raise InputError(f"{found} within the joint limits away from singularities; {cause}")
         q_line[lid] = q[ok]
     q_all = np.concatenate(list(q_line.values()))
     line_all = np.concatenate([np.full(len(q), lid) for lid, q in q_line.items()])
@@ -152,7 +156,16 @@ def design(
     if suggest:
         progress("trying further gauge-line placements")
         report["next"] = _next_placements(
-            dh, tool, limits, lines, q_all, line_all, ds_setup, workspace_q, rng, readings=readings,
+            dh,
+            tool,
+            limits,
+            lines,
+            q_all,
+            line_all,
+            ds_setup,
+            workspace_q,
+            rng,
+            readings=readings,
             cell=setup.cell,
         )
     approach = np.array([lines[int(lid)][3] for lid in line_all[rows]])
@@ -164,6 +177,64 @@ def design(
         approach,
     )
     return Design(plan, report)
+
+
+TRIAL_POINTS = 20
+"""Points on a line tried for each other reading of the robot file (``convention_cause``)."""
+
+
+def convention_cause(robot: RobotFile, robot_where: str, line: Line) -> str | None:
+    """The likely convention mistake of a robot file whose arm barely reaches ``line``: the first
+    other reading of its table (``other_readings``) that reaches at least half of ``TRIAL_POINTS``
+    points on it, said with the fix; None if none does. Its own random draws: a plan stays as it was."""
+    tool, limits = np.asarray(robot.tool_mm, float), np.radians(robot.limits_deg())
+    rng = np.random.default_rng(0)
+    for table, fix in other_readings(robot, robot_where):
+        _, ok = line_candidates(dh_from_degrees(table), tool, limits, line, TRIAL_POINTS, rng)
+        if ok.sum() >= TRIAL_POINTS / 2:
+            return fix.format(n=int(ok.sum()), of=TRIAL_POINTS)
+    return None
+
+
+def other_readings(robot: RobotFile, where: str) -> list[tuple[np.ndarray, str]]:
+    """Other standard tables (6, 4) [deg, mm] the file's numbers may have meant, each with the
+    sentence naming that mistake and its fix (``{n}`` of ``{of}`` points reached): modified numbers
+    under ``dh`` (or under no ``convention``: the default is ``dh``), standard ones under ``mdh``,
+    and a standard table whose row 1 twist (usually +-90 deg) was zeroed as a modified table's."""
+    table = robot.file_table_deg()
+    zeroed = table[0, A] == 0.0 and table[0, ALPHA] == 0.0
+    out = []
+    if robot.convention == "dh" and zeroed:
+        given = "convention" in robot.model_fields_set
+        said = 'it says convention = "dh"' if given else 'it gives no convention: the default is "dh"'
+        out.append((dh_from_mdh(table), MISTAKES["mdh"].format(where=where, said=said)))
+    if robot.convention == "mdh":
+        out.append((table, MISTAKES["dh"].format(where=where)))
+    if zeroed:
+        fix = 'set convention = "dh"' if robot.convention == "mdh" else 'keep convention = "dh"'
+        for alpha in (-90.0, 90.0):
+            twisted = table.copy()
+            twisted[0, ALPHA] = alpha
+            out.append((twisted, MISTAKES["zeroed"].format(where=where, alpha=alpha, fix=fix)))
+    return out
+
+
+MISTAKES = {
+    "mdh": (
+        'with convention = "mdh" {{n}} of {{of}} points are reachable: the table is likely modified D-H '
+        '({said}); set convention = "mdh" in {where}'
+    ),
+    "dh": (
+        'with convention = "dh" {{n}} of {{of}} points are reachable: the table is likely standard D-H; '
+        'set convention = "dh" in {where}'
+    ),
+    "zeroed": (
+        "with joints.0 alpha_deg = {alpha:g} {{n}} of {{of}} points are reachable: the table is likely "
+        "standard D-H with row 1's twist and offset zeroed as a modified table's; restore row 1's "
+        "alpha_deg and a_mm from the data sheet and {fix} in {where}"
+    ),
+}
+"""The convention mistakes ``other_readings`` tries, each with its fix."""
 
 
 def unreachable_cause(dh: np.ndarray, tool: np.ndarray, limits: np.ndarray, line: Line, rng) -> str:
@@ -407,6 +478,7 @@ def verify_design(
     n_select: int = VERIFY_POSES,
     per_line: int = 100,
     seed: int = 0,
+    robot_where: str = "the robot file",
 ) -> Design:
     """A short verification plan: ``n_select`` configurations on one gauge line, greedily the most
     informative (``calib.verification.sensitive_rows``) on ``USUALLY_MOVE`` with the line, anchor and
@@ -433,9 +505,10 @@ def verify_design(
         if best is None or info > best[0]:
             best = (info, lid, q[np.sort(rows)])
     if best is None:
+        causes = (convention_cause(robot, robot_where, line) for line in lines.values())
+        cause = next((c for c in causes if c), "move the gauge block or plan fewer poses")
         raise InputError(
-            f"{where}: no gauge line has {n_select} reachable points within the joint limits: "
-            "move the gauge block or plan fewer poses"
+            f"{where}: no gauge line has {n_select} reachable points within the joint limits: {cause}"
         )
     _, lid, q = best
     approach = np.tile(lines[lid][3], (len(q), 1))

@@ -68,7 +68,7 @@ def test_a_modified_table_places_joint_1_at_the_base(tmp_path):
         "alpha_deg = 0.0\na_mm = 0.0\nd_mm = 445.0", "alpha_deg = 0.0\na_mm = 5.0\nd_mm = 445.0"
     )
     (tmp_path / "r.toml").write_text(text)
-    with pytest.raises(InputError, match=r'joints.0: under convention = "mdh" its alpha_deg and a_mm'):
+    with pytest.raises(InputError, match=r'joints.0: alpha_deg 0 and a_mm 5 under convention = "mdh"'):
         load_robot(tmp_path / "r.toml")
 
 
