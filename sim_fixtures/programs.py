@@ -129,18 +129,10 @@ def read_rapid(text: str) -> list[ProgramPoint]:
     )
     if proc is None:
         raise ValueError("no PROC station_target(jointtarget standoff, jointtarget contact)")
-    moves = re.findall(
-        r"^\s*(MoveAbsJ standoff|MoveL CalcRobT\(\w+|WaitTime \\InPos, [-+0-9.eE]+)", proc[1], re.M
-    )
-    if (
-        moves[0] != "MoveAbsJ standoff"
-        or moves[1:2] != ["MoveL CalcRobT(contact"]
-        or moves[3:] != ["MoveL CalcRobT(standoff"]
-    ):
-        raise ValueError(
-            f"station_target moves {moves}, not MoveAbsJ standoff, MoveL contact, WaitTime, MoveL standoff"
-        )
-    dwell = float(moves[2].rsplit(",", 1)[1])
+    moves = [m.strip() for m in proc[1].splitlines() if re.match(r"\s*(Move|Wait)", m)]
+    if len(moves) != len(_RAPID_MOVES) or not all(map(str.startswith, moves, _RAPID_MOVES)):
+        raise ValueError(f"station_target moves {moves}, expected {_RAPID_MOVES}")
+    dwell = float(moves[2].removeprefix(_RAPID_MOVES[2]).rstrip(";"))
     steps = _steps(
         text,
         r"! target (\d+), line (\d+): contact \[\[([^\]]*)\], \[([^\]]*)\]\]",
@@ -153,6 +145,15 @@ def read_rapid(text: str) -> list[ProgramPoint]:
         pose = _named(("x", "y", "z", "q1", "q2", "q3", "q4"), f"{position}, {quaternion}")
         points.append(ProgramPoint(target, line, joints[on], joints[off], pose, dwell))
     return points
+
+
+_RAPID_MOVES = [
+    "MoveAbsJ standoff,",
+    "MoveL CalcRobT(contact,",
+    "WaitTime \\InPos,",
+    "MoveL CalcRobT(standoff,",
+]
+"""How each RAPID ``station_target`` line begins, in order."""
 
 
 def read_fanuc_ls(text: str) -> list[ProgramPoint]:

@@ -189,3 +189,17 @@ def test_krl_writes_the_src_and_its_dat_and_refuses_names_krl_cannot_take(irb_pl
         assert not (tmp_path / out).exists() and not (tmp_path / out).with_suffix(".dat").exists()
     assert program("fanuc-ls", "second_pass.ls") == 0
     assert (tmp_path / "second_pass.ls").read_text().startswith("/PROG  SECOND_PASS\n")
+
+
+def test_the_robot_files_controller_convention_reaches_the_program(irb_plan, tmp_path):
+    robot, plan = irb_plan
+    path, robot_file, out = tmp_path / "plan.csv", tmp_path / "kuka_like.toml", tmp_path / "pass.src"
+    path.write_text(plan.csv_text())
+    convention = f"joint_sign = {KUKA_LIKE.joint_sign}\njoint_offset_deg = {KUKA_LIKE.joint_offset_deg}\n"
+    robot_file.write_text(
+        configs.path("robots/abb_irb2600.toml").read_text() + "\n[controller]\n" + convention
+    )
+    argv = ["program", str(path), "--robot", str(robot_file), "--format", "krl", "--out", str(out)]
+    assert main(argv) == 0
+    contact = [p.contact_deg for p in read_program(out, "krl")]
+    np.testing.assert_allclose(contact, KUKA_LIKE.controller_deg(plan.q_deg), atol=1e-3)
