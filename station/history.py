@@ -318,18 +318,49 @@ def robots(path: Path) -> list[dict]:
     if conn is None:
         return []
     try:
-        rows = conn.execute(
-            "SELECT robot, robot_name, COUNT(*), SUM(command = 'calibrate'), MAX(time_utc), "
-            "(SELECT verdict FROM records r2 WHERE r2.robot = r.robot ORDER BY id DESC LIMIT 1) "
-            "FROM records r GROUP BY robot ORDER BY robot"
-        ).fetchall()
+        rows = conn.execute(ROBOTS).fetchall()
+        states = {row[0]: _state(conn, row[0]) if row[3] == 0 else row[6] for row in rows}
     finally:
         conn.close()
     columns = ("robot", "robot_name", "records", "calibrations", "time_utc", "verdict")
     keys = ("robot", "name", "records", "calibrations", "last_utc", "last_verdict")
     for row in rows:
-        _check_row(dict(zip(columns, row, strict=True)), f"{path}: robot {row[0]!r}")
-    return [dict(zip(keys, row, strict=True)) for row in rows]
+        _check_row(
+            dict(zip(columns, row[:6], strict=True)) | {"verdict": states[row[0]]},
+            f"{path}: robot {row[0]!r}",
+        )
+    return [dict(zip(keys, row[:6], strict=True)) | {"state": states[row[0]]} for row in rows]
+
+
+ROBOTS = (
+    "SELECT robot, robot_name, COUNT(*), SUM(command = 'calibrate'), MAX(time_utc), "
+    "(SELECT verdict FROM records r2 WHERE r2.robot = r.robot ORDER BY id DESC LIMIT 1), "
+    "(SELECT verdict FROM records r2 WHERE r2.robot = r.robot AND r2.table_hash = ("
+    "SELECT table_hash FROM records r3 WHERE r3.robot = r.robot AND r3.command = 'calibrate' "
+    "ORDER BY id DESC LIMIT 1) ORDER BY id DESC LIMIT 1) "
+    "FROM records r GROUP BY robot ORDER BY robot"
+)
+"""Per robot: identity, name, records, calibrations, last time, last verdict and its state: the
+latest verdict on its current table (the latest calibration's, by SHA-256)."""
+
+
+def _state(conn: sqlite3.Connection, robot: str) -> str | None:
+    """The state of a robot without a calibration in the history: the latest verdict on a table that
+    is not a nominal one (``table_kind`` of its figures; a record made before it counts)."""
+    rows = conn.execute("SELECT verdict, figures FROM records WHERE robot = ? ORDER BY id DESC", (robot,))
+    for verdict, figures in rows:
+        if _table_kind(figures) != "nominal":
+            return verdict
+    return None
+
+
+def _table_kind(figures: str) -> str | None:
+    """A stored report's ``table_kind`` (``corrected``, ``nominal``); None where it has none."""
+    try:
+        kind = json.loads(figures).get("table_kind")
+    except (TypeError, ValueError, AttributeError):
+        return None
+    return kind if isinstance(kind, str) else None
 
 
 def records(path: Path, robot: str) -> list[dict]:
@@ -339,9 +370,40 @@ def records(path: Path, robot: str) -> list[dict]:
         return []
     try:
         rows = conn.execute(f"SELECT {', '.join(COLUMNS)} FROM records WHERE robot = ? ORDER BY id", (robot,))
-        return [_record(dict(zip(COLUMNS, row, strict=True)), path) for row in rows]
+        return judged([_record(dict(zip(COLUMNS, row, strict=True)), path) for row in rows])
     finally:
         conn.close()
+
+
+def judged(found: list[dict]) -> list[dict]:
+    """Each record of one robot (oldest first) with the table it judged (``judged``, a phrase) and
+    whether that is the robot's current table (``current``): the latest calibration's (by SHA-256);
+    without a calibration here, any table but a nominal one. Only such records set its state."""
+    written = {r["table_hash"]: r for r in found if r["command"] == "calibrate" and r["table_hash"]}
+    latest = next((r["table_hash"] for r in reversed(found) if r["command"] == "calibrate"), None)
+    out = []
+    for r in found:
+        kind = r["figures"].get("table_kind")
+        current = r["table_hash"] == latest if latest is not None else kind != "nominal"
+        out.append(r | {"judged": _judged_table(r, written.get(r["table_hash"]), kind), "current": current})
+    return out
+
+
+def _judged_table(record: dict, calibration: dict | None, kind) -> str:
+    """The table ``record`` judged: ``the table it wrote`` (a calibration), ``the table of
+    calibration #3 (2026-...)``, ``a nominal table``, ``a corrected table calibrated 2026-...
+    elsewhere`` or, for a record made before tables were told apart, ``a table not calibrated in
+    this history``."""
+    if calibration is record:
+        return "the table it wrote"
+    if calibration is not None:
+        return f"the table of calibration #{calibration['id']} ({calibration['time_utc']})"
+    if kind == "nominal":
+        return "a nominal table"
+    when = record["figures"].get("table_calibrated_utc")
+    if kind == "corrected" and isinstance(when, str):
+        return f"a corrected table calibrated {when} elsewhere"
+    return "a table not calibrated in this history"
 
 
 def _record(row: dict, path: Path) -> dict:

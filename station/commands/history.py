@@ -57,11 +57,13 @@ def run(args) -> int:
 def robots_text(found: list[dict], path: Path) -> str:
     if not found:
         return f"{path}: no records yet"
-    lines = [f"{'robot':24}{'name':16}{'records':>8}{'calibr.':>8}  last"]
+    lines = [
+        f"{'robot':24}{'name':16}{'records':>8}{'calibr.':>8}  {'last record':27}state of its current table"
+    ]
     for r in found:
         lines.append(
             f"{escaped(r['robot']):24}{escaped(r['name']):16}{r['records']:>8}{r['calibrations']:>8}  "
-            f"{escaped(r['last_utc'])} {escaped(r['last_verdict'] or '')}"
+            f"{escaped(r['last_utc']):27}{escaped(r['state'] or '-')}"
         )
     return "\n".join(lines)
 
@@ -70,13 +72,14 @@ def records_text(robot: str, found: list[dict], moved: list[dict]) -> str:
     """One line per record, then every flagged move (``J2.a_mm +0.41 mm, 6.2 sigma since ...``)."""
     from calib.params import display_unit
 
-    lines = [f"robot {escaped(robot)}: {len(found)} records"]
+    lines = [f"robot {escaped(robot)}: {len(found)} records; {state_text(found)}"]
     for r in found:
-        r = {k: v if k in ("id", "rmse_mm", "figures") else escaped(v or "") for k, v in r.items()}
+        r = {k: v if k in ("id", "rmse_mm", "figures", "current") else escaped(v or "") for k, v in r.items()}
         rmse = "" if r["rmse_mm"] is None else f"{r['rmse_mm']:.3f} mm"
+        aside = "" if r["current"] else "; not its current table: leaves its state"
         lines.append(
             f"  #{r['id']:<4} {r['time_utc']}  {r['command']:9} {r['verdict']:12} {rmse:>10}  "
-            f"{r['samples']} (table {r['table']}, {r['table_hash'][:12]})"
+            f"{r['samples']} (table {r['table']}, {r['table_hash'][:12]}: {r['judged']}{aside})"
         )
     if not moved:
         lines.append("no parameter moved between consecutive calibrations (beyond 3 combined sigmas)")
@@ -87,6 +90,16 @@ def records_text(robot: str, found: list[dict], moved: list[dict]) -> str:
             f"{m['since']} (record #{m['record']}): a collision or wear?"
         )
     return "\n".join(lines)
+
+
+def state_text(found: list[dict]) -> str:
+    """``state: holds (the table of calibration #1 (...))``: the latest verdict on the robot's
+    current table (``station.history.judged``)."""
+    on_current = [r for r in found if r["current"]]
+    if not on_current:
+        return "state: none (no calibration or verification of a corrected table)"
+    last = on_current[-1]
+    return f"state: {escaped(last['verdict'] or '-')} (its current table: {escaped(last['judged'])})"
 
 
 HIDDEN = {"Cc", "Cf", "Cs", "Zl", "Zp"}

@@ -60,7 +60,7 @@ def run(args) -> int:
     samples = load_samples(session_samples or args.samples)
     with parameters_as_flags(FLAGS):
         outcome = verification.verify_samples(
-            samples, table, setup, table_where=str(args.table), setup_where=setup_where
+            samples, table, setup, table_where=str(args.table), setup_where=setup_where, robot=robot
         )
     report = outcome.report
     outputs = []

@@ -462,7 +462,9 @@ def _report(
         line_dial=absorbed.line_modes(model),
         provenance=origin,
         holdout_scope=scope,
-        next=next_step(model, cal, check, after.train, workspace, method if short else None, doubts),
+        next=next_step(
+            model, cal, check, after.train, workspace, method if short else None, doubts, robot.param_name
+        ),
     )
 
 
@@ -558,11 +560,13 @@ def next_step(
     workspace: WorkspacePrediction,
     short_of: str | None,
     doubts: list[str] = (),
+    param_name: Callable[[str], str] = lambda name: name,
 ) -> str:
     """What to do now, in one sentence (``NEXT``): re-measure wild rows or noisy instruments, check
     the files a parameter ran away from, mind the solver, add a placement where the workspace is not
     yet determined, check any other doubt of the fit check (``doubts``, its warnings), else accept.
-    ``short_of``: the method that stopped short of the optimum."""
+    ``short_of``: the method that stopped short of the optimum; ``param_name``: the robot file's
+    name of a parameter (``RobotFile.param_name``), as ``check.excursion`` gives it."""
     before = np.abs(model.row_error_mm(cal.before.x))
     wild = wild_rows(before, WILD_FACTOR)
     if wild.size:
@@ -579,7 +583,7 @@ def next_step(
             return NEXT["model_error"].format(ratio=check.noise_ratio, fit=fit.rmse_mm, predicted=predicted)
         return NEXT["noise"].format(ratio=check.noise_ratio)
     if check.excursion is not None and check.excursion_sigmas >= EXCURSION_DOUBT:
-        k = model.names.index(check.excursion)
+        k = [param_name(name) for name in model.names].index(check.excursion)
         files = "setup" if model.setup_mask[k] else "robot file"
         return NEXT["excursion"].format(files=files, name=check.excursion, z=check.excursion_sigmas)
     if check.iteration_cap:
@@ -717,7 +721,7 @@ def fit_check(
     z = excursions(cal.x, model.x0, model.prior_sigma(), cal.identified)
     wild = _wild(model, cal)
     messages = [wild] if wild else []
-    messages += [*found.warnings, *_doubts(model, cal, test, z, fit, capped, agreement)]
+    messages += [*found.warnings, *_doubts(model, cal, test, z, fit, capped, agreement, robot.param_name)]
     refusal = _refusal(model, cal, test, z, fit, robot, (*notes, *([wild] if wild else [])))
     refusal = refusal or _absorbed_refusal(found, workspace, nominal)
     verdict = "inconsistent" if refusal else "doubtful" if messages else "consistent"
@@ -727,7 +731,7 @@ def fit_check(
         chi2=test.chi2,
         dof=test.dof,
         p_value=test.p_value,
-        excursion=model.names[top] if z[top] > 0 else None,
+        excursion=robot.param_name(model.names[top]) if z[top] > 0 else None,
         excursion_sigmas=float(z[top]),
         iteration_cap=capped,
         verdict=verdict,
@@ -781,12 +785,13 @@ def _doubts(
     fit: ErrorMetrics,
     capped: bool,
     agreement: tuple[float, bool] | None = None,
+    param_name: Callable[[str], str] = lambda name: name,
 ) -> list[str]:
     """The warnings of a fit that may still stand: a residual beyond the stated noise (the chi-square
     rejects it and it is ``NOISE_DOUBT_RATIO`` times the noise or more; ``agreement``: how alike
     neighbouring poses' residuals are, and whether that makes it the robot's error), the iteration
     cap reached, parameters ``EXCURSION_DOUBT`` prior sigmas or more from their start. ``capped``:
-    the solver stopped at its iteration cap."""
+    the solver stopped at its iteration cap; ``param_name``: the robot file's name of a parameter."""
     messages = []
     if _beyond_noise(test):
         p = "< 1e-300" if test.p_value < 1e-300 else f"{test.p_value:.1e}"
@@ -802,7 +807,7 @@ def _doubts(
         messages.append(WARNINGS["iteration_cap"].format(nit=cal.after.nit))
     order = [k for k in np.argsort(-z) if z[k] >= EXCURSION_DOUBT]
     if order:
-        moves = "; ".join(_excursion(model, cal, z, k) for k in order[:3])
+        moves = "; ".join(_excursion(model, cal, z, k, param_name) for k in order[:3])
         files = " and the ".join(
             name
             for name, mask in (("robot file", ~model.setup_mask), ("setup", model.setup_mask))
@@ -833,7 +838,7 @@ def _refusal(
         evidence.append(f"{k} of {n} rows lie hundreds of noise sigmas off the rest")
         causes.append("samples of different sessions (or of a cell that changed) in one set")
     if far.any():
-        evidence.append(_excursion(model, cal, z, int(np.argmax(z))))
+        evidence.append(_excursion(model, cal, z, int(np.argmax(z)), robot.param_name))
         if (far & ~model.setup_mask).any():
             causes.insert(0, f"a wrong robot model (the robot file describes the {robot.name})")
         if (far & model.setup_mask).any():
@@ -860,10 +865,13 @@ def _wild(model: MeasurementModel, cal: Calibration) -> str | None:
     )
 
 
-def _excursion(model: MeasurementModel, cal: Calibration, z: np.ndarray, k: int) -> str:
-    """``J5.d_mm moved 1262 mm from the robot file's value, 1262 times its tolerance (1 mm)``."""
-    name = model.names[k]
-    factor, unit = display_unit(name)
+def _excursion(
+    model: MeasurementModel, cal: Calibration, z: np.ndarray, k: int, param_name=lambda name: name
+) -> str:
+    """``J5.d_mm moved 1262 mm from the robot file's value, 1262 times its tolerance (1 mm)``, the
+    parameter named as the robot file does (``param_name``)."""
+    factor, unit = display_unit(model.names[k])
+    name = param_name(model.names[k])
     delta = (cal.x[k] - model.x0[k]) * factor
     if model.setup_mask[k]:
         source, what = "setup's", "stated uncertainty"

@@ -78,7 +78,7 @@ def compare(
         "kind": model.kind,
         "seed": options.seed,
         "before": metrics(model, hold_model, start.before.x).as_json(),
-        "free": free.tolist(),
+        "free": [robot.param_name(name) for name in free.tolist()],
         "methods": [
             {
                 "name": r.method,

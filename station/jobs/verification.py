@@ -35,10 +35,11 @@ from station.jobs.calibration import (
     build_model,
     check_joint_limits,
     payload_of,
+    provenance,
     workspace_configurations,
 )
 from station.jobs.planning import USUALLY_MOVE
-from station.jobs.report import ERROR_HEADER, error_row
+from station.jobs.report import ERROR_HEADER, Provenance, error_row
 
 DRIFT_P = 1e-3
 """The chi-square's p-value below which the residual is more than an unchanged robot leaves."""
@@ -73,6 +74,27 @@ MEANINGS = {
         "recalibrate (station calibrate) before relying on it"
     ),
 }
+
+NEXT = {
+    ("holds", "corrected"): (
+        "keep using the table; verify again after a collision, a repair or at your interval (station plan "
+        "--verify, station sample, station verify)"
+    ),
+    ("drifted", "corrected"): (
+        "recalibrate (station plan, station sample, station calibrate){moved}, then verify the new table"
+    ),
+    ("holds", "nominal"): (
+        "calibrate if you need better than these samples' {rmse:.3f} mm RMS (station plan, station "
+        "sample, station calibrate): this judged the nominal table, not a corrected one"
+    ),
+    ("drifted", "nominal"): (
+        "calibrate the robot (station plan, station sample, station calibrate): its nominal table does "
+        "not describe it to the stated noise; a check of the nominal table leaves the robot's state in "
+        "the history with its current table"
+    ),
+}
+"""V.json's ``next``: what to do now, one sentence starting with the action, by verdict and by the
+kind of table judged (``table_kind``: a corrected table carries ``[calibration]``)."""
 
 
 @dataclass(frozen=True)
@@ -152,8 +174,15 @@ class VerifyReport:
     samples: str
     time_s: float
     missed: Missed | None = None
+    table_kind: str = "nominal"
+    table_calibrated_utc: str | None = None
+    provenance: Provenance | None = None
+    next: str = ""
 
     def as_json(self) -> dict:
+        """V.json: the contract's keys, what table it judged (``table_kind``: ``corrected`` or
+        ``nominal``, ``table_calibrated_utc``: the corrected table's calibration date), the robot,
+        samples, setup, date and station version (as REPORT.json) and ``next``."""
         return {
             "verdict": self.verdict,
             "meaning": self.meaning,
@@ -174,6 +203,10 @@ class VerifyReport:
             "samples": self.samples,
             "time_s": self.time_s,
             "missed": None if self.missed is None else asdict(self.missed),
+            "table_kind": self.table_kind,
+            "table_calibrated_utc": self.table_calibrated_utc,
+            **(self.provenance.as_json() if self.provenance is not None else {}),
+            "next": self.next,
         }
 
 
@@ -201,20 +234,22 @@ def verify_samples(
     *,
     table_where: str = "table",
     setup_where: str = "setup",
+    robot: RobotFile | None = None,
 ) -> VerifyOutcome:
     """Judge ``table`` (a corrected table, or any robot file) on ``samples``: the setup unknowns
-    fitted with the table and its terms held. Raises ``InputError`` for too few samples, a joint
+    fitted with the table and its terms held; ``robot`` (the nominal file, default the table) names
+    the robot in the report. Raises ``InputError`` for too few samples, a joint
     beyond the table's limits, a drawstring set without a setup (``ParameterError``)."""
     t0 = time.perf_counter()
     check_joint_limits(samples, table)
     model = build_model(samples, table, setup, setup_where)
-    robot = table.model()
+    chain = table.model()
     links = table.link_masses(payload_of(table, setup))
-    model = model.with_terms(JointTerms(table.terms(), robot.dh, links))
+    model = model.with_terms(JointTerms(table.terms(), chain.dh, links))
     held = setup_unknowns(model)
     check_distinct_poses(model, int(held.sum()), samples.path)
     x0 = model.x0.copy()
-    x0[~model.setup_mask] = np.concatenate([robot.dh.ravel(), robot.term_values])
+    x0[~model.setup_mask] = np.concatenate([chain.dh.ravel(), chain.term_values])
     check_dials(model, x0, samples.path)
     _, fit, fit_scale = hold_robot(model, x0)
     x = fit.x
@@ -229,12 +264,13 @@ def verify_samples(
     changes = likely_changes(r, *basis, candidates, jac[:, robot_cols], cov)
     check_same_table(model, changes, table, samples.path)
     drifted = is_drifted(test, changes, scale)
-    likely = tuple(_likely(model, c) for c in named(changes)) if drifted else ()
+    likely = tuple(_likely(model, c, table.param_name) for c in named(changes)) if drifted else ()
     smallest = caught_changes(*basis, jac[:, robot_cols], cov, _z_caught(candidates))
     missed = _missed(model, table, x, candidates, smallest)
     errors = model.row_error_mm(x)
     overall = error_metrics(errors)
     verdict = "drifted" if drifted else "holds"
+    kind, calibrated = table_judged(table)
     kept_low = np.asarray(weights) ** 2 < DOWNWEIGHTED_BELOW
     downweighted = np.unique(model.rows[kept_low])
     report = VerifyReport(
@@ -251,8 +287,30 @@ def verify_samples(
         samples=samples.path,
         time_s=round(time.perf_counter() - t0, 4),
         missed=missed,
+        table_kind=kind,
+        table_calibrated_utc=calibrated,
+        provenance=provenance(samples, robot or table, setup_where if setup is not None else None),
+        next=next_step(verdict, kind, likely, overall["rmse_mm"]),
     )
     return VerifyOutcome(report, model, x)
+
+
+def table_judged(table: RobotFile) -> tuple[str, str | None]:
+    """What kind of table ``table`` is (``corrected``: it carries ``[calibration]``, else
+    ``nominal``) and, for a corrected one, its calibration date (``date_utc``)."""
+    if not table.calibration:
+        return "nominal", None
+    when = table.calibration.get("date_utc")
+    return "corrected", when if isinstance(when, str) else None
+
+
+def next_step(verdict: str, kind: str, likely: tuple[Likely, ...], rmse_mm: float) -> str:
+    """What to do now (``NEXT``) after ``verdict`` on a ``kind`` of table (``corrected`` or
+    ``nominal``), naming the parameters most likely moved; ``rmse_mm``: the samples' residual [mm]."""
+    moved = ""
+    if likely:
+        moved = f" after checking what moved ({', '.join(p.param for p in likely[:3])}: a collision or wear?)"
+    return NEXT[verdict, kind].format(moved=moved, rmse=rmse_mm)
 
 
 def check_distinct_poses(model: MeasurementModel, unknowns: int, where: str) -> None:
@@ -336,8 +394,8 @@ def _missed(
         return None
     blind = np.where(moves, smallest * np.where(moves, reach, 1.0), 0.0)
     k = int(np.argmax(blind))
-    name = model.names[candidates[k]]
-    factor, unit = display_unit(name)
+    factor, unit = display_unit(model.names[candidates[k]])
+    name = table.param_name(model.names[candidates[k]])
     if not np.isfinite(blind[k]):
         return Missed(name, None, unit, None)
     return Missed(name, float(smallest[k] * factor), unit, float(blind[k]))
@@ -381,9 +439,10 @@ def named(changes: list[Change]) -> list[Change]:
     return keep[:LIKELY_MAX]
 
 
-def _likely(model: MeasurementModel, change: Change) -> Likely:
-    name = model.names[change.index]
-    factor, unit = display_unit(name)
+def _likely(model: MeasurementModel, change: Change, param_name) -> Likely:
+    """``change`` in display units, its parameter named as the table does (``param_name``)."""
+    factor, unit = display_unit(model.names[change.index])
+    name = param_name(model.names[change.index])
     return Likely(name, change.change * factor, change.sigma * factor, unit, round(change.explains, 4))
 
 
@@ -408,10 +467,17 @@ def meaning(verdict: str, test: DriftTest, likely: tuple[Likely, ...], missed: M
     )
 
 
+def judged(report: VerifyReport) -> str:
+    """Which table was judged: ``corrected table, calibrated 2026-...`` or ``nominal table``."""
+    when = f", calibrated {report.table_calibrated_utc}" if report.table_calibrated_utc else ""
+    return f"{report.table_kind} table{when}"
+
+
 def summary(report: VerifyReport) -> str:
     """A short human summary: the residual overall and per line, the test, the verdict."""
     lines = [
-        f"{report.kind} verification of {report.table} on {report.rows} samples ({report.time_s:.2f} s)",
+        f"{report.kind} verification of {report.table} ({judged(report)}) on {report.rows} samples "
+        f"({report.time_s:.2f} s)",
         ERROR_HEADER,
         error_row("all rows", report.rmse_mm, report.mean_mm, report.max_mm),
     ]
@@ -425,4 +491,5 @@ def summary(report: VerifyReport) -> str:
     if report.downweighted:
         lines.append(f"down-weighted rows (gross readings): {list(report.downweighted)}")
     lines.append(f"verdict: {report.verdict} ({report.meaning})")
+    lines.append(f"next: {report.next}")
     return "\n".join(lines)
