@@ -31,6 +31,7 @@ import numpy as np
 from drivers.ascii import DIALECTS
 from drivers.config import DrawstringAscii, DrawstringModbusTcp, RobotOpcUa, RobotRos, RobotRtde
 from errors import InputError
+from sim_fixtures.controller import presented
 from sim_fixtures.modbus_device import ModbusDevice
 from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_node
 from sim_fixtures.robot_program import RobotFault, SimRobot
@@ -217,7 +218,10 @@ class SimStation:
     (real s) still at the first before it runs (an operator presses play once the station listens).
     ``cell``: another cell than the JR680 of ``[sim] seed`` (``rehearsal_cell``), ``plan`` unused;
     ``once``: the program runs the plan once, as a real one does, instead of round and round, from
-    the station's first read of an OPC UA robot (an RTDE robot's starts at once)."""
+    the station's first read of an OPC UA robot (an RTDE robot's starts at once). ``convention``
+    (joint_sign (6,), joint_offset_deg (6,) [deg]; None: the identity): the controller's, in which
+    the robot's joints are published and its target channel's writes taken
+    (:mod:`sim_fixtures.controller`); the truth walks the model's."""
 
     def __init__(
         self,
@@ -228,6 +232,7 @@ class SimStation:
         start_delay_s: float = 0.0,
         cell: WorldCell | None = None,
         once: bool = False,
+        convention: tuple[Sequence[float], Sequence[float]] | None = None,
     ):
         if not isinstance(cfg.robot, RobotRtde | RobotOpcUa | RobotRos):
             raise InputError(
@@ -258,6 +263,8 @@ class SimStation:
             retarget=None if self.channel is None else Retarget(self.channel, cell),
         )
         self.inbox = None if self.channel is None else TargetInbox(self.channel, self.robot, self.clock)
+        # what the controller publishes and takes: its own joint convention
+        self.published, self.published_inbox = presented(self.robot, self.inbox, *(convention or ()))
         self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
         self.source = CellSource(self.robot, cell)
         rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in (0, 1, 6)]
@@ -303,10 +310,12 @@ class SimStation:
             robot = self.cfg.robot
             if isinstance(robot, RobotOpcUa):
                 self.devices["robot"] = opcua_robot(
-                    robot, self.robot, self.clock, self.once, self.inbox
+                    robot, self.published, self.clock, self.once, self.published_inbox
                 ).start()
             elif isinstance(robot, RobotRos):
-                self.devices["robot"] = ros_robot(robot, self.robot, self.clock, self.inbox).start()
+                self.devices["robot"] = ros_robot(
+                    robot, self.published, self.clock, self.published_inbox
+                ).start()
             else:
                 self.devices["robot"] = self._rtde(elsewhere is not None)
             with _links_claimed(self.cfg, elsewhere):
@@ -335,12 +344,12 @@ class SimStation:
         started = self.clock.start_monotonic
         try:
             return RtdeServerProcess(
-                self.robot, self.cfg.robot.host, start_monotonic=started, inbox=self.inbox
+                self.published, self.cfg.robot.host, start_monotonic=started, inbox=self.published_inbox
             ).start()
         except OSError:
             if not elsewhere:
                 raise
-            return start_on_free_loopback(self.robot, start_monotonic=started, inbox=self.inbox)
+            return start_on_free_loopback(self.published, start_monotonic=started, inbox=self.published_inbox)
 
     def address(self, name: str) -> dict:
         """Where device ``name`` is served, as printed by ``sim serve``."""

@@ -8,11 +8,13 @@ naming the file, the key and what is wrong.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
-from pydantic import Field, TypeAdapter, ValidationError, model_validator
+from pydantic import AfterValidator, Field, TypeAdapter, ValidationError, model_validator
 
+import configs
 from calib.params import DH_NAMES
+from drivers.base import Driver
 from drivers.config import (
     DialConfig,
     DrawstringConfig,
@@ -23,6 +25,7 @@ from drivers.config import (
     SerialLine,
     error_key,
 )
+from drivers.convention import in_model_joints
 from errors import InputError
 from station.formats.base import MAX_DIAL_MM, MAX_LENGTH_MM, DialReading, Length, TimeScale, read_toml
 from station.holders import file_holder, named
@@ -48,8 +51,15 @@ def unreachable_hint(cfg: StationConfig, exc: Exception) -> str:
 Seconds = Annotated[float, Field(gt=0, le=86400)]  # a time of the capture rule, s: up to a day
 
 
+def _six_or_none(values: list) -> list:
+    if len(values) not in (0, 6):
+        raise ValueError(f"{len(values)} values: give 6, joint 1 first (or [] for the robot file's)")
+    return values
+
+
 class SimConfig(Section):
-    """The simulated cell that ``station sim serve`` runs: world seed, robot program motion."""
+    """The simulated cell that ``station sim serve`` runs: world seed, robot program motion, and the
+    joint convention its simulated controller publishes and takes targets in (:meth:`convention`)."""
 
     seed: int = Field(0, ge=0)
     speed_deg_s: float = Field(30.0, gt=0, le=1000)
@@ -58,6 +68,21 @@ class SimConfig(Section):
     targets_per_line: int = Field(70, ge=2, le=10000)  # the cell's plan: targets along each gauge line
     plan_csv: Name = "/tmp/station-sim/plan.csv"  # sim serve publishes the plan it walks here
     change: dict[str, Annotated[float, Field(ge=-100, le=100)]] = {}  # the robot after its calibration
+    # the simulated controller's joint convention ([]: the --robot file's [controller], else the identity)
+    joint_sign: Annotated[list[Literal[1, -1]], AfterValidator(_six_or_none)] = []
+    joint_offset_deg: Annotated[
+        list[Annotated[float, Field(ge=-3600, le=3600)]], AfterValidator(_six_or_none)
+    ] = []
+
+    def convention(self, controller=None) -> tuple[list[float], list[float]]:
+        """The simulated controller's ``joint_sign`` and ``joint_offset_deg`` [deg] (6 each): this
+        section's where given, else ``controller``'s (a robot file's ``[controller]``; None: the
+        identity)."""
+        sign = self.joint_sign or (controller.joint_sign if controller is not None else [1] * 6)
+        offset = self.joint_offset_deg or (
+            controller.joint_offset_deg if controller is not None else [0.0] * 6
+        )
+        return [float(v) for v in sign], [float(v) for v in offset]
 
     @model_validator(mode="after")
     def _change_names(self) -> SimConfig:
@@ -123,6 +148,20 @@ class StationConfig(Section):
         """The configured device sections by name, robot first."""
         found = {"robot": self.robot, "drawstring": self.drawstring, "dial": self.dial}
         return {name: section for name, section in found.items() if section is not None}
+
+    def drivers(self, controller=None) -> dict[str, Driver]:
+        """Every configured device's driver (unopened) by name, robot first; the robot's read and
+        written in the model's joints under ``controller`` (a robot file's ``[controller]``; None:
+        the controller's own)."""
+        built = {name: section.build() for name, section in self.devices().items()}
+        built["robot"] = in_model_joints(built["robot"], controller)
+        return built
+
+
+def resolve(name: str, config_path: str | Path) -> Path:
+    """A file named in the config: beside the config if it is there, else a shipped default."""
+    beside = Path(config_path).parent / name
+    return beside if beside.exists() else configs.path(name)
 
 
 def load_station_config(path: str | Path) -> StationConfig:

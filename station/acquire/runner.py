@@ -12,15 +12,15 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
-import configs
 from drivers.base import DeviceReplyError, DriverError, call_with_reconnect
 from errors import DeviceError, InputError
 from station.acquire.capture import Devices, Rules
+from station.acquire.convention import AwaySettles
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
 from station.acquire.targets import TargetFeed
-from station.config import StationConfig, load_station_config, station_config, unreachable_hint
+from station.config import StationConfig, load_station_config, resolve, station_config, unreachable_hint
 from station.formats.announcement import announcement_path, running_simulator
 from station.formats.base import read_toml, validate
 from station.formats.plan import Plan, load_plan
@@ -39,7 +39,7 @@ STOP_CHECK_S = 0.1  # a drain looks for a stop request this often [s]
 class SessionInputs:
     """Everything a session run needs, validated: its folder (new or reopened), the station
     config (at the session's time scale), the plan, the robot table and the setup; ``notes`` for
-    the session's log as it starts."""
+    the session's log as it starts; ``robot_where``: the robot file's path."""
 
     folder: SessionFolder
     cfg: StationConfig
@@ -47,12 +47,7 @@ class SessionInputs:
     robot: RobotFile
     setup: SetupFile
     notes: tuple[str, ...] = ()
-
-
-def resolve(name: str, config_path: Path) -> Path:
-    """A file named in the config: beside the config if it is there, else a shipped default."""
-    beside = config_path.parent / name
-    return beside if beside.exists() else configs.path(name)
+    robot_where: str = "the robot file"  # where the robot file is, for advice on its [controller]
 
 
 def _plain(model) -> dict:
@@ -127,7 +122,8 @@ def new_session(
         "station": _plain(cfg),
         "plan": plan.rows(),
     }
-    return SessionInputs(SessionFolder.new(out, header), cfg, plan, robot, setup, notes)
+    where = str(resolve(cfg.session.robot_model, config_path))
+    return SessionInputs(SessionFolder.new(out, header), cfg, plan, robot, setup, notes, where)
 
 
 def resume_session(
@@ -151,13 +147,16 @@ def resume_session(
         lock.release()
         raise
     folder = SessionFolder.open(folder_path, lock)
-    return SessionInputs(folder, cfg, plan, header.robot, header.setup, (*notes, *folder.notes))
+    notes = (*notes, *folder.notes)
+    robot_where = f"{where} [robot] (and the robot file it came from)"  # the resumed session's robot
+    return SessionInputs(folder, cfg, plan, header.robot, header.setup, notes, robot_where)
 
 
-def open_devices(cfg: StationConfig) -> Devices:
-    """Build, open and read every configured device once (DeviceError if one stays unreachable)."""
+def open_devices(cfg: StationConfig, controller=None) -> Devices:
+    """Build, open and read every configured device once (DeviceError if one stays unreachable);
+    the robot's joints in the model's, under ``controller`` (the robot file's ``[controller]``)."""
     backoff = cfg.reconnect.backoff()
-    devices = Devices({name: section.build() for name, section in cfg.devices().items()}, backoff)
+    devices = Devices(cfg.drivers(controller), backoff)
     try:
         for driver in devices.drivers.values():
             try:
@@ -204,7 +203,7 @@ def run(
     worker = FitWorker.start(inputs.robot, inputs.setup, plan_rows)  # starts while the devices open
     view = None
     try:
-        devices = open_devices(inputs.cfg)
+        devices = open_devices(inputs.cfg, inputs.robot.controller)
         try:
             if not inputs.folder.made:
                 inputs.folder.make()
@@ -347,6 +346,8 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     live.drain(RESUME_FIT_S)
     rules = Rules.from_config(inputs.cfg.session, inputs.cfg.time_scale)
     session = live.session = Session(inputs.folder, plan, devices, rules, live.listener())
+    controller, where = inputs.robot.controller, inputs.robot_where
+    session.away = AwaySettles(plan.q_deg, plan.target, rules.match_deg, controller, where)
     if live.running.goal_met:
         session.finish("accuracy reached")
     in_main = threading.current_thread() is threading.main_thread()

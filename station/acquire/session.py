@@ -194,7 +194,10 @@ class Session:
         if not self.settle.update(robot):
             return False
         index = self._match(np.asarray(robot.values["q_deg"]))
-        if index is None:
+        if index is None:  # away from every target: a wrong joint convention, once it shows, is said
+            away = getattr(self, "away", None)  # station.acquire.convention.AwaySettles, set by the runner
+            if away is not None and (advice := away.settled(robot.values["q_deg"])):
+                self.listener.message(advice)
             return False
         self._reached.add(index)
         self.listener.settled(index)
@@ -330,6 +333,8 @@ class Session:
             never = [int(self.plan.target[i]) for i in self.pending if i not in self._reached]
             if never:
                 why += f"; never reached: target{'s' if len(never) > 1 else ''} {_listed(never)}"
+            if (advice := getattr(getattr(self, "away", None), "advice", None)) is not None:
+                why += f"; {advice}"
         return f"no capture for {waited:g} s: {why}"
 
     def _end(self, state: State, text: str) -> State:

@@ -1,7 +1,9 @@
 """``station read [--config F]``: one reading of every configured device, as one JSON object.
 
 The object holds every value (``q_deg`` in degrees, ``length_mm``, ``dial_mm``, ...) and, per
-device, its units and the monotonic and wall-clock times of its reading. A device that stays
+device, its units and the monotonic and wall-clock times of its reading. The robot's joints are the
+model's: the robot file that ``[session] robot_model`` names converts the controller's readings
+with its ``[controller]`` (as ``station sample`` does). A device that stays
 unreachable after the configured retries ends the command with exit 1, naming it.
 """
 
@@ -58,12 +60,14 @@ def _finite_or_none(value):
 
 
 def run(args) -> int:
-    from station.config import load_station_config, unreachable_hint
+    from station.config import load_station_config, resolve, unreachable_hint
+    from station.formats.tables import load_robot
 
     cfg = load_station_config(args.config)
+    controller = load_robot(resolve(cfg.session.robot_model, args.config)).controller
     backoff = cfg.reconnect.backoff()
     try:
-        readings = {name: read_once(section.build(), backoff) for name, section in cfg.devices().items()}
+        readings = {name: read_once(driver, backoff) for name, driver in cfg.drivers(controller).items()}
     except DeviceUnreachable as exc:
         raise DeviceError(f"{exc} ({unreachable_hint(cfg, exc)})") from exc
     print(json.dumps(as_json(readings), allow_nan=False))

@@ -84,9 +84,10 @@ def run(args) -> int:
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
     joints = None if plan is None else (plan.q_deg, plan.line)
-    model, cell = _rehearsal(args, cfg, joints, None if plan is None else plan.target)
+    model, cell, controller = _rehearsal(args, cfg, joints, None if plan is None else plan.target)
     once = cell is not None and cfg.robot.kind == "opcua"  # a program run once, started by the station
-    station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell, once=once)
+    convention = cfg.sim.convention(controller)
+    station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell, once=once, convention=convention)
     # Children start with Ctrl-C ignored (a terminal sends it to the whole process group): this
     # process alone handles it and stops them.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -111,11 +112,12 @@ def run(args) -> int:
 
 
 def _rehearsal(args, cfg, joints, targets):
-    """The robot model's name and the cell to simulate: with ``--robot``/``--setup`` the user's
-    own (``station.jobs.rehearsal``; ``targets``: the plan's target ids), else the shipped JR680's
-    (cell None)."""
+    """The robot model's name, the cell to simulate and the controller's joint convention (the
+    robot file's ``[controller]``): with ``--robot``/``--setup`` the user's own
+    (``station.jobs.rehearsal``; ``targets``: the plan's target ids), else the shipped JR680's (cell
+    and convention None)."""
     if args.robot is None and args.setup is None:
-        return JR680_NAME, None
+        return JR680_NAME, None, None
     if args.robot is None or args.setup is None:
         raise InputError(
             "--robot and --setup go together: the robot file and the setup of the cell to rehearse"
@@ -126,7 +128,7 @@ def _rehearsal(args, cfg, joints, targets):
     cell = rehearsed_cell(
         robot, setup, str(args.setup), cfg.sim.seed, joints, cfg.sim.targets_per_line, targets
     )
-    return robot.name, cell
+    return robot.name, cell, robot.controller
 
 
 def _announce(cfg, model: str) -> None:
