@@ -31,13 +31,20 @@ def run(
     nominal_where: str,
     options: CompensationOptions | None = None,
 ) -> Outcome:
-    """Compensate ``program`` for the calibrated ``table`` (its ``nominal`` model wrote the program)."""
+    """Compensate ``program`` for the calibrated ``table`` (its ``nominal`` model wrote the program).
+    The program's joints are the controller's: converted to the model's by the nominal robot file's
+    ``[controller]`` on read, and back on write."""
     t0 = time.perf_counter()
     calibrated = table.model()
     options = options or CompensationOptions()
-    comp = compensate(nominal.model(), calibrated, np.radians(program.q_deg), options)
+    controller = nominal.controller
+    q_model = controller.model_deg(program.q_deg)
+    comp = compensate(nominal.model(), calibrated, np.radians(q_model), options)
     status = [status_text(comp, i, options, calibrated.limits) for i in range(len(program))]
-    text = program.csv_text(np.degrees(comp.q), comp.shift, status)
+    q_out = np.where(
+        (comp.status == Status.OK)[:, None], controller.controller_deg(np.degrees(comp.q)), program.q_deg
+    )
+    text = program.csv_text(q_out, comp.shift, status)
     ok = comp.status == Status.OK
     cov = table.covariance(table_where)
     report = {

@@ -242,3 +242,35 @@ def test_status_says_why_a_row_keeps_its_joints(cell, tmp_path, capsys):
     )
     assert code == 0
     assert [r["status"] for r in csv.DictReader(out.open())][2] != status["wrist"]
+
+
+def test_a_program_in_a_controllers_convention_is_compensated_in_its_convention(cell, tmp_path, capsys):
+    """A KUKA-like ``[controller]`` in the robot file: the program's joints are the controller's,
+    converted to the model's to compensate and back to write; the result is the model program's
+    compensation in the controller's joints, and a kept row keeps the program's joints."""
+    sc, _, corrected, program, q_program = cell
+    sign, offset = np.array([-1, 1, 1, -1, 1, -1]), np.array([0.0, -90.0, 90.0, 0.0, 0.0, 0.0])
+    robot = tmp_path / "kuka.toml"
+    controller = {"joint_sign": sign.tolist(), "joint_offset_deg": offset.tolist()}
+    robot.write_text(sc.robot.read_text() + "\n" + tomli_w.dumps({"controller": controller}))
+    in_controller = tmp_path / "program_kuka.csv"
+    rows = list(csv.DictReader(program.open()))
+    with in_controller.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        for row, q in zip(rows, q_program, strict=True):
+            reading = sign * (q - offset)  # the contract: q_model = sign * reading + offset
+            writer.writerow({**row, **{f"q{i + 1}_deg": f"{v:.6f}" for i, v in enumerate(reading)}})
+    model_out, kuka_out = tmp_path / "model.csv", tmp_path / "kuka.csv"
+    args = ("--table", corrected, "--out")
+    assert _cli(capsys, "compensate", program, "--robot", sc.robot, *args, model_out)[0] == 0
+    assert _cli(capsys, "compensate", in_controller, "--robot", robot, *args, kuka_out)[0] == 0
+    model_rows, q_model = _compensated(model_out)
+    kuka_rows, q_kuka = _compensated(kuka_out)
+    assert [r["status"] for r in kuka_rows] == [r["status"] for r in model_rows]
+    # each file's joints to 6 decimals: the two agree to twice that rounding
+    np.testing.assert_allclose(sign * q_kuka + offset, q_model, atol=2e-6)
+    kept = [k for k, r in enumerate(kuka_rows) if r["status"] != "ok"]
+    given = list(csv.DictReader(in_controller.open()))
+    q_cols = [f"q{i}_deg" for i in range(1, 7)]
+    assert kept and all([kuka_rows[k][c] for c in q_cols] == [given[k][c] for c in q_cols] for k in kept)
