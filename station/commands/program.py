@@ -100,7 +100,20 @@ def _second_pass(args, plan, nominal):
     table = load_robot(args.table)
     check_same_robot(table, str(args.table), nominal, str(args.robot))
     check_same_tool(table, str(args.table), nominal, str(args.robot))
-    fix = offline_correction(plan, nominal, table)
+    setup = samples = None
+    if args.session is not None:
+        from station.formats.samples import load_samples
+        from station.formats.session_folder import load_session
+
+        _, setup, where = load_session(args.session)
+        samples = load_samples(where)
+    else:
+        print(
+            "warning: without --session the table's frame is taken for the setup's (a calibration holds the "
+            "robot's base, which the lines' placement absorbs): give the first pass's session folder, whose "
+            "lines register it, or the contacts may land millimetres off"
+        )
+    fix = offline_correction(plan, nominal, table, setup, samples)
     plan = replace(plan, q_deg=fix.q_deg)
     moved = fix.shift_mm[fix.ok]
     print(

@@ -54,6 +54,12 @@ def register(subparsers) -> None:
         "--plan", type=Path, help="plan CSV (station plan) for the simulated robot to walk instead of its own"
     )
     serve.add_argument(
+        "--program",
+        type=Path,
+        help="a measurement program (station program: .script, .csv, .src with its .dat, .mod, .ls) for the "
+        "simulated controller to run instead: its contact points, in its order, in the controller's joints",
+    )
+    serve.add_argument(
         "--time-scale",
         type=float,
         metavar="S",
@@ -83,6 +89,10 @@ def run(args) -> int:
         cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"seed": args.seed})})
     stop = threading.Event()
     plan = load_plan(args.plan) if args.plan else None
+    if args.program is not None:
+        if plan is not None:
+            raise InputError("--plan or --program: the simulated robot walks one of them")
+        plan = program_plan(args.program, cfg.sim.convention(_controller(args)))
     joints = None if plan is None else (plan.q_deg, plan.line)
     model, cell, controller = _rehearsal(args, cfg, joints, None if plan is None else plan.target)
     once = cell is not None and cfg.robot.kind == "opcua"  # a program run once, started by the station
@@ -129,6 +139,41 @@ def _rehearsal(args, cfg, joints, targets):
         robot, setup, str(args.setup), cfg.sim.seed, joints, cfg.sim.targets_per_line, targets
     )
     return robot.name, cell, robot.controller
+
+
+def _controller(args):
+    """The ``--robot`` file's ``[controller]`` (None without one)."""
+    from station.formats.tables import load_robot
+
+    return None if args.robot is None else load_robot(args.robot).controller
+
+
+def program_plan(path: Path, convention: tuple[list[float], list[float]]) -> Plan:
+    """The targets a program file walks (the format its extension names), their joints read by a
+    controller of ``convention`` (``joint_sign``, ``joint_offset_deg``) as the model's."""
+    import numpy as np
+
+    from calib.conventions import model_joints
+    from sim_fixtures.programs import read_program
+    from station.formats.plan import Plan
+    from station.jobs.programs import FORMATS
+
+    by_extension = {f.extension: name for name, f in FORMATS.items()}
+    fmt = by_extension.get(path.suffix.lower())
+    if fmt is None:
+        known = ", ".join(by_extension)
+        raise InputError(f"--program {path}: not a program station program writes ({known})")
+    try:
+        points = read_program(path, fmt)
+    except FileNotFoundError as exc:
+        raise InputError(f"--program {path}: no such file {exc.filename}") from None
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, IndexError) as exc:
+        why = f"not a {fmt} program as station program writes it: {exc}"
+        raise InputError(f"--program {path}: {why}") from None
+    if not points:
+        raise InputError(f"--program {path}: no measured targets in it")
+    q = model_joints(np.array([p.contact_deg for p in points]), *convention)
+    return Plan(np.array([p.target for p in points]), np.array([p.line for p in points]), q)
 
 
 def _announce(cfg, model: str) -> None:

@@ -23,12 +23,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from calib.calibrate import hold_robot
 from calib.compensation import Status, compensate
 from calib.registration import register_lines
 from calib.robot_model import RobotModel
 from station.formats.plan import Plan
+from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.running import Refit
+from station.jobs.verification import table_held
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,8 @@ def fitted_lines(setup: SetupFile, fit: Refit) -> dict[int, tuple[np.ndarray, np
 def cell_from_calibrated(setup: SetupFile, fitted: dict) -> tuple[np.ndarray, np.ndarray]:
     """``(R, t)`` taking the calibrated frame to the setup's (``calib.registration``) through the
     fitted lines the setup places (``point_mm``, ``direction``); none: the identity."""
+    if not fitted:
+        return np.eye(3), np.zeros(3)
     placed = {ln.id: ln for ln in setup.lines if ln.point_mm is not None and ln.direction is not None}
     ids = [lid for lid in fitted if lid in placed]
     if not ids:
@@ -82,30 +87,54 @@ def correct_targets(
 ) -> TargetCorrection:
     """The corrected joints of plan rows ``plan_q_deg`` (M, 6) [deg] on lines ``plan_lines`` (M,),
     written with ``robot``'s nominal model, for the robot as ``fit`` models it (module notes)."""
+    calibrated = calibrated_model(robot, fit)
+    return TargetCorrection(
+        fit.n, *_corrected(robot, setup, calibrated, fitted_lines(setup, fit), plan_q_deg, plan_lines)
+    )
+
+
+def _corrected(robot, setup, calibrated: RobotModel, fitted: dict, plan_q_deg, plan_lines, meant_pose=None):
+    """The joints (M, 6) [deg] at which ``calibrated`` reaches each plan row's contact pose
+    (``meant_pose`` (M, 6: mm, rotation vector deg), else ``robot``'s nominal TCP at the planned
+    joints; the setup's frame), carried into its frame through the ``fitted`` lines and onto them;
+    whether each was corrected (M,) and how far the nominal model sees it move (M,) [mm]."""
     nominal = robot.model()
     q0 = np.radians(plan_q_deg)
-    p, rot = nominal.tool_frames(q0)  # the contact poses, the setup's frame
-    fitted = fitted_lines(setup, fit)
+    if meant_pose is None:
+        p, rot = nominal.tool_frames(q0)
+    else:
+        p, rot = meant_pose[:, :3], Rotation.from_rotvec(meant_pose[:, 3:], degrees=True).as_matrix()
     r_cell, t_cell = cell_from_calibrated(setup, fitted)
     p_cal, rot_cal = (p - t_cell) @ r_cell, np.einsum("ji,njk->nik", r_cell, rot)
     for lid, (point, direction) in fitted.items():  # onto the line the fit placed
         rows = np.asarray(plan_lines) == lid
         p_cal[rows] = point + np.outer((p_cal[rows] - point) @ direction, direction)
-    comp = compensate(nominal, calibrated_model(robot, fit), q0, meant=(p_cal, rot_cal))
-    return TargetCorrection(fit.n, np.degrees(comp.q), comp.status == Status.OK, comp.shift)
+    comp = compensate(nominal, calibrated, q0, meant=(p_cal, rot_cal))
+    return np.degrees(comp.q), comp.status == Status.OK, comp.shift
 
 
-def offline_correction(plan: Plan, nominal: RobotFile, table: RobotFile) -> TargetCorrection:
+def table_lines(
+    table: RobotFile, setup: SetupFile, samples: Samples
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """The gauge lines (point [mm], unit direction) by id as ``samples`` place them in ``table``'s
+    frame: the setup unknowns fitted with the table held, as ``station verify`` fits them."""
+    model, x0 = table_held(samples, table, setup, "setup")
+    fit = hold_robot(model, x0)[1]
+    return {lid: model.line(fit.x, lid) for lid in getattr(model, "line_ids", [])}
+
+
+def offline_correction(
+    plan: Plan, nominal: RobotFile, table: RobotFile, setup: SetupFile | None, samples: Samples | None
+) -> TargetCorrection:
     """The joints at which the corrected ``table`` puts the TCP on each of ``plan``'s contact poses
     (its ``x_mm..rz_deg``, else the ``nominal`` model's TCP at the planned joints), from the
-    planned joints; ``n``: the samples the table was calibrated on (0 if it does not say)."""
-    q0 = np.radians(plan.q_deg)
-    meant = None
-    if plan.pose is not None:
-        meant = (plan.pose[:, :3], Rotation.from_rotvec(plan.pose[:, 3:], degrees=True).as_matrix())
-    comp = compensate(nominal.model(), table.model(), q0, meant=meant)
-    n = int((table.calibration or {}).get("n_samples", 0))
-    return TargetCorrection(n, np.degrees(comp.q), comp.status == Status.OK, comp.shift)
+    planned joints; with the first pass's ``samples`` (and its ``setup``), carried into the table's
+    frame through the lines they place (else the table's frame taken for the setup's); ``n``: the
+    samples the table was calibrated on (0 if it does not say)."""
+    fitted = {} if samples is None or setup is None else table_lines(table, setup, samples)
+    calibrated = table.model()
+    found = _corrected(nominal, setup, calibrated, fitted, plan.q_deg, plan.line, plan.pose)
+    return TargetCorrection(int((table.calibration or {}).get("n_samples", 0)), *found)
 
 
 def unmeasured_first(plan: Plan, measured) -> tuple[Plan, int]:

@@ -242,14 +242,9 @@ def verify_samples(
     beyond the table's limits, a drawstring set without a setup (``ParameterError``)."""
     t0 = time.perf_counter()
     check_joint_limits(samples, table)
-    model = build_model(samples, table, setup, setup_where)
-    chain = table.model()
-    links = table.link_masses(payload_of(table, setup))
-    model = model.with_terms(JointTerms(table.terms(), chain.dh, links))
+    model, x0 = table_held(samples, table, setup, setup_where)
     held = setup_unknowns(model)
     check_distinct_poses(model, int(held.sum()), samples.path)
-    x0 = model.x0.copy()
-    x0[~model.setup_mask] = np.concatenate([chain.dh.ravel(), chain.term_values])
     check_dials(model, x0, samples.path)
     _, fit, fit_scale = hold_robot(model, x0)
     x = fit.x
@@ -293,6 +288,21 @@ def verify_samples(
         next=next_step(verdict, kind, likely, overall["rmse_mm"]),
     )
     return VerifyOutcome(report, model, x)
+
+
+def table_held(
+    samples: Samples, table: RobotFile, setup: SetupFile | None, setup_where: str
+) -> tuple[MeasurementModel, np.ndarray]:
+    """The measurement model of ``samples`` with ``table``'s joint-space terms, and its start
+    ``x0`` with the robot's unknowns at the table's values (the setup's at their rough values):
+    what ``calib.calibrate.hold_robot`` fits the setup unknowns from, the table held."""
+    model = build_model(samples, table, setup, setup_where)
+    chain = table.model()
+    links = table.link_masses(payload_of(table, setup))
+    model = model.with_terms(JointTerms(table.terms(), chain.dh, links))
+    x0 = model.x0.copy()
+    x0[~model.setup_mask] = np.concatenate([chain.dh.ravel(), chain.term_values])
+    return model, x0
 
 
 def table_judged(table: RobotFile) -> tuple[str, str | None]:
