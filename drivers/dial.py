@@ -11,10 +11,18 @@ import serial
 from drivers.ascii import DIALECTS, AsciiSerialDriver
 
 DIAL_DIALECTS = ("sylvac", "mitutoyo")
+DIAL_ERRORS = {
+    "3": "out of range: the plunger is beyond its travel, so the tool is off the gauge edge (not "
+    "touching it) or pressed in past the end; bring the tool onto the edge and read again",
+}
+"""What the indicator's error codes mean (``ERR3`` Sylvac-style, ``913`` Mitutoyo-style: code 3)."""
 
 
 class DialIndicator(AsciiSerialDriver):
-    """Reads ``dial_mm``: the indicator's displacement, mm, positive as the plunger goes in."""
+    """Reads ``dial_mm``: the indicator's displacement, mm, positive as the plunger goes in;
+    ``error_meanings``: what its error codes mean (:data:`DIAL_ERRORS`)."""
+
+    error_meanings = DIAL_ERRORS
 
     def __init__(self, port: serial.Serial, dialect: str = "sylvac", name: str = "dial"):
         if dialect not in DIAL_DIALECTS:

@@ -19,7 +19,6 @@ import contextlib
 import dataclasses
 import fcntl
 import functools
-import itertools
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -44,7 +43,8 @@ from sim_fixtures.world import Placement, Robot, World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
 PLAY_WAIT_S = 1e6  # a program run once waits this long (real s) at its first target for play
-PLAY_READS = 25  # node reads (12 per read of joints and speeds): the third read presses play
+PLAY_POLL_S = 0.3  # real s: reads of the joints this long, none PLAY_GAP_S after the last, press play
+PLAY_GAP_S = 0.25  # real s: a longer pause between reads is no session polling
 SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
 
 
@@ -132,9 +132,8 @@ def opcua_robot(
 ) -> OpcUaRobotServer:
     """The robot program's joints on an OPC UA server at the section's ``url``; the config's node
     ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout).
-    ``play``: the program (waiting at its first target) starts at the station's third read of the
-    joints (``PLAY_READS`` node reads: a session polling after its device check, not a one-off
-    ``station read``), as an operator presses play once the session waits for the robot.
+    ``play``: the program (waiting at home) starts once the station polls the joints steadily
+    (:class:`PlayOnPoll`), as an operator presses play once the session waits for the robot.
     ``hand(target, q_deg)``: where corrected targets written to the server go (the program's channel)."""
     positions, speeds = section.nodes()
     if positions != [position_node(i) for i in range(1, 7)] or speeds not in (
@@ -146,16 +145,37 @@ def opcua_robot(
             "(Axis1 .. Axis6) and ActualSpeed beside it: leave both at their defaults"
         )
     url = urlsplit(section.url)
-
-    reads = itertools.count(1)
+    operator = PlayOnPoll(clock) if play else None
 
     def state():
-        if play and clock.now() < 0 and next(reads) >= PLAY_READS:
-            clock.start_monotonic = time.monotonic()
+        if operator is not None:
+            operator.read()
         now = robot.state(clock.now())
         return now.q_deg, now.qd_deg_s
 
     return OpcUaRobotServer(state, url.hostname, url.port or 4840, hand)
+
+
+class PlayOnPoll:
+    """The operator of a program run once: presses play (starts ``clock``) once the station has read
+    the joints for ``PLAY_POLL_S`` with no pause over ``PLAY_GAP_S`` (a session polls them while it
+    waits for the robot, a hundred times a second). A ``station read`` looks twice in one go and
+    leaves: it does not start the program, however often it is run."""
+
+    def __init__(self, clock: SimClock):
+        self.clock = clock
+        self._since = self._last = -float("inf")  # the present stretch of steady reads: its start, its last
+
+    def read(self) -> None:
+        """One read of a joint's value: play, if it completes a steady stretch."""
+        if self.clock.now() >= 0:
+            return
+        now = time.monotonic()
+        if now - self._last > PLAY_GAP_S:
+            self._since = now
+        self._last = now
+        if now - self._since >= PLAY_POLL_S:
+            self.clock.start_monotonic = now
 
 
 def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock, hand=None) -> RosbridgeServer:
@@ -218,7 +238,7 @@ class SimStation:
     (real s) still at the first before it runs (an operator presses play once the station listens).
     ``cell``: another cell than the JR680 of ``[sim] seed`` (``rehearsal_cell``), ``plan`` unused;
     ``once``: the program runs the plan once, as a real one does, instead of round and round, from
-    the station's first read of an OPC UA robot (an RTDE robot's starts at once). ``convention``
+    when a session polls an OPC UA robot (:class:`PlayOnPoll`; an RTDE robot's starts at once). ``convention``
     (joint_sign (6,), joint_offset_deg (6,) [deg]; None: the identity): the controller's, in which
     the robot's joints are published and its target channel's writes taken
     (:mod:`sim_fixtures.controller`); the truth walks the model's."""

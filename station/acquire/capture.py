@@ -69,9 +69,17 @@ class Suspend(Exception):
     """A condition that pauses the session until it clears; the message says which, ``cause``
     names the condition (the same while it lasts, whatever the readings)."""
 
-    def __init__(self, reason: str, cause: str, device: str | None = None, error_reply: bool = False):
+    def __init__(
+        self,
+        reason: str,
+        cause: str,
+        device: str | None = None,
+        error_reply: bool = False,
+        reading: float | None = None,
+    ):
         super().__init__(reason)
         self.cause = cause
+        self.reading = reading  # the sensor's reading that failed its gate [mm], where there is one
         self.device = device  # set when the device stopped answering, or answers only with errors
         self.error_reply = error_reply  # it answers, with an error code
 
@@ -190,7 +198,7 @@ def check_gates(devices: Devices, rules: Rules) -> None:
     if "dial" in devices.drivers:
         dial = devices.read("dial").values["dial_mm"]
         if why := dial_outside(dial, rules):
-            raise Suspend(f"dial reads {why}", "dial gate")
+            raise Suspend(f"dial reads {why}", "dial gate", reading=dial)
 
 
 def length_outside(length_mm: float, rules: Rules) -> str | None:

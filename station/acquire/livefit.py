@@ -263,8 +263,9 @@ class RunningCalibration:
         limit = SUSPECT_SIGMAS * float(np.hypot(sigma_mm, fit.noise_mm))
         return LiveError(model_mm, float(length_mm) - model_mm, limit)
 
-    def add(self, q_deg, length_mm: float, dial_mm: float, line: int) -> None:
-        """A stored sample: joins the next refit (started now if the worker is idle)."""
+    def add(self, q_deg, length_mm: float, dial_mm: float, line: int, refit: bool = True) -> None:
+        """A stored sample: joins the next refit (started now if the worker is idle and ``refit``:
+        a resumed session's samples are added all before the first refit starts, on all of them)."""
         s = self.samples
         self.samples = SessionSamples(
             np.vstack([s.q_deg, np.asarray(q_deg, float)[None]]),
@@ -272,7 +273,8 @@ class RunningCalibration:
             np.append(s.dial_mm, float(dial_mm)),
             np.append(s.line, int(line)),
         )
-        self._next_job()
+        if refit:
+            self._next_job()
 
     def poll(self, timeout_s: float = 0.0) -> Refit | None:
         """Look in on the worker (waiting up to ``timeout_s``): a finished refit is reported and
@@ -338,8 +340,8 @@ class RunningCalibration:
         if self.until_mm is not None and not self.goal_met and bound <= self.until_mm:
             self.goal_met = True
             self.listener.reached(
-                f"accuracy reached: predicted workspace error {fit.workspace.predicted_rmse_mm:.3f} mm, "
-                f"95 % bound {bound:.3f} mm <= {self.until_mm:g} mm after {fit.n} samples"
+                f"accuracy reached: predicted workspace error {fit.workspace.predicted_rmse_mm:.3g} mm, "
+                f"95 % bound {bound:.3g} mm <= {self.until_mm:g} mm after {fit.n} samples"
             )
 
     def _saturation(self, fit: Refit, counts: dict[int, int]) -> None:

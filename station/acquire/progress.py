@@ -59,9 +59,18 @@ class Progress:
 
     def refit(self, predicted_mm: float, bound_95_mm: float) -> None:
         """The running calibration's latest predicted workspace error [mm] and 95 % bound [mm]."""
-        self.workspace = f"{predicted_mm:.3g} mm (95 %: {bound_95_mm:.3g} mm)"
+        self.workspace = workspace_text(predicted_mm, bound_95_mm)
         if self.tty and self.last:
             self._bar(self._error)
+
+    def show_refit(self, n: int) -> None:
+        """Show the latest refit (of ``n`` samples) now where no plain line has shown it yet: the
+        one a session stops at is seen before the stop quotes it."""
+        if self.tty or not self.every_sample or self.workspace == self._shown:
+            return
+        self._shown = self.workspace
+        self.stream.write(f"running calibration, {n} samples: predicted workspace {self.workspace}\n")
+        self.stream.flush()
 
     def _bar(self, error: str) -> None:
         self._error = error
@@ -85,6 +94,11 @@ class Progress:
         if self.tty and self.last:
             self.stream.write("\n")
             self.stream.flush()
+
+
+def workspace_text(predicted_mm: float, bound_95_mm: float) -> str:
+    """A refit's predicted workspace error and 95 % bound as every line of the session shows them."""
+    return f"{predicted_mm:.3g} mm (95 %: {bound_95_mm:.3g} mm)"
 
 
 def _error_text(live) -> str:

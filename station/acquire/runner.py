@@ -16,6 +16,7 @@ from drivers.base import DeviceReplyError, DriverError, call_with_reconnect
 from errors import DeviceError, InputError
 from station.acquire.capture import Devices, Rules
 from station.acquire.convention import AwaySettles
+from station.acquire.ending import gate_advice, offline_pass
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
@@ -270,18 +271,42 @@ class Live:
             self.feed.settled(index)
 
     def remedy(self) -> str | None:
-        """What to do about the targets left when the session times out, where the channel corrects
-        them (``TargetFeed.remedy``); None otherwise."""
-        folder = self.session.folder.path if self.session is not None else "DIR"
-        return None if self.feed is None else self.feed.remedy(f"station sample --resume {folder}")
+        """What to do about the targets left when the session times out (``station.acquire.ending``):
+        before the model is determined, widen the dial gate for the targets it kept off the edge;
+        after, the channel's correction (``TargetFeed.remedy``) or, without a channel, the offline
+        second pass."""
+        if self.session is None:
+            return None
+        folder = self.session.folder
+        resume = f"station sample --resume {folder.path}"
+        channel = self.feed is not None and self.feed.channel() is not None
+        offline = offline_pass(*_plan_and_robot(folder.header), str(folder.path), resume)
+        rerun = f"run the robot program again with {resume}: the targets measured already are skipped"
+        fit = self.running.latest
+        if fit is None or not fit.judged:
+            then = CORRECTED_LATER if channel else f"once it is determined, {offline}"
+            return self._widen(fit, then) or rerun
+        if said := None if self.feed is None else self.feed.remedy(resume):
+            return said
+        return rerun if channel else offline
+
+    def _widen(self, fit: Refit | None, then: str) -> str | None:
+        """The dial gate to widen for the targets kept off the edge before the model is determined
+        (``fit``: the latest refit, not judged), ``then``: how the later targets get corrected."""
+        folder = self.session.folder
+        needed = f" of the {fit.needed} it needs" if fit is not None else ""
+        model = f"the model is not determined yet ({len(self.ids)} samples{needed})"
+        config = folder.header.get("config", "station.toml")
+        again = f"station sample --config {config} --resume {folder.path}"  # under the widened gate
+        return gate_advice(self.session.off_edge_left(), model, config, again, then)
 
     def corrected_targets(self) -> list[int]:
         """The target ids this run handed the program corrected."""
         return [] if self.feed is None else [t for t, n in self.feed.sent.items() if n]
 
-    def add(self, row: dict, q_deg, length_mm: float, dial_mm: float) -> None:
+    def add(self, row: dict, q_deg, length_mm: float, dial_mm: float, refit: bool = True) -> None:
         self.ids.append(int(row["sample"]))
-        self.running.add(q_deg, length_mm, dial_mm, int(row["line"]))
+        self.running.add(q_deg, length_mm, dial_mm, int(row["line"]), refit)
 
     def sample(self, row: dict, cap) -> None:
         live = self.running.live_error(cap.q_deg, cap.length_mm)
@@ -311,6 +336,7 @@ class Live:
         self.view.message(text)
 
     def reached(self, text: str) -> None:
+        self.progress.show_refit(self.running.latest.n)  # the refit that stopped it, shown first
         self.message(text)
         if self.session is not None:
             self.session.finish("accuracy reached")
@@ -323,6 +349,19 @@ class Live:
             if left <= 0 or not self.running.worker.busy or stopped():
                 return
             self.running.poll(min(left, STOP_CHECK_S))
+
+
+CORRECTED_LATER = (
+    "once the model is determined, the running calibration corrects the later targets onto the edge "
+    "through the robot's target channel"
+)
+
+
+def _plan_and_robot(header: dict) -> tuple[str, str]:
+    """The plan file and the robot file a session's ``session.toml`` header names."""
+    config = Path(header.get("config", "station.toml"))
+    robot = header.get("station", {}).get("session", {}).get("robot_model", "ROBOT.toml")
+    return header.get("plan_source", "PLAN.csv"), str(resolve(robot, config))
 
 
 def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
@@ -339,10 +378,11 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     if "robot" in devices.drivers:
         live.feed_targets(plan, devices.drivers["robot"], inputs.folder.finished_targets)
     worker.wait_ready(WORKER_START_S)
-    for row in inputs.folder.rows:
+    resumed = inputs.folder.rows
+    for k, row in enumerate(resumed):
         dial = float(row["dial_mm"]) if row["dial_mm"] else float("nan")
         q = [float(row[f"q{i}_deg"]) for i in range(1, 7)]
-        live.add(row, q, float(row["length_mm"]), dial)
+        live.add(row, q, float(row["length_mm"]), dial, refit=k == len(resumed) - 1)  # one refit, on all
     live.drain(RESUME_FIT_S)
     rules = Rules.from_config(inputs.cfg.session, inputs.cfg.time_scale)
     session = live.session = Session(inputs.folder, plan, devices, rules, live.listener())

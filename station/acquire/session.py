@@ -67,6 +67,12 @@ def _listed(targets: list[int]) -> str:
 OFF_EDGE = ("dial gate", "dial out of range")
 """Suspensions of a robot that stands where the dial reads outside its gate: no progress."""
 
+AGAIN = (
+    "taken again only if the robot settles there again: the robot program decides (one that walks "
+    "the plan once moves on for good; the session's end says how to measure what is left)"
+)
+"""What becomes of a target whose capture was rejected: the program, not the station, decides."""
+
 
 class OffEdge(Exception):
     """The robot stood where the dial reads outside its gate for the target timeout."""
@@ -135,6 +141,8 @@ class Session:
         self._reached: set[int] = set()  # plan targets settled at in this run
         self._attempts: collections.Counter[int] = collections.Counter()  # settles at unfinished targets
         self._attempted = False  # the last poll was an attempt that counts as progress
+        self._at: int | None = None  # the unfinished target this poll attempts
+        self.off_edge: dict[int, float] = {}  # plan row -> the dial's reading that kept it (NaN: none)
         self._suspended_by: Suspend | None = None
         self._last_retry: dict[str, type] = {}  # the kind of failure last logged, by device
         devices.on_retry = self._retrying
@@ -163,12 +171,13 @@ class Session:
                 return self._end(State.STOPPED, "stopped on request")
             if self._finish is not None:
                 return self._end(State.DONE, self._finish)
-            self._attempted = False
+            self._attempted, self._at = False, None
             try:
                 if self._step():
                     last_progress = self.clock()
                     self.settle.ever = False
             except Suspend as why:
+                self._note_off_edge(why)
                 since = self.clock()
                 try:
                     self._suspended(why)
@@ -212,9 +221,8 @@ class Session:
             cap = capture(self.devices, self.rules, self.plan.q_deg[index])
         except Rejected as why:
             self.rejected += 1
-            self.listener.message(
-                f"capture at target {int(self.plan.target[index])} rejected: {why}; it will be taken again"
-            )
+            target = int(self.plan.target[index])
+            self.listener.message(f"capture at target {target} rejected: {why}; {AGAIN}")
             self.settle.reset()
             return self._attempted
         finally:
@@ -227,9 +235,20 @@ class Session:
         """Count a settle at unfinished target ``index``: progress for its first
         ``ATTEMPTS_PER_TARGET`` (the robot's next round through the plan may succeed)."""
         self._attempts[index] += 1
+        self._at = index
         if self._attempts[index] <= ATTEMPTS_PER_TARGET:
             self._attempted = True
             self._visited.clear()
+
+    def _note_off_edge(self, why: Suspend) -> None:
+        """Keep what the dial read where it kept the attempted target off the edge."""
+        if self._at is not None and why.cause in OFF_EDGE:
+            self.off_edge[self._at] = float("nan") if why.reading is None else why.reading
+
+    def off_edge_left(self) -> dict[int, float]:
+        """Target id -> the dial's reading there (NaN: out of range), of the unfinished targets the
+        dial kept off the edge."""
+        return {int(self.plan.target[i]): v for i, v in self.off_edge.items() if i in self.pending}
 
     def _match(self, q_deg: np.ndarray) -> int | None:
         """Index of the plan target nearest to ``q_deg`` if within ``match_deg`` (finished or not)."""

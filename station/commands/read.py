@@ -5,16 +5,25 @@ device, its units and the monotonic and wall-clock times of its reading. The rob
 model's: the robot file that ``[session] robot_model`` names converts the controller's readings
 with its ``[controller]`` (as ``station sample`` does). A device that stays
 unreachable after the configured retries ends the command with exit 1, naming it.
+
+An instrument that answers with an error code it states the meaning of (the dial's ``ERR3``: out
+of range, the tool off the edge) leaves its values null and its ``error``, ``code`` and ``meaning``
+under ``devices``; every other device is still read and printed, stderr says in one line per such
+device what its code means, and the exit code is 3: not every value was read.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import sys
 
 import configs
-from drivers.base import Backoff, DeviceUnreachable, Driver, Reading, call_with_reconnect
+from drivers.base import Backoff, DeviceReplyError, DeviceUnreachable, Driver, Reading, call_with_reconnect
 from errors import DeviceError
+
+NOT_ALL_READ = 3
+"""Exit code of a read in which an instrument answered with an error code (its values are null)."""
 
 
 def register(subparsers) -> None:
@@ -40,17 +49,28 @@ def read_once(driver: Driver, backoff: Backoff) -> Reading:
         driver.close()
 
 
-def as_json(readings: dict[str, Reading]) -> dict:
+def as_json(readings: dict[str, Reading], failed: dict[str, dict] | None = None) -> dict:
     """All values side by side, then per device its units and timestamps; a value that is not a
-    finite number is null (JSON has no NaN)."""
+    finite number is null (JSON has no NaN). ``failed``: per device that answered with an error
+    code, its fields (null) and what it answered (:func:`failure`)."""
     out: dict = {}
     for reading in readings.values():
         out.update({name: _finite_or_none(value) for name, value in reading.values.items()})
+    for said in (failed or {}).values():
+        out.update(dict.fromkeys(said["units"]))
     out["devices"] = {
         name: {"units": dict(r.units), "t_monotonic": r.t_monotonic, "t_wall": r.t_wall}
         for name, r in readings.items()
     }
+    out["devices"].update(failed or {})
     return out
+
+
+def failure(driver: Driver, exc: DeviceReplyError) -> dict:
+    """What a device's error code says: its fields' units, the reply, the code and its meaning."""
+    meaning = driver.error_meanings.get(str(exc.code), "a code the station does not know: see the manual")
+    units = {name: field.units for name, field in driver.fields.items()}
+    return {"units": units, "error": exc.cause, "code": str(exc.code), "meaning": meaning}
 
 
 def _finite_or_none(value):
@@ -66,9 +86,21 @@ def run(args) -> int:
     cfg = load_station_config(args.config)
     controller = load_robot(resolve(cfg.session.robot_model, args.config)).controller
     backoff = cfg.reconnect.backoff()
-    try:
-        readings = {name: read_once(driver, backoff) for name, driver in cfg.drivers(controller).items()}
-    except DeviceUnreachable as exc:
-        raise DeviceError(f"{exc} ({unreachable_hint(cfg, exc)})") from exc
-    print(json.dumps(as_json(readings), allow_nan=False))
-    return 0
+    readings, failed = {}, {}
+    for name, driver in cfg.drivers(controller).items():
+        try:
+            readings[name] = read_once(driver, backoff)
+        except DeviceUnreachable as exc:
+            raise DeviceError(f"{exc} ({unreachable_hint(cfg, exc)})") from exc
+        except DeviceReplyError as exc:
+            if not hasattr(driver, "error_meanings"):  # no instrument's reading: a wiring fault
+                raise
+            failed[name] = failure(driver, exc)
+    print(json.dumps(as_json(readings, failed), allow_nan=False))
+    for name, said in failed.items():
+        print(
+            f"station: {name}: {said['error']}: {said['meaning']} (the other devices were read; "
+            f"exit {NOT_ALL_READ}: not every value)",
+            file=sys.stderr,
+        )
+    return NOT_ALL_READ if failed else 0

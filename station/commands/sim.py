@@ -5,7 +5,8 @@ Without ``--robot`` it simulates the shipped HSR-JR680 cell, whose robot program
 target onto its true line; with ``--robot R --setup S`` it rehearses your own cell
 (``station.jobs.rehearsal``): that robot with random errors, that setup's drawstring and lines, the
 program commanding the plan's nominal joints, so the tool lands off the edge by the robot's error;
-joints over OPC UA: the program runs the plan once, from the station's first read of the robot.
+joints over OPC UA: the program runs the plan once, from when a session polls the robot (a
+``station read`` does not start it).
 
 Publishes the plan its robot walks at ``[sim] plan_csv`` (where ``station sample`` looks by
 default) and announces its robot and time scale beside it (``station.formats.announcement``: a
