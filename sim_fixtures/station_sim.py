@@ -178,16 +178,23 @@ class PlayOnPoll:
             self.clock.start_monotonic = now
 
 
-def ros_robot(section: RobotRos, robot: SimRobot, clock: SimClock, hand=None) -> RosbridgeServer:
+def ros_robot(
+    section: RobotRos, robot: SimRobot, clock: SimClock, play: bool = False, hand=None
+) -> RosbridgeServer:
     """The robot program's joints as ``sensor_msgs/JointState`` on a rosbridge at the section's
-    host and port; its ``joint_names`` must be the ones published (``JOINT_NAMES``). ``hand(target,
-    q_deg)``: where corrected targets published on its ``target_topic`` go (the program's channel)."""
+    host and port; its ``joint_names`` must be the ones published (``JOINT_NAMES``). ``play``: as
+    :func:`opcua_robot`'s, each message published to a subscriber a read (a session stays
+    subscribed; a ``station read`` takes one message and leaves). ``hand(target, q_deg)``: where
+    corrected targets published on its ``target_topic`` go (the program's channel)."""
     if list(section.joint_names) != list(JOINT_NAMES):
         raise InputError(
             f"[robot] joint_names: the simulated rosbridge publishes {list(JOINT_NAMES)}: name those"
         )
+    operator = PlayOnPoll(clock) if play else None
 
     def state():
+        if operator is not None:
+            operator.read()
         now = robot.state(clock.now())
         return now.q_deg, now.qd_deg_s
 
@@ -334,7 +341,7 @@ class SimStation:
                 ).start()
             elif isinstance(robot, RobotRos):
                 self.devices["robot"] = ros_robot(
-                    robot, self.published, self.clock, self.published_inbox
+                    robot, self.published, self.clock, self.once, self.published_inbox
                 ).start()
             else:
                 self.devices["robot"] = self._rtde(elsewhere is not None)

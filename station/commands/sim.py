@@ -1,12 +1,14 @@
-"""``station sim serve [--config F] [--hold] [--plan P.csv] [--time-scale S] [--robot R --setup S]
-[--seed N]``: run the simulated devices until SIGINT/SIGTERM.
+"""``station sim serve [--config F] [--hold] [--plan P.csv | --program P] [--time-scale S]
+[--robot R --setup S] [--seed N]``: run the simulated devices until SIGINT/SIGTERM.
 
 Without ``--robot`` it simulates the shipped HSR-JR680 cell, whose robot program moves every
 target onto its true line; with ``--robot R --setup S`` it rehearses your own cell
 (``station.jobs.rehearsal``): that robot with random errors, that setup's drawstring and lines, the
 program commanding the plan's nominal joints, so the tool lands off the edge by the robot's error;
 joints over OPC UA: the program runs the plan once, from when a session polls the robot (a
-``station read`` does not start it).
+``station read`` does not start it). ``--program``: the simulated controller runs a program
+``station program`` wrote (any format), its joints read in the controller's convention; over OPC UA
+and ROS once, from when a session polls the robot.
 
 Publishes the plan its robot walks at ``[sim] plan_csv`` (where ``station sample`` looks by
 default) and announces its robot and time scale beside it (``station.formats.announcement``: a
@@ -96,7 +98,10 @@ def run(args) -> int:
         plan = program_plan(args.program, cfg.sim.convention(_controller(args)))
     joints = None if plan is None else (plan.q_deg, plan.line)
     model, cell, controller = _rehearsal(args, cfg, joints, None if plan is None else plan.target)
-    once = cell is not None and cfg.robot.kind == "opcua"  # a program run once, started by the station
+    # a program run once, started when a session polls the robot: OPC UA's, and a written program over ROS
+    once = cell is not None and (
+        cfg.robot.kind == "opcua" or (args.program is not None and cfg.robot.kind == "ros")
+    )
     convention = cfg.sim.convention(controller)
     station = SimStation(cfg, hold=args.hold, plan=joints, cell=cell, once=once, convention=convention)
     # Children start with Ctrl-C ignored (a terminal sends it to the whole process group): this
