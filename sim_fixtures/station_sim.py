@@ -45,6 +45,7 @@ DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads E
 PLAY_WAIT_S = 1e6  # a program run once waits this long (real s) at its first target for play
 PLAY_POLL_S = 0.3  # real s: reads of the joints this long, none PLAY_GAP_S after the last, press play
 PLAY_GAP_S = 0.25  # real s: a longer pause between reads is no session polling
+PLAY_SUBSCRIBED_S = 3.0  # real s: a ROS subscription this long unbroken, press play (a session's is)
 SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
 
 
@@ -162,8 +163,8 @@ class PlayOnPoll:
     waits for the robot, a hundred times a second). A ``station read`` looks twice in one go and
     leaves: it does not start the program, however often it is run."""
 
-    def __init__(self, clock: SimClock):
-        self.clock = clock
+    def __init__(self, clock: SimClock, poll_s: float = PLAY_POLL_S):
+        self.clock, self.poll_s = clock, poll_s
         self._since = self._last = -float("inf")  # the present stretch of steady reads: its start, its last
 
     def read(self) -> None:
@@ -174,7 +175,7 @@ class PlayOnPoll:
         if now - self._last > PLAY_GAP_S:
             self._since = now
         self._last = now
-        if now - self._since >= PLAY_POLL_S:
+        if now - self._since >= self.poll_s:
             self.clock.start_monotonic = now
 
 
@@ -183,14 +184,16 @@ def ros_robot(
 ) -> RosbridgeServer:
     """The robot program's joints as ``sensor_msgs/JointState`` on a rosbridge at the section's
     host and port; its ``joint_names`` must be the ones published (``JOINT_NAMES``). ``play``: as
-    :func:`opcua_robot`'s, each message published to a subscriber a read (a session stays
-    subscribed; a ``station read`` takes one message and leaves). ``hand(target, q_deg)``: where
-    corrected targets published on its ``target_topic`` go (the program's channel)."""
+    :func:`opcua_robot`'s, each message published to a subscriber a read, play after
+    ``PLAY_SUBSCRIBED_S`` of them unbroken (a session subscribes as it opens its devices, seconds
+    before it polls: a resumed one refits its samples first; a ``station read`` takes one message
+    and leaves). ``hand(target, q_deg)``: where corrected targets published on its
+    ``target_topic`` go (the program's channel)."""
     if list(section.joint_names) != list(JOINT_NAMES):
         raise InputError(
             f"[robot] joint_names: the simulated rosbridge publishes {list(JOINT_NAMES)}: name those"
         )
-    operator = PlayOnPoll(clock) if play else None
+    operator = PlayOnPoll(clock, PLAY_SUBSCRIBED_S) if play else None
 
     def state():
         if operator is not None:
