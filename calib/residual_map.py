@@ -1,0 +1,241 @@
+"""The residual map: the error a calibrated table leaves that neighbouring poses share, predicted at
+any pose from the calibration's own rows, with its uncertainty.
+
+``calib.discrepancy`` finds that a real arm's residual changes smoothly with the joints (poses a few
+degrees apart share it) and weighs the fit by it. This module uses it: Gaussian-process regression
+of the rows' residual vectors (base frame, mm; each component independent, one kernel) over joints
+1-3 (the chord distance ``2 sin(dq / 2)`` per joint, as ``discrepancy``; the arm's error lives
+there, the wrist's lever is short) with the squared-exponential kernel::
+
+    cov(e(q), e(q')) = shared * exp(-d(q, q')^2 / (2 l^2)),   plus ``noise`` on each row,
+
+and ``shared + noise`` the rows' mean square per component. The prediction at a pose is the
+posterior mean; its variance tightens near measured poses and falls back to ``shared`` (the table's
+own shared error) far from them, where the mean falls back to zero (the table alone).
+
+Local: each pose is predicted from its ``NEIGHBOURS`` nearest rows (in the kernel's own distance;
+the chord distance of joints 1-3 is the Euclidean distance of their cosines and sines), so 12,000
+rows cost one batch of small solves, not a 12,000 x 12,000 one. The correlation length and the
+shared share are those of least cross-validated error on ``FOLDS`` interleaved folds of the rows
+(row ``i`` in fold ``i mod FOLDS``: a pose predicted from poses measured around it, which is what
+the map is for), and the map is used only where it cuts that error by ``MIN_GAIN`` against the
+table alone (``fit_map`` returns None): a cell of table and white noise keeps the table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MAP_JOINTS = 3
+"""The map's kernel reads joints 1-3 (those that carry the arm)."""
+LENGTH_SCALES_DEG = (2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 25.0)
+"""Correlation lengths tried [deg of joints 1-3] (``calib.discrepancy``'s grid)."""
+SHARED_FRACTIONS = (0.5, 0.75, 0.9, 0.97)
+"""Shares of the rows' mean square tried for the shared error (ratios 1, 3, 9, 32 to the noise)."""
+NEIGHBOURS = 40
+"""Rows each prediction is computed from."""
+FOLDS = 5
+"""Interleaved cross-validation folds."""
+CV_ROWS = 2000
+"""At most this many rows (evenly spaced) are predicted in the cross-validation."""
+MIN_GAIN = 0.05
+"""Cut of the cross-validated RMS error against the table alone the map must bring to be used."""
+CHUNK = 1024
+"""Query poses per block of the neighbour search (memory: CHUNK x rows distances)."""
+
+
+@dataclass(frozen=True)
+class ResidualMap:
+    """A fitted residual map.
+
+    Attributes
+    ----------
+    q : ndarray, shape (N, 6)
+        The rows' joint readings [rad].
+    error_mm : ndarray, shape (N, 3)
+        Their residuals, measured minus the table's TCP, base frame [mm].
+    length_scale_deg : float
+        Correlation length over joints 1-3 [deg].
+    shared_mm2, noise_mm2 : float
+        Variance per component [mm^2] of the shared error and of what no neighbour shares.
+    cv_rmse_mm, table_cv_rmse_mm : float
+        3-D RMS error [mm] of the rows predicted from the other folds, with the map and the table
+        alone.
+    """
+
+    q: np.ndarray
+    error_mm: np.ndarray
+    length_scale_deg: float
+    shared_mm2: float
+    noise_mm2: float
+    cv_rmse_mm: float
+    table_cv_rmse_mm: float
+
+    @property
+    def explained(self) -> float:
+        """Share of the table's cross-validated mean square error the map takes out."""
+        return 1.0 - (self.cv_rmse_mm / self.table_cv_rmse_mm) ** 2
+
+    def predict(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The shared error's posterior mean (M, 3) [mm, base frame] at the poses ``q`` (M, 6)
+        [rad], and the variance per component (M,) [mm^2] of what is left there after it: the
+        posterior variance plus what no neighbour shares (``noise_mm2``, the instrument's noise
+        included). Far from the rows: mean 0 and the table's own mean square."""
+        points = embedding(self.q)
+        queries = embedding(np.asarray(q, float))
+        index = neighbours(queries, points, NEIGHBOURS)
+        distances = local_distances(queries, points, index)
+        length = np.radians(self.length_scale_deg)
+        mean, variance = local_posterior(
+            distances, self.error_mm[index], length, self.shared_mm2, self.noise_mm2
+        )
+        return mean, variance + self.noise_mm2
+
+
+def embedding(q: np.ndarray) -> np.ndarray:
+    """Cosines and sines (N, 2 MAP_JOINTS) of joints 1-3 of ``q`` (N, 6) [rad]: their Euclidean
+    distances are the chord distances [rad] of ``calib.discrepancy.joint_distance2``."""
+    z = q[:, :MAP_JOINTS]
+    return np.hstack([np.cos(z), np.sin(z)])
+
+
+def distance2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared Euclidean distances (M, N) between the rows of ``a`` (M, d) and ``b`` (N, d)."""
+    d2 = np.sum(a**2, axis=1)[:, None] + np.sum(b**2, axis=1)[None, :] - 2.0 * a @ b.T
+    return np.maximum(d2, 0.0)
+
+
+def neighbours(queries: np.ndarray, points: np.ndarray, k: int, fold=None, query_fold=None) -> np.ndarray:
+    """Indices (M, k') of the ``k`` nearest ``points`` (N, d) to each of ``queries`` (M, d),
+    ``k' = min(k, N)``; with ``fold`` (N,) and ``query_fold`` (M,), only points of another fold."""
+    k = min(k, points.shape[0] - (0 if fold is None else int(np.bincount(fold).max())))
+    out = np.empty((queries.shape[0], k), int)
+    for start in range(0, queries.shape[0], CHUNK):
+        block = slice(start, start + CHUNK)
+        d2 = distance2(queries[block], points)
+        if fold is not None:
+            d2[query_fold[block, None] == fold[None, :]] = np.inf
+        out[block] = np.argpartition(d2, k - 1, axis=1)[:, :k]
+    return out
+
+
+def local_distances(queries: np.ndarray, points: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Squared distances among each query's neighbours ``index`` (M, k) -> (M, k, k), and from the
+    query to them (M, k), of embedded poses ``queries`` (M, d) and ``points`` (N, d)."""
+    near = points[index]
+    norm = np.sum(near**2, axis=2)
+    among = norm[:, :, None] + norm[:, None, :] - 2.0 * np.matmul(near, near.transpose(0, 2, 1))
+    cross = np.sum((near - queries[:, None, :]) ** 2, axis=2)
+    return np.maximum(among, 0.0), cross
+
+
+def local_posterior(
+    distances: tuple[np.ndarray, np.ndarray],
+    values: np.ndarray,
+    length_rad: float,
+    shared: float,
+    noise: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian-process posterior at each query from its k neighbours.
+
+    Parameters
+    ----------
+    distances : tuple of ndarray, shapes (M, k, k), (M, k)
+        ``local_distances`` of the queries' neighbours [rad^2].
+    values : ndarray, shape (M, k, c)
+        The neighbours' values [mm], each component independent under the one kernel.
+    length_rad, shared, noise : float
+        Correlation length [rad], shared and noise variance per component [mm^2].
+
+    Returns
+    -------
+    mean : ndarray, shape (M, c)
+    variance : ndarray, shape (M,)
+        Of the shared error (without the noise) per component [mm^2].
+    """
+    among, to_query = distances
+    cov = shared * np.exp(-among / (2.0 * length_rad**2)) + noise * np.eye(among.shape[1])
+    cross = shared * np.exp(-to_query / (2.0 * length_rad**2))
+    solved = np.linalg.solve(cov, np.concatenate([values, cross[:, :, None]], axis=2))
+    mean = np.einsum("mk,mkc->mc", cross, solved[:, :, :-1])
+    variance = shared - np.einsum("mk,mk->m", cross, solved[:, :, -1])
+    return mean, np.maximum(variance, 0.0)
+
+
+def rms3(error: np.ndarray) -> float:
+    """3-D RMS [mm] of error vectors (N, 3)."""
+    return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
+
+
+class Folds:
+    """The rows (at most ``CV_ROWS``, evenly spaced) predicted from the rows of the other ``FOLDS``
+    interleaved folds (row ``i`` in fold ``i mod FOLDS``), their neighbours found once.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 6)
+        The rows' joint readings [rad].
+    error_mm : ndarray, shape (N, 3)
+        Their residuals [mm].
+    """
+
+    def __init__(self, q: np.ndarray, error_mm: np.ndarray):
+        n = q.shape[0]
+        fold = np.arange(n) % FOLDS
+        self.rows = np.unique(np.linspace(0, n - 1, min(n, CV_ROWS)).astype(int))
+        points = embedding(q)
+        index = neighbours(points[self.rows], points, NEIGHBOURS, fold, fold[self.rows])
+        self.distances, self.values = local_distances(points[self.rows], points, index), error_mm[index]
+        self.error = error_mm[self.rows]
+        self.total = float(np.mean(error_mm**2))
+        """The rows' mean square per component [mm^2]."""
+
+    def predict(self, length_deg: float, share: float) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mean (M, 3) [mm] and variance (M,) [mm^2] of the rows, with the shared error
+        ``share`` of the rows' mean square at the correlation length ``length_deg`` [deg]."""
+        shared, noise = share * self.total, (1.0 - share) * self.total
+        return local_posterior(self.distances, self.values, np.radians(length_deg), shared, noise)
+
+
+def search(folds: Folds) -> dict[tuple[float, float], float]:
+    """Cross-validated 3-D RMS error [mm] per (length [deg], shared fraction) the search visits:
+    coordinate descent over the grid (the length at the middling share, the share at that length,
+    the length again; 14 of its 28 points)."""
+    scores = {}
+
+    def score(length, share):
+        if (length, share) not in scores:
+            scores[length, share] = rms3(folds.error - folds.predict(length, share)[0])
+        return scores[length, share]
+
+    length = min(LENGTH_SCALES_DEG, key=lambda v: score(v, SHARED_FRACTIONS[2]))
+    share = min(SHARED_FRACTIONS, key=lambda v: score(length, v))
+    min(LENGTH_SCALES_DEG, key=lambda v: score(v, share))
+    return scores
+
+
+def variance_scale(folds: Folds, length_deg: float, share: float) -> float:
+    """The factor on both variances that makes the folds' standardised errors (error minus mean,
+    squared, over the posterior variance plus the noise, per component) average one: the kernel's
+    amplitude as the held-out rows show it (it leaves the mean as it is)."""
+    mean, variance = folds.predict(length_deg, share)
+    squared = np.sum((folds.error - mean) ** 2, axis=1)
+    return float(np.mean(squared / (3.0 * (variance + (1.0 - share) * folds.total))))
+
+
+def fit_map(q: np.ndarray, error_mm: np.ndarray) -> ResidualMap | None:
+    """The residual map of the rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm,
+    measured minus the table's TCP, base frame], at the grid point of least cross-validated error;
+    None where it does not cut the table's cross-validated error by ``MIN_GAIN`` (or too few rows to
+    have neighbours in every fold)."""
+    if q.shape[0] < 2 * FOLDS:
+        return None
+    folds = Folds(q, error_mm)
+    (length, share), best = min(search(folds).items(), key=lambda item: item[1])
+    table = rms3(folds.error)
+    if best > (1.0 - MIN_GAIN) * table:
+        return None
+    scale = variance_scale(folds, length, share) * folds.total
+    return ResidualMap(q, error_mm, length, share * scale, (1 - share) * scale, best, table)
