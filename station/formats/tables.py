@@ -353,11 +353,18 @@ files describe different robots."""
 
 def check_same_robot(table: RobotFile, table_where: str, nominal: RobotFile, nominal_where: str) -> None:
     """Bad input unless ``table`` (a calibration of) and ``nominal`` are the same robot: the same
-    ``serial`` where both name one, every D-H parameter within ``SAME_ROBOT_MM`` / ``SAME_ROBOT_DEG``."""
+    ``serial`` where both name one, the same ``[controller]``, every D-H parameter within
+    ``SAME_ROBOT_MM`` / ``SAME_ROBOT_DEG``."""
     if table.serial and nominal.serial and table.serial != nominal.serial:
         raise InputError(
             f"{table_where}: serial {table.serial!r} is not {nominal_where}'s {nominal.serial!r}: a table "
             "calibrated for another robot of the same type"
+        )
+    if table.controller != nominal.controller:
+        raise InputError(
+            f"{table_where}: [controller] {_convention(table)} is not {nominal_where}'s "
+            f"{_convention(nominal)}: programs and samples would read its joints another way; give both "
+            "files the controller's convention"
         )
     diff = np.abs(table.table_deg() - nominal.table_deg())
     limit = np.array([SAME_ROBOT_DEG, SAME_ROBOT_MM, SAME_ROBOT_MM, SAME_ROBOT_DEG])
@@ -368,6 +375,13 @@ def check_same_robot(table: RobotFile, table_where: str, nominal: RobotFile, nom
             f"{table_where}: joints.{j}.{key} differs from {nominal_where}'s by {diff[j, k]:.1f}: "
             "not a calibration of that robot"
         )
+
+
+def _convention(robot: RobotFile) -> str:
+    c = robot.controller
+    if c.identity:
+        return "(none: the identity)"
+    return f"joint_sign {c.joint_sign}, joint_offset_deg {c.joint_offset_deg}"
 
 
 def check_same_tool(table: RobotFile, table_where: str, nominal: RobotFile, nominal_where: str) -> None:

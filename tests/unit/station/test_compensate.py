@@ -253,6 +253,10 @@ def test_a_program_in_a_controllers_convention_is_compensated_in_its_convention(
     robot = tmp_path / "kuka.toml"
     controller = {"joint_sign": sign.tolist(), "joint_offset_deg": offset.tolist()}
     robot.write_text(sc.robot.read_text() + "\n" + tomli_w.dumps({"controller": controller}))
+    kuka_table = (
+        tmp_path / "kuka_corrected.toml"
+    )  # calibrated from this robot file, it carries its convention
+    kuka_table.write_text(corrected.read_text() + "\n" + tomli_w.dumps({"controller": controller}))
     in_controller = tmp_path / "program_kuka.csv"
     rows = list(csv.DictReader(program.open()))
     with in_controller.open("w", newline="") as fh:
@@ -264,7 +268,12 @@ def test_a_program_in_a_controllers_convention_is_compensated_in_its_convention(
     model_out, kuka_out = tmp_path / "model.csv", tmp_path / "kuka.csv"
     args = ("--table", corrected, "--out")
     assert _cli(capsys, "compensate", program, "--robot", sc.robot, *args, model_out)[0] == 0
-    assert _cli(capsys, "compensate", in_controller, "--robot", robot, *args, kuka_out)[0] == 0
+    assert (
+        _cli(capsys, "compensate", in_controller, "--robot", robot, "--table", kuka_table, "--out", kuka_out)[
+            0
+        ]
+        == 0
+    )
     model_rows, q_model = _compensated(model_out)
     kuka_rows, q_kuka = _compensated(kuka_out)
     assert [r["status"] for r in kuka_rows] == [r["status"] for r in model_rows]

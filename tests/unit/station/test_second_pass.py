@@ -114,4 +114,9 @@ def test_a_session_of_another_plan_or_without_a_table_is_refused(first_pass, tmp
     assert "measured target 999, which" in capsys.readouterr().err
     assert main([*argv, "--out", str(out), "--session", str(folder / "session")]) == 2
     assert "--session goes with --table" in capsys.readouterr().err
+    kuka = tmp_path / "kuka.toml"  # the table of a robot file whose convention was changed since
+    kuka_signs = "\n[controller]\njoint_sign = [-1, 1, 1, -1, 1, -1]\n"
+    kuka.write_text((folder / "first.toml").read_text() + kuka_signs)
+    assert main([*argv, "--out", str(out), "--table", str(kuka)]) == 2
+    assert "[controller] joint_sign [-1, 1, 1, -1, 1, -1], joint_offset_deg" in capsys.readouterr().err
     assert not out.exists()
