@@ -60,8 +60,8 @@ def offline_pass(plan: str, robot: str, folder: str, resume: str) -> str:
     return (
         f"calibrate what was measured (station calibrate {folder} --out CORRECTED.toml), write the "
         f"plan's program corrected by that table (station program {plan} --robot {robot} --table "
-        f"CORRECTED.toml --format F --out F, F: your controller's) and run it with {resume}: the "
-        "targets measured already are skipped"
+        f"CORRECTED.toml --session {folder} --format F --out F, F: your controller's: the targets "
+        f"left first) and run it with {resume}: the targets measured already are skipped"
     )
 
 

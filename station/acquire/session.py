@@ -83,8 +83,8 @@ OFF_EDGE_TIMEOUT = (
     "edge): {remedy}"
 )
 OFFLINE_REMEDY = (
-    "correct the remaining targets (station calibrate, then station compensate the plan) or widen "
-    "[session] dial_range_mm"
+    "correct the remaining targets (station calibrate, then station program the plan with --table "
+    "and --session) or widen [session] dial_range_mm"
 )
 """What to do about targets the robot cannot bring onto the edge where nothing corrects them in-session."""
 

@@ -26,8 +26,8 @@ from station.jobs.correction import TargetCorrection
 NO_CHANNEL = (
     "targets are not corrected in-session: the robot connection offers no target channel ({why}); "
     "where the tool lands off the edge, correct the remaining targets offline: station calibrate "
-    "the session, station compensate the plan with that table, run its program and continue "
-    "with station sample --resume"
+    "the session, station program the plan with --table (that table) and --session (this session), "
+    "run that program and continue with station sample --resume"
 )
 
 

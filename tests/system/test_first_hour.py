@@ -177,8 +177,9 @@ def test_a_rejected_capture_says_the_program_decides_and_the_end_how_to_measure_
     assert ending.endswith(
         "was rejected or suspended (see above): calibrate what was measured (station calibrate s --out "
         "CORRECTED.toml), write the plan's program corrected by that table (station program sim/plan.csv "
-        "--robot robot.toml --table CORRECTED.toml --format F --out F, F: your controller's) and run it "
-        f"with station sample --resume s: the targets measured already are skipped; {len(measured)} samples "
+        "--robot robot.toml --table CORRECTED.toml --session s --format F --out F, F: your controller's: the "
+        "targets left first) and run it with station sample --resume s: the targets measured already are "
+        f"skipped; {len(measured)} samples "
         "in s"
     ), ending
 

@@ -488,7 +488,10 @@ def test_a_robot_standing_off_the_edge_times_out_saying_so(tmp_path, clock):
     assert cell.targets() == [0, 1]
     assert cell.said("suspended: dial reads -3.500 mm, outside its gate")
     assert cell.messages[-1].startswith("timed out: no capture for 10 s: the dial reads outside its gate")
-    assert "correct the remaining targets (station calibrate, then station compensate" in cell.messages[-1]
+    assert (
+        "correct the remaining targets (station calibrate, then station program the plan with --table"
+        in cell.messages[-1]
+    )
     assert clock() < 5.0 + RULES.target_timeout_s + 5.0
 
 
