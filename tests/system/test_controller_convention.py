@@ -19,7 +19,7 @@ from station.config import station_config
 from station.formats.plan import Plan
 from station.formats.tables import Controller, load_robot, load_setup
 from tests.system.moving import free_address, sample
-from tests.system.test_sim_serve import run_cli, serving
+from tests.system.test_sim_serve import own_cell, run_cli, serving
 
 SIGN = [-1, 1, 1, -1, 1, -1]
 OFFSET = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
@@ -146,26 +146,11 @@ def test_a_session_against_a_kuka_convention_stores_model_joints_at_the_right_ta
         np.testing.assert_allclose(q, station.plan_deg[int(r["target"])], atol=still)
 
 
-CELL = """
-time_scale = 40.0
-[session]
-robot_model = "robot.toml"
-setup = "setup.toml"
-plan = "sim/plan.csv"
-[robot]
-kind = "rtde"
-host = "{host}"
-[drawstring]
-kind = "modbus_tcp"
-port = {port}
-[dial]
-port = "{dial}"
-[sim]
-seed = 14
-targets_per_line = 4
-plan_csv = "sim/plan.csv"
-joint_sign = [-1, 1, 1, -1, 1, -1]
-"""
+CELL = own_cell(
+    '[robot]\nkind = "rtde"\nhost = "{host}"\n',
+    sim="targets_per_line = 4\njoint_sign = [-1, 1, 1, -1, 1, -1]\n",
+    head="time_scale = 40.0\n",
+)
 
 
 def test_a_robot_file_without_kukas_signs_is_named_with_the_fix(tmp_path, monkeypatch):

@@ -18,25 +18,9 @@ from station.commands.sim import rehearsed_cell
 from station.formats.base import read_toml
 from station.formats.plan import load_plan
 from station.formats.tables import load_robot, load_setup
-from tests.system.test_sim_serve import run_cli, serving
+from tests.system.test_sim_serve import own_cell, run_cli, serving
 
-CELL = """
-[session]
-robot_model = "robot.toml"
-setup = "setup.toml"
-plan = "sim/plan.csv"
-[robot]
-kind = "opcua"
-url = "opc.tcp://{host}:4841"
-[drawstring]
-kind = "modbus_tcp"
-port = {port}
-[dial]
-port = "{dial}"
-[sim]
-seed = 14
-plan_csv = "sim/plan.csv"
-"""
+CELL = own_cell('[robot]\nkind = "opcua"\nurl = "opc.tcp://{host}:4841"\n')
 GATE_MM = 2.0  # [session] dial_range_mm's default: +-2 mm
 SLACK_MM = 0.05  # the dial's noise (2 um) and the operator-free landing: a capture's reading of the truth
 

@@ -54,6 +54,18 @@ initial_s = 0.05
 """
 
 
+def own_cell(robot: str, sim: str = "", head: str = "") -> str:
+    """A rehearsed cell's station config (``sim serve --robot robot.toml --setup setup.toml``,
+    seed 14, the plan at ``sim/plan.csv``) with its ``[robot]`` section ``robot``, ``sim`` keys added
+    to ``[sim]`` and ``head`` (top-level keys) first; ``{host}``, ``{port}``, ``{dial}`` as
+    :func:`write_config` fills them."""
+    return (
+        f'{head}[session]\nrobot_model = "robot.toml"\nsetup = "setup.toml"\nplan = "sim/plan.csv"\n{robot}'
+        '[drawstring]\nkind = "modbus_tcp"\nport = {port}\n[dial]\nport = "{dial}"\n'
+        f'[sim]\nseed = 14\nplan_csv = "sim/plan.csv"\n{sim}'
+    )
+
+
 def write_config(tmp_path, text: str = CONFIG, extra: str = "") -> Path:
     """``tmp_path/station.toml``: ``text`` on a random loopback RTDE address and a free Modbus
     port, then ``extra``."""

@@ -23,34 +23,18 @@ from station.commands.sim import rehearsed_cell
 from station.formats.base import read_toml, toml_text
 from station.formats.plan import load_plan
 from station.formats.tables import load_robot, load_setup
-from tests.system.test_sim_serve import run_cli, serving
+from tests.system.test_sim_serve import own_cell, run_cli, serving
 
-OPCUA = """
-[robot]
+OPCUA = """[robot]
 kind = "opcua"
 url = "opc.tcp://{host}:4841"
 target_node = ""
 target_index_node = ""
 """
-ROS = """
-[robot]
+ROS = """[robot]
 kind = "ros"
 host = "{host}"
 target_topic = ""
-"""
-CELL = """
-[session]
-robot_model = "robot.toml"
-setup = "setup.toml"
-plan = "sim/plan.csv"
-[drawstring]
-kind = "modbus_tcp"
-port = {port}
-[dial]
-port = "{dial}"
-[sim]
-seed = 14
-plan_csv = "sim/plan.csv"
 """
 KUKA = {"joint_sign": [-1, 1, 1, -1, 1, -1], "joint_offset_deg": [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]}
 FANUC = {"joint_sign": [1, 1, 1, 1, 1, 1], "joint_offset_deg": [0.0, 0.0, -90.0, 0.0, 0.0, 0.0]}
@@ -94,7 +78,7 @@ def test_a_rehearsed_cell_from_plan_to_history_by_the_offline_route(vendor, tmp_
     monkeypatch.setenv("STATION_HISTORY_DB", str(tmp_path / "history.sqlite"))
     (tmp_path / "robot.toml").write_text(_robot_file(controller, convention))
     (tmp_path / "setup.toml").write_text(configs.path("setups/irb2600.toml").read_text())
-    cell = joints + CELL
+    cell = own_cell(joints)
     plan = ("plan", "--robot", "robot.toml", "--setup", "setup.toml", "--no-suggest")
     _ok(run_cli(*plan, "--out", "plan.csv", "--per-line", "60", "--select", "120"))
     _ok(run_cli("program", "plan.csv", "--robot", "robot.toml", "--format", fmt, "--out", program))
