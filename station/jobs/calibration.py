@@ -226,7 +226,9 @@ def provenance(samples: Samples, robot: RobotFile, setup: str | None) -> Provena
     the station's version."""
     from station import installed_version
 
-    return Provenance(robot.name, robot.serial, str(samples.path), setup, now_utc(), installed_version())
+    return Provenance(
+        robot.name, robot.serial, str(samples.path), setup, now_utc(), installed_version(), robot.convention
+    )
 
 
 def payload_of(robot: RobotFile, setup: SetupFile | None) -> Payload | None:

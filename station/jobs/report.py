@@ -148,8 +148,9 @@ class CrossValidation:
 @dataclass(frozen=True)
 class Provenance:
     """What a report is of, so that it stands alone: the robot (``robot_name``, its ``serial`` or
-    None), the ``samples`` file, the ``setup`` (a file, or the setup a session folder embeds; None
-    where none was used), when (``created_utc``, ISO 8601) and by which ``station_version``."""
+    None, its table's ``robot_convention``: ``dh`` or ``mdh``), the ``samples`` file, the
+    ``setup`` (a file, or the setup a session folder embeds; None where none was used), when
+    (``created_utc``, ISO 8601) and by which ``station_version``."""
 
     robot_name: str
     robot_serial: str | None
@@ -157,10 +158,14 @@ class Provenance:
     setup: str | None
     created_utc: str
     station_version: str
+    robot_convention: str | None = None
 
     def as_json(self) -> dict:
+        robot = {"name": self.robot_name, "serial": self.robot_serial}
+        if self.robot_convention is not None:
+            robot["convention"] = self.robot_convention
         return {
-            "robot": {"name": self.robot_name, "serial": self.robot_serial},
+            "robot": robot,
             "samples": self.samples,
             "setup": self.setup,
             "created_utc": self.created_utc,

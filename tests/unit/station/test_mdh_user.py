@@ -113,7 +113,7 @@ def test_the_verify_report_says_whose_robot_when_by_which_station_and_what_next(
     ):
         _, out, report = ran[name]
         assert report["verdict"] == verdict and report["table_kind"] == kind
-        assert report["robot"] == {"name": "KR-like", "serial": SERIAL}
+        assert report["robot"] == {"name": "KR-like", "serial": SERIAL, "convention": "mdh"}
         assert datetime.fromisoformat(report["created_utc"]).tzinfo is not None
         assert report["station_version"] == installed_version()
         assert report["next"].startswith(advice)

@@ -27,7 +27,7 @@ def test_the_report_stands_alone(three_lines, tmp_path, capsys):
     with_serial = tmp_path / "robot.toml"
     with_serial.write_text(tomli_w.dumps({**robot, "serial": "JR680-0042"}))
     report, out = _calibrate(capsys, with_serial, sc.setup, sc.samples, tmp_path, "--holdout", sc.holdout)
-    assert report["robot"] == {"name": "HSR-JR680", "serial": "JR680-0042"}
+    assert report["robot"] == {"name": "HSR-JR680", "serial": "JR680-0042", "convention": "dh"}
     assert report["samples"] == str(sc.samples) and report["setup"] == str(sc.setup)
     assert report["station_version"] == installed_version()
     assert report["created_utc"].endswith("+00:00")
