@@ -24,7 +24,8 @@ indicator and its joint angles, and calibrate its Denavit-Hartenberg table.
 A session: `station plan` (which poses) -> `station program` (the robot program that measures
 them) -> `station sample` (measure them, with a running calibration) -> `station calibrate` (the
 corrected table and its report) -> `station export` or `station compensate` (use it). Later,
-`station verify` judges the table on new samples and `station history` lists each robot's records.
+`station verify` judges the table on new samples, `station history` lists each robot's records and
+`station report` writes a calibration certificate.
 `station demo` runs all of it on simulated devices; `station sim serve` starts those devices for the
 other commands; `station read` checks the wiring."""
 
@@ -41,6 +42,7 @@ COMMANDS = (  # in the order of the workflow, as the help lists them
     "compensate",
     "verify",
     "history",
+    "report",
     "import-ipa",
 )
 

@@ -206,6 +206,9 @@ def history_figure(robot: str, records: list[dict], moved: list[dict], path: Pat
         if any(r["verdict"] == verdict for r in records):
             ax.plot([], [], "D", color=colour, ls="none", label=verdict)
     _history_moves(ax, records, moved, when, np.nan_to_num(rmse), ms)
+    if when.max() - when.min() < np.timedelta64(1, "h"):  # records of one session: an hour, not years
+        middle = when.min() + (when.max() - when.min()) / 2
+        ax.set_xlim(middle - np.timedelta64(30, "m"), middle + np.timedelta64(30, "m"))
     locator = mdates.AutoDateLocator()
     ax.xaxis.set_major_locator(locator)
     ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
