@@ -22,11 +22,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+for _key in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_key, "1")  # as ``station`` sets them (``station.cli.BLAS_THREADS``)
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -59,16 +63,25 @@ def base_residuals(model: PositionModel, x: np.ndarray) -> np.ndarray:
 def residual_map_of(outcome: CalibrationOutcome) -> tuple[ResidualMap | None, float]:
     """The map of a calibration's own rows and the time [s] its fit took."""
     t0 = time.perf_counter()
-    found = fit_map(outcome.model.samples.q, base_residuals(outcome.model, outcome.calibration.x))
+    model, x = outcome.model, outcome.calibration.x
+    found = fit_map(model.samples.q, base_residuals(model, x), dh_table(x), model.tcp_in_flange(x))
     return found, time.perf_counter() - t0
 
 
 def map_text(found: ResidualMap | None, seconds: float) -> str:
     if found is None:
         return f"map off ({seconds:.2f} s)"
+    angles, shared = found.angles, found.shared
+    stages = [
+        "angle errors off"
+        if angles is None
+        else f"angle errors of J1-J3 {angles.sigma_deg:g} deg over {angles.length_deg:g} deg",
+        "shared error off"
+        if shared is None
+        else f"shared error {np.sqrt(3 * shared.shared_mm2):.3f} mm over {shared.length_scale_deg:g} deg",
+    ]
     return (
-        f"map: {len(found.q)} rows, length {found.length_scale_deg:g} deg, shared "
-        f"{np.sqrt(3 * found.shared_mm2):.3f} mm, noise {np.sqrt(3 * found.noise_mm2):.3f} mm (3-D RMS); "
+        f"map: {'; '.join(stages)}; "
         f"cross-validated {found.table_cv_rmse_mm:.3f} -> {found.cv_rmse_mm:.3f} mm "
         f"({found.explained:.0%} of the mean square); fit {seconds:.2f} s"
     )
@@ -135,8 +148,9 @@ def timing(data: Path, robot) -> dict:
     series = load(data, "A")
     outcome = calibrate_samples(position_set(series), robot, None, terms="geometric")
     error = base_residuals(outcome.model, outcome.calibration.x)
+    x = outcome.calibration.x
     t0 = time.perf_counter()
-    found = fit_map(series.ipa.q_rad, error)
+    found = fit_map(series.ipa.q_rad, error, dh_table(x), outcome.model.tcp_in_flange(x))
     t1 = time.perf_counter()
     if found is not None:
         found.predict(series.ipa.q_rad)

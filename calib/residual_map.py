@@ -1,25 +1,28 @@
-"""The residual map: the error a calibrated table leaves that neighbouring poses share, predicted at
-any pose from the calibration's own rows, with its uncertainty.
+"""The residual map: the error a calibrated table leaves, predicted at any pose from the
+calibration's own rows, with its uncertainty. Two stages, each used only where it cuts the error of
+rows predicted from the other folds by ``MIN_GAIN`` (a cell of table and white noise keeps the
+table; ``fit_map`` returns None):
 
-``calib.discrepancy`` finds that a real arm's residual changes smoothly with the joints (poses a few
-degrees apart share it) and weighs the fit by it. This module uses it: Gaussian-process regression
-of the rows' residual vectors (base frame, mm; each component independent, one kernel) over joints
-1-3 (the chord distance ``2 sin(dq / 2)`` per joint, as ``discrepancy``; the arm's error lives
-there, the wrist's lever is short) with the squared-exponential kernel::
+1. **Joint angle errors** (``calib.angle_errors``): joints 1-3 turning by a smooth function of their
+   own angle (a gear's cyclic error, many cycles a turn), seen through the Jacobian; learnt wherever
+   a joint stood, whatever the others did.
+2. **The shared error** of what they leave (``SharedError``): ``calib.discrepancy`` finds that a
+   real arm's residual changes smoothly with the joints (poses a few degrees apart share it); here
+   it is predicted by Gaussian-process regression of the rows' residual vectors (base frame, mm;
+   each component independent, one kernel) over joints 1-3 (the chord distance ``2 sin(dq / 2)``
+   per joint, as ``discrepancy``) with the squared-exponential kernel::
 
-    cov(e(q), e(q')) = shared * exp(-d(q, q')^2 / (2 l^2)),   plus ``noise`` on each row,
+       cov(e(q), e(q')) = shared * exp(-d(q, q')^2 / (2 l^2)),   plus ``noise`` on each row,
 
-and ``shared + noise`` the rows' mean square per component. The prediction at a pose is the
-posterior mean; its variance tightens near measured poses and falls back to ``shared`` (the table's
-own shared error) far from them, where the mean falls back to zero (the table alone).
+   ``shared + noise`` the rows' mean square per component. Local: each pose from its
+   ``NEIGHBOURS`` nearest rows (the chord distance of joints 1-3 is the Euclidean distance of their
+   cosines and sines), so 12,000 rows cost one batch of small solves, not a 12,000 x 12,000 one.
+   The length and the shared share are those of least error on ``FOLDS`` interleaved folds (row
+   ``i`` in fold ``i mod FOLDS``: a pose predicted from poses measured around it, which is what the
+   map is for), the variances scaled so the folds' standardised errors average one.
 
-Local: each pose is predicted from its ``NEIGHBOURS`` nearest rows (in the kernel's own distance;
-the chord distance of joints 1-3 is the Euclidean distance of their cosines and sines), so 12,000
-rows cost one batch of small solves, not a 12,000 x 12,000 one. The correlation length and the
-shared share are those of least cross-validated error on ``FOLDS`` interleaved folds of the rows
-(row ``i`` in fold ``i mod FOLDS``: a pose predicted from poses measured around it, which is what
-the map is for), and the map is used only where it cuts that error by ``MIN_GAIN`` against the
-table alone (``fit_map`` returns None): a cell of table and white noise keeps the table.
+Near measured poses the prediction's variance tightens; far from them the mean falls back to zero
+(the table alone) and the variance to the rows' own mean square.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from calib.angle_errors import AngleErrors, fit_angle_errors, joint_jacobian
 
 MAP_JOINTS = 3
 """The map's kernel reads joints 1-3 (those that carry the arm)."""
@@ -47,8 +52,8 @@ CHUNK = 1024
 
 
 @dataclass(frozen=True)
-class ResidualMap:
-    """A fitted residual map.
+class SharedError:
+    """The error neighbouring poses share, as a local Gaussian process over joints 1-3.
 
     Attributes
     ----------
@@ -75,7 +80,7 @@ class ResidualMap:
 
     @property
     def explained(self) -> float:
-        """Share of the table's cross-validated mean square error the map takes out."""
+        """Share of the cross-validated mean square error it takes out."""
         return 1.0 - (self.cv_rmse_mm / self.table_cv_rmse_mm) ** 2
 
     def predict(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -225,8 +230,8 @@ def variance_scale(folds: Folds, length_deg: float, share: float) -> float:
     return float(np.mean(squared / (3.0 * (variance + (1.0 - share) * folds.total))))
 
 
-def fit_map(q: np.ndarray, error_mm: np.ndarray) -> ResidualMap | None:
-    """The residual map of the rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm,
+def fit_shared(q: np.ndarray, error_mm: np.ndarray) -> SharedError | None:
+    """The shared error of the rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm,
     measured minus the table's TCP, base frame], at the grid point of least cross-validated error;
     None where it does not cut the table's cross-validated error by ``MIN_GAIN`` (or too few rows to
     have neighbours in every fold)."""
@@ -238,4 +243,66 @@ def fit_map(q: np.ndarray, error_mm: np.ndarray) -> ResidualMap | None:
     if best > (1.0 - MIN_GAIN) * table:
         return None
     scale = variance_scale(folds, length, share) * folds.total
-    return ResidualMap(q, error_mm, length, share * scale, (1 - share) * scale, best, table)
+    return SharedError(q, error_mm, length, share * scale, (1 - share) * scale, best, table)
+
+
+@dataclass(frozen=True)
+class ResidualMap:
+    """What a calibrated table leaves, predicted at any pose: joints 1-3's angle errors
+    (``calib.angle_errors``), then the error neighbouring poses share of what they leave
+    (``SharedError``); either may be off (None).
+
+    Attributes
+    ----------
+    dh : ndarray, shape (6, 4)
+        The calibrated table (rad, mm), for the Jacobian at a pose.
+    tool_mm : ndarray, shape (3,)
+        The TCP in the flange frame [mm].
+    angles : AngleErrors or None
+    shared : SharedError or None
+    cv_rmse_mm, table_cv_rmse_mm : float
+        3-D RMS error [mm] of the rows predicted from the other folds, with the map (the last stage
+        on) and with the table alone.
+    """
+
+    dh: np.ndarray
+    tool_mm: np.ndarray
+    angles: AngleErrors | None
+    shared: SharedError | None
+    cv_rmse_mm: float
+    table_cv_rmse_mm: float
+
+    @property
+    def explained(self) -> float:
+        """Share of the table's cross-validated mean square error the map takes out."""
+        return 1.0 - (self.cv_rmse_mm / self.table_cv_rmse_mm) ** 2
+
+    def predict(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The predicted error (M, 3) [mm, base frame] at readings ``q`` (M, 6) [rad], and the
+        variance per component (M,) [mm^2] of what is left there after it (the angle errors'
+        posterior variance, plus the shared error's posterior and unshared variance, or without
+        it what the angle errors leave on the folds)."""
+        q = np.asarray(q, float)
+        mean, variance = np.zeros((q.shape[0], 3)), np.zeros(q.shape[0])
+        if self.angles is not None:
+            mean, variance = self.angles.predict(q, joint_jacobian(self.dh, q, self.tool_mm))
+        if self.shared is None:
+            return mean, variance + (self.angles.rest_mm2 if self.angles is not None else 0.0)
+        shared_mean, shared_variance = self.shared.predict(q)
+        return mean + shared_mean, variance + shared_variance
+
+
+def fit_map(q: np.ndarray, error_mm: np.ndarray, dh: np.ndarray, tool_mm: np.ndarray) -> ResidualMap | None:
+    """The residual map of rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm, measured
+    minus the table's TCP, base frame] of the table ``dh`` (6, 4) (rad, mm) with the TCP ``tool_mm``
+    (3,) [mm]: the angle errors where they cut the folds' error by their ``MIN_GAIN``, then the
+    shared error of what is left where it cuts that by ``MIN_GAIN``; None where neither does."""
+    jacobian = joint_jacobian(dh, q, tool_mm)
+    angles = fit_angle_errors(q, jacobian, error_mm)
+    left = error_mm if angles is None else error_mm - angles.mean(q, jacobian)
+    shared = fit_shared(q, left)
+    if angles is None and shared is None:
+        return None
+    table = rms3(error_mm)
+    best = shared.cv_rmse_mm if shared is not None else float(np.sqrt(3.0 * angles.rest_mm2))
+    return ResidualMap(np.asarray(dh, float), np.asarray(tool_mm, float), angles, shared, best, table)

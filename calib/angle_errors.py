@@ -1,0 +1,175 @@
+"""Joint angle errors: each of joints 1-3 turning by a smooth function of its own angle more than it
+reads (a gear's or strain wave's cyclic error, many cycles a turn: on the real UR10 joints 2 and 3
+some 17 times a turn), seen at the TCP through the arm's Jacobian.
+
+Each joint's error is a Gaussian process over its angle, written in harmonics ``1..HARMONICS``::
+
+    dq_j(q_j) = sum_k a_jk cos(k q_j) + b_jk sin(k q_j),   a_jk, b_jk ~ N(0, sigma^2 rho_k),
+    rho_k ∝ exp(-(k l)^2 / 2),  sum_k rho_k = 1,
+
+a wrapped Gaussian kernel of length ``l`` [rad] and size ``sigma`` [rad] (the order 0 is the
+table's offset). The TCP moves by ``sum_j J_j(q) dq_j(q_j)``, ``J_j`` the derivative of the TCP by
+joint j's angle, so the coefficients are a Bayesian linear regression of the rows' residual vectors
+(each row's residual counted white with the rows' mean square per component). Unlike a kernel over
+all three joints at once, a joint's function is learnt wherever that joint stood, whatever the
+others did; at angles no row visited it falls back to zero within a few ``l``.
+
+``l`` and ``sigma`` are those of least cross-validated error on ``FOLDS`` interleaved folds
+(coordinate descent over ``LENGTHS_DEG`` x ``SIGMAS_DEG``); the errors are used only where they cut
+the table's fold error by ``MIN_GAIN`` (``fit_angle_errors`` returns None).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.kinematics import THETA, tcp_jacobian
+
+ANGLE_JOINTS = 3
+"""Joints 1-3 carry an angle error."""
+HARMONICS = 60
+"""Highest order [cycles per turn] of a joint's angle error."""
+LENGTHS_DEG = (3.0, 4.0, 6.0, 10.0)
+"""Kernel lengths tried [deg]: from 3 deg, where the 60th harmonic's weight is 0.7 % of the first's,
+so the truncated kernel still falls off as a Gaussian (to -2 %, the zero mean over a turn, beyond
+three lengths) and a joint's error falls back away from the angles visited."""
+SIGMAS_DEG = (0.005, 0.01, 0.02, 0.05)
+"""Sizes of a joint's angle error tried [deg RMS]."""
+FOLDS = 5
+"""Interleaved cross-validation folds (row ``i`` in fold ``i mod FOLDS``)."""
+MIN_GAIN = 0.05
+"""Cut of the cross-validated RMS error against the table alone the errors must bring."""
+
+
+def joint_jacobian(dh: np.ndarray, q: np.ndarray, tool_mm: np.ndarray) -> np.ndarray:
+    """Derivatives (N, 3, ANGLE_JOINTS) [mm/rad] of the TCP (base frame) by the angles of joints
+    1-3, table ``dh`` (6, 4) (rad, mm), readings ``q`` (N, 6) [rad], TCP ``tool_mm`` (3,) [mm]."""
+    _, jac = tcp_jacobian(dh, q, tool_mm)
+    return jac[:, :, [4 * j + THETA for j in range(ANGLE_JOINTS)]]
+
+
+def features(q: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
+    """The TCP's response (N, 3, F) [mm/rad] to each coefficient (F = ANGLE_JOINTS x 2 HARMONICS:
+    per joint the cosines, then the sines) at readings ``q`` (N, 6) [rad] with ``jacobian``
+    (N, 3, ANGLE_JOINTS)."""
+    order = np.arange(1, HARMONICS + 1)
+    out = []
+    for j in range(ANGLE_JOINTS):
+        angle = q[:, j, None] * order
+        basis = np.concatenate([np.cos(angle), np.sin(angle)], axis=1)
+        out.append(jacobian[:, :, j, None] * basis[:, None, :])
+    return np.concatenate(out, axis=2)
+
+
+def prior_variance(length_deg: float, sigma_deg: float) -> np.ndarray:
+    """Prior variance (F,) [rad^2] of each coefficient (``features``' order)."""
+    order = np.arange(1, HARMONICS + 1)
+    rho = np.exp(-((order * np.radians(length_deg)) ** 2) / 2.0)
+    rho /= rho.sum()
+    return np.tile(np.concatenate([rho, rho]), ANGLE_JOINTS) * np.radians(sigma_deg) ** 2
+
+
+@dataclass(frozen=True)
+class AngleErrors:
+    """Fitted angle errors of joints 1-3.
+
+    Attributes
+    ----------
+    length_deg, sigma_deg : float
+        The kernel's length [deg] and size [deg RMS].
+    weights : ndarray, shape (F,)
+        The coefficients' posterior mean [rad].
+    covariance : ndarray, shape (F, F)
+        Their posterior covariance [rad^2].
+    rest_mm2 : float
+        Mean square per component [mm^2] of what they leave on the folds.
+    """
+
+    length_deg: float
+    sigma_deg: float
+    weights: np.ndarray
+    covariance: np.ndarray
+    rest_mm2: float
+
+    def mean(self, q: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
+        """The TCP error (M, 3) [mm, base frame] at readings ``q`` (M, 6) [rad] with ``jacobian``
+        (M, 3, ANGLE_JOINTS)."""
+        return features(q, jacobian) @ self.weights
+
+    def predict(self, q: np.ndarray, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The TCP error (M, 3) [mm, base frame] at readings ``q`` (M, 6) [rad] with ``jacobian``
+        (M, 3, ANGLE_JOINTS), and its posterior variance per component (M,) [mm^2]."""
+        a = features(q, jacobian)
+        variance = np.sum((a @ self.covariance) * a, axis=(1, 2)) / 3.0
+        return a @ self.weights, variance
+
+
+def posterior_mean(gram: np.ndarray, moment: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:
+    """Posterior mean (F,) [rad] of the coefficients from ``gram`` = A^T A, ``moment`` = A^T e, white
+    ``noise`` [mm^2] per component and ``prior`` (F,) [rad^2]."""
+    return np.linalg.solve(gram / noise + np.diag(1.0 / prior), moment / noise)
+
+
+def posterior_covariance(gram: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:
+    """Posterior covariance (F, F) [rad^2] of the coefficients (see ``posterior_mean``)."""
+    return np.linalg.inv(gram / noise + np.diag(1.0 / prior))
+
+
+class Folds:
+    """Per interleaved fold, the Gram matrix and moment of its rows, and the features and residuals
+    of the rows it predicts."""
+
+    def __init__(self, q: np.ndarray, jacobian: np.ndarray, error_mm: np.ndarray):
+        fold = np.arange(q.shape[0]) % FOLDS
+        self.noise = float(np.mean(error_mm**2))
+        self.grams, self.moments, self.held = [], [], []
+        for f in range(FOLDS):
+            rows = fold == f
+            a = features(q[rows], jacobian[rows]).reshape(-1, ANGLE_JOINTS * 2 * HARMONICS)
+            self.grams.append(a.T @ a)
+            self.moments.append(a.T @ error_mm[rows].ravel())
+            self.held.append((a, error_mm[rows].ravel()))
+        self.gram, self.moment = sum(self.grams), sum(self.moments)
+
+    def error(self, length_deg: float, sigma_deg: float) -> float:
+        """3-D RMS error [mm] of every row predicted from the other folds."""
+        prior = prior_variance(length_deg, sigma_deg)
+        squares = 0.0
+        for g, m, (a, e) in zip(self.grams, self.moments, self.held, strict=True):
+            weights = posterior_mean(self.gram - g, self.moment - m, self.noise, prior)
+            squares += np.sum((e - a @ weights) ** 2)
+        return float(np.sqrt(3.0 * squares / sum(e.size for _, e in self.held)))
+
+
+def search(folds: Folds) -> dict[tuple[float, float], float]:
+    """Fold error [mm] per (length, size) visited: the length at the middling size, the size at that
+    length, the length again."""
+    scores = {}
+
+    def score(length, sigma):
+        if (length, sigma) not in scores:
+            scores[length, sigma] = folds.error(length, sigma)
+        return scores[length, sigma]
+
+    length = min(LENGTHS_DEG, key=lambda v: score(v, SIGMAS_DEG[2]))
+    sigma = min(SIGMAS_DEG, key=lambda v: score(length, v))
+    min(LENGTHS_DEG, key=lambda v: score(v, sigma))
+    return scores
+
+
+def fit_angle_errors(q: np.ndarray, jacobian: np.ndarray, error_mm: np.ndarray) -> AngleErrors | None:
+    """Angle errors of joints 1-3 from rows ``q`` (N, 6) [rad], ``jacobian`` (N, 3, ANGLE_JOINTS)
+    [mm/rad] and residuals ``error_mm`` (N, 3) [mm, base frame]; None unless they cut the table's
+    fold error by ``MIN_GAIN``."""
+    if q.shape[0] < 2 * FOLDS:
+        return None
+    folds = Folds(q, jacobian, error_mm)
+    (length, sigma), best = min(search(folds).items(), key=lambda item: item[1])
+    if best > (1.0 - MIN_GAIN) * np.sqrt(3.0 * folds.noise):
+        return None
+    prior = prior_variance(length, sigma)
+    weights = posterior_mean(folds.gram, folds.moment, folds.noise, prior)
+    covariance = posterior_covariance(folds.gram, folds.noise, prior)
+    return AngleErrors(length, sigma, weights, covariance, best**2 / 3.0)
