@@ -144,7 +144,8 @@ def test_a_robot_without_a_channel_is_told_the_offline_route_once_and_a_failed_w
     feed.corrected(correction)
     assert len(said) == 1
     assert said[0].startswith("targets are not corrected in-session: the robot connection offers no target")
-    assert "(a robot connection of this kind has none)" in said[0] and "station compensate" in said[0]
+    assert "(a robot connection of this kind has none)" in said[0]
+    assert "station program the plan with --table (that table) and --session (this session)" in said[0]
     assert "station sample --resume" in said[0]
     channel = Channel(fail=True)
     feed, correction, said, _ = _feed(channel, [1, 2])
