@@ -296,7 +296,10 @@ def fit_map(q: np.ndarray, error_mm: np.ndarray, dh: np.ndarray, tool_mm: np.nda
     """The residual map of rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm, measured
     minus the table's TCP, base frame] of the table ``dh`` (6, 4) (rad, mm) with the TCP ``tool_mm``
     (3,) [mm]: the angle errors where they cut the folds' error by their ``MIN_GAIN``, then the
-    shared error of what is left where it cuts that by ``MIN_GAIN``; None where neither does."""
+    shared error of what is left where it cuts that by ``MIN_GAIN``; None where neither does (or
+    the rows fit exactly). The rows are a position instrument's (three components each)."""
+    if not np.any(error_mm):
+        return None
     jacobian = joint_jacobian(dh, q, tool_mm)
     angles = fit_angle_errors(q, jacobian, error_mm)
     left = error_mm if angles is None else error_mm - angles.mean(q, jacobian)

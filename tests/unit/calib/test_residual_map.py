@@ -162,10 +162,12 @@ def test_the_neighbours_are_the_nearest_rows_of_the_other_folds():
         assert set(index[i]) == set(np.argsort(d2)[:12])
 
 
-def test_too_few_rows_give_no_map():
+def test_too_few_rows_or_an_exact_fit_give_no_map():
     rng = np.random.default_rng(5)
     q, error = rng.normal(size=(2 * residual_map.FOLDS - 1, 6)), rng.normal(size=(9, 3))
     assert fit_map(q, error, NOMINAL, np.zeros(3)) is None
+    q = rng.normal(size=(50, 6))
+    assert fit_map(q, np.zeros((50, 3)), NOMINAL, np.zeros(3)) is None  # nothing left to map
 
 
 def test_a_joints_cyclic_error_is_learnt_wherever_that_joint_stood():
