@@ -309,3 +309,41 @@ def fit_map(q: np.ndarray, error_mm: np.ndarray, dh: np.ndarray, tool_mm: np.nda
     table = rms3(error_mm)
     best = shared.cv_rmse_mm if shared is not None else float(np.sqrt(3.0 * angles.rest_mm2))
     return ResidualMap(np.asarray(dh, float), np.asarray(tool_mm, float), angles, shared, best, table)
+
+
+def map_arrays(found: ResidualMap) -> dict[str, np.ndarray]:
+    """The map as named arrays (what a file stores beside the corrected table): the table and TCP,
+    the fold errors, the angle errors' kernel, coefficients and covariance, the shared error's
+    kernel and its rows (joints 1-3 only, all its kernel reads, and their residuals)."""
+    out = {
+        "dh": found.dh,
+        "tool_mm": found.tool_mm,
+        "cv_rmse_mm": np.array([found.cv_rmse_mm, found.table_cv_rmse_mm]),
+    }
+    if found.angles is not None:
+        a = found.angles
+        out["angle_kernel"] = np.array([a.length_deg, a.sigma_deg, a.rest_mm2])
+        out["angle_weights"], out["angle_covariance"] = a.weights, a.covariance
+    if found.shared is not None:
+        s = found.shared
+        out["shared_kernel"] = np.array(
+            [s.length_scale_deg, s.shared_mm2, s.noise_mm2, s.cv_rmse_mm, s.table_cv_rmse_mm]
+        )
+        out["shared_q"], out["shared_error_mm"] = s.q[:, :MAP_JOINTS], s.error_mm
+    return out
+
+
+def map_from_arrays(arrays: dict[str, np.ndarray]) -> ResidualMap:
+    """The map ``map_arrays`` wrote (the shared rows' wrist joints read as 0: the kernel ignores
+    them)."""
+    angles = shared = None
+    if "angle_kernel" in arrays:
+        length, sigma, rest = (float(v) for v in arrays["angle_kernel"])
+        angles = AngleErrors(length, sigma, arrays["angle_weights"], arrays["angle_covariance"], rest)
+    if "shared_kernel" in arrays:
+        q = arrays["shared_q"]
+        q = np.hstack([q, np.zeros((q.shape[0], 6 - MAP_JOINTS))])
+        length, shared_mm2, noise_mm2, cv, table = (float(v) for v in arrays["shared_kernel"])
+        shared = SharedError(q, arrays["shared_error_mm"], length, shared_mm2, noise_mm2, cv, table)
+    cv, table = (float(v) for v in arrays["cv_rmse_mm"])
+    return ResidualMap(arrays["dh"], arrays["tool_mm"], angles, shared, cv, table)

@@ -4,6 +4,8 @@ unmodelled``), calibrated from a tracker; near the poses measured the map takes 
 leaves down toward the tracker's noise and bounds it; far from them it falls back to the table; a
 cell of table and white noise keeps it off. The local solve is the dense Gaussian process's."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -189,3 +191,26 @@ def test_a_joints_cyclic_error_is_learnt_wherever_that_joint_stood():
     assert found is not None and found.angles is not None and found.shared is None
     assert rms3(error(new)) > 4 * NOISE_3D_MM
     assert rms3(error(new) - found.predict(new)[0]) <= 2 * NOISE_3D_MM
+
+
+@pytest.mark.parametrize("stages", ["both", "angles", "shared"])
+def test_the_map_as_arrays_predicts_what_the_map_did(stages):
+    """Written as named arrays and read back, with either stage or both, the map predicts the same
+    mean and variance (to rounding); the shared rows keep joints 1-3 alone."""
+    rng = np.random.default_rng(10)
+    q = work_region(rng, 300)
+    tool = np.array([0.0, 0.0, 100.0])
+    angle = np.zeros((300, angle_errors.ANGLE_JOINTS))
+    angle[:, 1] = np.radians(0.02) * np.sin(17 * q[:, 1])
+    error = np.einsum("ncj,nj->nc", angle_errors.joint_jacobian(NOMINAL, q, tool), angle)
+    error += 0.1 * np.sin(3 * q[:, :3]) + rng.normal(0, SIGMA_MM, (300, 3))
+    found = fit_map(q, error, NOMINAL, tool)
+    assert found is not None and found.angles is not None and found.shared is not None
+    if stages != "both":
+        found = dataclasses.replace(found, **{"shared" if stages == "angles" else "angles": None})
+    arrays = residual_map.map_arrays(found)
+    assert arrays.get("shared_q", np.zeros((0, 3))).shape[1] == 3
+    read = residual_map.map_from_arrays(arrays)
+    new = work_region(rng, 50)
+    for got, want in zip(read.predict(new), found.predict(new), strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
