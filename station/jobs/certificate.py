@@ -105,11 +105,13 @@ class VerificationFile(_Open):
 @dataclass(frozen=True)
 class Instrument:
     """One instrument of the cell: ``name``, how the station reached it (``device``; None: not
-    stated, empty: no device) and its stated noise as the setup gives it (``noise``; None: unknown)."""
+    stated, empty: no device) and its stated noise as the setup gives it (``noise``, words; None:
+    unknown; ``sigma_mm``, a reading's, where it has one)."""
 
     name: str
     device: str | None
     noise: str | None
+    sigma_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -201,7 +203,10 @@ def instruments_of(kind: str, setup: Path | None, session: bool) -> tuple[tuple[
     if setup is None or not setup.is_file():
         where = "names no setup" if setup is None else f"names its setup '{setup}', which is no file here"
         return (), f"unknown: the report {where}; the instruments' stated noise cannot be given"
-    raw = read_toml(setup)
+    try:
+        raw = read_toml(setup)
+    except InputError as exc:
+        return (), f"unknown: the setup the report names cannot be read now ({exc})"
     table = raw.get("setup", {}) if session else raw
     station = raw.get("station", {}) if session else {}
     return _instruments(table, station), f"as stated in {setup}{SESSION_SETUP if session else ''}"
@@ -212,35 +217,23 @@ DEFAULT_NOISE = {"drawstring": 0.02, "dial": 0.002, "line": 0.01, "contact": 0.2
 
 
 def _instruments(setup: dict, station: dict) -> tuple[Instrument, ...]:
-    """The drawstring, the dial (where the setup has one) and the gauge edge's contact."""
-
-    def noise(value, default, what):
-        given = value if isinstance(value, int | float) else default
-        return f"{given:g} mm {what}" + ("" if isinstance(value, int | float) else " (the default)")
-
+    """The drawstring, the dial (where the setup has each) and the gauge edge's contact."""
     out = []
-    if "drawstring" in setup:
-        sigma = setup["drawstring"].get("sigma_mm")
-        out.append(
-            Instrument(
-                "drawstring displacement sensor",
-                _device(station.get("drawstring")),
-                noise(sigma, DEFAULT_NOISE["drawstring"], "per reading"),
-            )
-        )
-    if "dial" in setup:
-        sigma = setup["dial"].get("sigma_mm")
-        out.append(
-            Instrument(
-                "dial indicator",
-                _device(station.get("dial")),
-                noise(sigma, DEFAULT_NOISE["dial"], "per reading"),
-            )
-        )
-    line = noise(setup.get("line_sigma_mm"), DEFAULT_NOISE["line"], "on the edge")
-    contact = noise(setup.get("contact_sigma_mm"), DEFAULT_NOISE["contact"], "off it without a dial")
+    for key, name in (("drawstring", "drawstring displacement sensor"), ("dial", "dial indicator")):
+        if isinstance(setup.get(key), dict):
+            sigma, text = _noise(setup[key].get("sigma_mm"), DEFAULT_NOISE[key], "per reading")
+            out.append(Instrument(name, _device(station.get(key)), text, sigma))
+    line = _noise(setup.get("line_sigma_mm"), DEFAULT_NOISE["line"], "on the edge")[1]
+    contact = _noise(setup.get("contact_sigma_mm"), DEFAULT_NOISE["contact"], "off it without a dial")[1]
     out.append(Instrument("gauge-block edge (tool contact)", "", f"{line}; {contact}"))
     return tuple(out)
+
+
+def _noise(value, default: float, what: str) -> tuple[float, str]:
+    """A stated noise [mm] (the setup's default where it gives none) and how the page says it."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value), f"{value:g} mm {what}"
+    return default, f"{default:g} mm {what} (the default)"
 
 
 def _device(section) -> str | None:

@@ -489,7 +489,7 @@ def page(cert: Certificate) -> str:
     """The whole certificate, one HTML document."""
     d = cert.data
     calibration = cert.kind == CALIBRATION
-    noise = next((_first_mm(i.noise) for i in cert.instruments if i.name.startswith("drawstring")), None)
+    noise = next((i.sigma_mm for i in cert.instruments if i.name.startswith("drawstring")), None)
     if calibration:
         check = d.fit_check or {}
         verdict = check.get("verdict")
@@ -527,14 +527,6 @@ def page(cert: Certificate) -> str:
         f"{history_section(cert)}</section>",
     ]
     return DOCUMENT.format(title=t(f"{title}: {name}"), css=CSS, body="\n".join(sections))
-
-
-def _first_mm(noise: str | None) -> float | None:
-    """The first figure of a stated noise (``0.02 mm per reading``)."""
-    try:
-        return float(noise.split()[0]) if noise else None
-    except ValueError:
-        return None
 
 
 DOCUMENT = """<!DOCTYPE html>

@@ -198,3 +198,16 @@ def test_one_sessions_records_are_drawn_over_an_hour_not_years(monkeypatch, tmp_
     plots.history_figure("R1", records, [], tmp_path / "h.png")
     low, high = drawn[0].axes[0].get_xlim()  # days
     assert 0.5 / 24 < high - low <= 1 / 24 + 1e-9
+
+
+def test_a_setup_no_longer_readable_leaves_the_noise_unknown(calibrated, tmp_path, capsys):
+    folder, db, _ = calibrated
+    report = json.loads((folder / "report.json").read_text())
+    broken = tmp_path / "setup.toml"
+    broken.write_text("[drawstring\n")
+    report["setup"] = str(broken)
+    given = tmp_path / "r.json"
+    given.write_text(json.dumps(report))
+    text = _certificate(capsys, given, tmp_path / "c.html", db).text
+    assert f"unknown: the setup the report names cannot be read now ({broken}: not valid TOML" in text
+    assert "per reading" not in text
