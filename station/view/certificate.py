@@ -58,7 +58,7 @@ def _save(fig, out) -> None:
 def lines_figure(lines: list[dict], noise_mm: float | None, out) -> None:
     """Each gauge line's residual after the fit (RMSE, mean, max) beside the stated reading noise."""
     fig, ax = plt.subplots(figsize=(7.2, 3.0))
-    ids = [f"line {ln.get('id')}" for ln in lines]
+    ids = [drawn(f"line {ln.get('id')}") for ln in lines]
     width = 0.26
     for k, (key, label, colour) in enumerate(
         (("rmse_mm", "RMSE", "C0"), ("mean_mm", "mean", "#7fb2d9"), ("max_mm", "max", "#c9d9e8"))
@@ -113,34 +113,39 @@ def workspace_figure(nominal_mm: float | None, workspace: dict, out) -> None:
 
 
 def parameters_figure(parameters: dict, out) -> None:
-    """Each identified parameter's change from nominal with its 95 % interval (2 sigma): lengths and
-    angles in their own panels."""
-    groups = [(u, [(n, p) for n, p in parameters.items() if n.endswith(u)]) for u in ("_mm", "_deg")]
-    groups = [(u, rows) for u, rows in groups if rows]
+    """Each identified parameter's change from nominal with its 95 % interval (2 sigma), one panel
+    per unit (mm, deg, ...)."""
+    units = dict.fromkeys(unit_of(n) for n in parameters)
+    groups = [(u, [(n, p) for n, p in parameters.items() if unit_of(n) == u]) for u in units]
     height = 0.9 + 0.22 * max(len(rows) for _, rows in groups)
     fig, axes = plt.subplots(1, len(groups), figsize=(7.2, height), squeeze=False)
     for ax, (unit, rows) in zip(axes[0], groups, strict=True):
-        names = [n for n, _ in rows][::-1]
+        names = [drawn(n) for n, _ in rows][::-1]
         delta = [p.delta if p.delta is not None else 0.0 for _, p in rows][::-1]
         sigma = [2 * p.sigma for _, p in rows][::-1]
         ax.errorbar(delta, range(len(rows)), xerr=sigma, fmt="o", ms=4, color="C0", ecolor="C0", capsize=2)
         ax.axvline(0.0, color="0.5", lw=0.8)
         ax.set_yticks(range(len(rows)), names, fontsize=7)
-        ax.set_xlabel(f"change from nominal [{unit[1:]}]")
+        ax.set_xlabel(f"change from nominal [{drawn(unit)}]")
         ax.grid(axis="x", color="0.9")
     _save(fig, out)
+
+
+def drawn(text) -> str:
+    """Text from a report as matplotlib draws it as given: its ``$`` not mathtext's."""
+    return str(text).replace("$", r"\$")
 
 
 def verification_lines_figure(data, out) -> None:
     """Each gauge line's RMS residual with the table held, against what an unchanged robot leaves."""
     fig, ax = plt.subplots(figsize=(7.2, 3.0))
-    ids = [f"line {ln.get('id')}" if data.kind == "drawstring" else "all rows" for ln in data.lines]
+    ids = [drawn(f"line {ln.get('id')}") if data.kind == "drawstring" else "all rows" for ln in data.lines]
     colour = VERDICT_COLOURS.get(data.verdict, "0.4")
     ax.bar(
         range(len(ids)),
         [float(ln.get("rmse_mm") or 0.0) for ln in data.lines],
         color=colour,
-        label=data.verdict,
+        label=drawn(data.verdict),
         width=0.5,
     )
     pad = max(0.0, (3 - len(ids)) / 2)  # one or two bars centred, as wide as in three

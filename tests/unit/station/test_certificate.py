@@ -13,6 +13,7 @@ from station.cli import main
 from station.formats.base import read_toml
 
 HOSTILE = '<script>alert("x")</script> & <b>'
+MATHTEXT = r"J1.$\notacommand$_mm"  # what matplotlib would parse as mathtext, and fail on
 
 
 class Page(HTMLParser):
@@ -124,12 +125,15 @@ def test_a_name_from_a_report_is_text(calibrated, tmp_path, capsys):
     report["robot"] = {"name": HOSTILE, "serial": None}
     report["warnings"] = [HOSTILE]
     report["held"] = [{"param": "J1.theta_deg", "reason": HOSTILE}]
+    report["parameters"][MATHTEXT] = {"value": 1.0, "sigma": 0.1, "nominal": 0.0, "delta": 1.0}
+    report["lines"][0]["id"] = MATHTEXT
     forged = tmp_path / "forged.json"
     forged.write_text(json.dumps(report))
     page = _certificate(capsys, forged, tmp_path / "c.html", db)
     html = (tmp_path / "c.html").read_text()
     assert HOSTILE not in html and "&lt;script&gt;alert(&quot;x&quot;)&lt;/script&gt; &amp; &lt;b&gt;" in html
     assert "script" not in page.tags and page.text.count(HOSTILE) >= 4  # title, header, robot, warning, held
+    assert page.text.count(MATHTEXT) == 2  # the parameter and the line, drawn in their pictures too
 
 
 def test_what_no_source_carries_is_said_unknown(calibrated, tmp_path, capsys):
