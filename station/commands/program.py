@@ -7,8 +7,6 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from errors import InputError
 from station.commands.flags import number
 from station.jobs.programs import FORMATS
@@ -61,6 +59,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    import numpy as np
+
     from station.formats.base import Output, check_writable, write_outputs
     from station.formats.plan import load_plan
     from station.formats.tables import load_robot
@@ -93,6 +93,8 @@ def run(args) -> int:
 def _second_pass(args, plan, nominal):
     """The plan with its contact joints corrected by ``--table`` (the targets ``--session`` did not
     measure first) and the table to write the program with; says what it did."""
+    import numpy as np
+
     from station.formats.session_folder import measured_targets
     from station.formats.tables import check_same_robot, check_same_tool, load_robot
     from station.jobs.correction import offline_correction, unmeasured_first
