@@ -1,4 +1,4 @@
-"""A compensated program on the simulated cell, judged against the truth (README, "Using the result").
+"""A compensated program on the simulated cell, judged against the truth (docs/how-to/compensate.md).
 
     python benchmarks/compensate_accuracy.py [--table demo-out/corrected.toml] [--seed 0] [--poses 1000]
 

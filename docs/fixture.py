@@ -1,4 +1,4 @@
-"""Draw the measuring fixture of the README's "Your own cell" (docs/fixture.png): python docs/fixture.py"""
+"""Draw the measuring fixture of docs/tutorials/own-cell-ur.md (docs/fixture.png): python docs/fixture.py"""
 
 from pathlib import Path
 

@@ -2,7 +2,7 @@
 ``chromium`` driven by Playwright) as a person reads it and as it prints: every picture loads, nothing
 is fetched beyond the page, no figure or table is wider than an A4 page's print area or cut by a page
 break, each section starts a page. ``STATION_CERTIFICATE_PNG=docs/certificate.png`` also saves the
-calibration certificate's first screen there (the README's)."""
+calibration certificate's first screen there (docs/how-to/certificate.md's)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Issue 35, "what the first hour met", items 1-4, as the user met them: their own cell rehearsed
-(``station sim serve --robot R --setup S``: the README's IRB 2600, MDH, joints over OPC UA, the
+(``station sim serve --robot R --setup S``: the OPC UA tutorial's IRB 2600, MDH, joints over OPC UA, the
 program walking a 45-target plan once, at time scale 40), everything through the console commands.
 Seed 14's robot lands the plan's line 2 3.7-5.5 mm off the edge, lines 0 and 1 on it: 30 samples,
 one short of determining the model."""
@@ -47,7 +47,7 @@ def cell(gate: str = "", channel: str = "") -> str:
 
 
 def _own_cell(tmp_path, monkeypatch, targets: int = TARGETS) -> None:
-    """The README walk-through's robot and setup in the working folder, a plan of ``targets`` made."""
+    """The walk-through's robot and setup in the working folder, a plan of ``targets`` made."""
     monkeypatch.chdir(tmp_path)
     for name, src in (("robot.toml", "robots/abb_irb2600.toml"), ("setup.toml", "setups/irb2600.toml")):
         (tmp_path / name).write_text(configs.path(src).read_text())

@@ -1,4 +1,4 @@
-"""The README's own-cell walk-through in one session: a rehearsed ABB IRB 2600 (MDH) with its joints
+"""The OPC UA tutorial's walk-through in one session: a rehearsed ABB IRB 2600 (MDH) with its joints
 over OPC UA, its program commanding the plan's nominal joints, so the tool lands off the edge by the
 robot's error, until the running calibration has determined the model and ``station sample``
 hands the program corrected targets; calibrated, the result's true workspace error lies within its
@@ -26,7 +26,7 @@ SLACK_MM = 0.05  # the dial's noise (2 um) and the operator-free landing: a capt
 
 
 def _walkthrough(tmp_path, monkeypatch) -> tuple[str, ...]:
-    """The README walk-through's folder made the working one: the IRB 2600 and its setup copied in,
+    """The walk-through's folder made the working one: the IRB 2600 and its setup copied in,
     the 120-target plan made; the ``sim serve`` flags that rehearse it at time scale 40."""
     monkeypatch.chdir(tmp_path)
     for name, src in (("robot.toml", "robots/abb_irb2600.toml"), ("setup.toml", "setups/irb2600.toml")):

@@ -1,4 +1,4 @@
-"""The README's non-UR walk-throughs, each a whole day of a rehearsed cell through the console
+"""docs/tutorials/offline-program.md's walk-throughs, each a whole day of a rehearsed cell through the console
 commands: a KUKA-convention arm (modified D-H, KUKA's A1, A4 and A6 turned, A2 and A3 zeroed
 elsewhere; joints over OPC UA, KRL), an ABB arm (modified D-H; OPC UA, RAPID) and a Fanuc-convention
 arm (standard D-H, J3 zeroed elsewhere; joints over ROS, the LS program). None offers the station
@@ -129,7 +129,7 @@ def test_a_rehearsed_cell_from_plan_to_history_by_the_offline_route(vendor, tmp_
         f"{vendor}: first pass {len(measured)} samples, {len(left)} left; second pass {len(taken)} of "
         f"{len(programmed)} programmed; true {true_error(tmp_path / 'corrected.toml'):.3f} mm, "
         f"95 % bound {bound:.3f} mm, nominal {true_error(tmp_path / 'robot.toml'):.2f} mm"
-    )  # the README's figures (pytest -s)
+    )  # docs/tutorials/offline-program.md's figures (pytest -s)
     assert true_error(tmp_path / "corrected.toml") <= bound < true_error(tmp_path / "robot.toml") / 3
     assert read_toml(tmp_path / "corrected.toml").get("controller") == controller
 

@@ -6,7 +6,7 @@ The check on the picture: the views draw the gauge lines, the live error and the
 workspace error in several colours, so at least ``MIN_HUES`` hue bins (of 16) hold
 ``MIN_PIXELS`` saturated pixels each; Rerun's welcome page (what a wrong or unreachable address
 shows) holds two (its blue selection and the orange "software rasterizer" note).
-``STATION_LIVE_VIEW_PNG=docs/live-view.png`` also saves the screenshot there (the README's).
+``STATION_LIVE_VIEW_PNG=docs/live-view.png`` also saves the screenshot there (the README's, the first hour's).
 """
 
 from __future__ import annotations

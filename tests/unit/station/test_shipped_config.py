@@ -92,7 +92,7 @@ def test_the_shipped_file_loads_with_its_active_sections():
 
 
 def test_the_shipped_robot_files_say_tool_mm_is_the_tcp_as_the_readme_does():
-    """The ABB file said 'tool_mm is the flange', the README that it is the ball's centre (issue 35)."""
+    """The ABB file said 'tool_mm is the flange', the docs that it is the ball's centre (issue 35)."""
     for path in sorted(configs.path("robots").glob("*.toml")):
         said = [line for line in path.read_text().splitlines() if line.startswith("#") and "tool_mm" in line]
         for line in said:
