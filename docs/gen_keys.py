@@ -2,9 +2,9 @@
 unit, range and description (``docs/hooks.py`` puts them where a page says ``<!-- keys M:C -->``).
 
 A description is the comment the commented example file (``configs/...``, the marker's second word)
-writes on that key, else the comment beside the field in the model's source, else its
-``Field(description=...)``. A nested model is a table of its own (``[session]``, ``[[joints]]``); a
-union of models (the robot's ``kind``) one table per kind.
+writes on that key, else the comment beside the field in the model's source, else what the model's
+docstring says of it, else its ``Field(description=...)``. A nested model is a table of its own
+(``[session]``, ``[[joints]]``); a union of models (the robot's ``kind``) one table per kind.
 """
 
 from __future__ import annotations
@@ -47,14 +47,17 @@ def model(target: str):
 
 
 def tables(cls: type[BaseModel], example: str | None = None) -> list[Table]:
-    """Every table of ``cls``, the top level first."""
-    comments = example_comments(ROOT / example) if example else {}
+    """Every table of ``cls``, the top level first; ``example`` ``flat``: the top level alone, its
+    nested tables as rows (a page that links to their own reference)."""
+    flat = example == "flat"
+    comments = example_comments(ROOT / example) if example and not flat else {}
     out: list[Table] = []
-    _walk(cls, "", "", comments, out)
+    _walk(cls, "", "", comments, out, flat)
     return out
 
 
 def markdown(target: str, example: str | None = None) -> str:
+    """The key tables of the model ``target`` (``module:Class``) as Markdown."""
     parts = []
     for t in tables(model(target), example):
         head = f"### {t.title}\n\n{t.doc}\n\n" if t.title else f"{t.doc}\n\n"
@@ -65,12 +68,12 @@ def markdown(target: str, example: str | None = None) -> str:
     return "\n\n".join(parts)
 
 
-def _walk(cls, path: str, kind: str, comments: dict, out: list[Table]) -> None:
+def _walk(cls, path: str, kind: str, comments: dict, out: list[Table], flat: bool = False) -> None:
     rows, nested = [], []
     source = source_comments(cls)
     for name, field in cls.model_fields.items():
         inner = _models(field.annotation)
-        if inner:
+        if inner and not flat:
             nested.append((name, field.annotation, inner))
             continue
         describe = (
@@ -78,6 +81,7 @@ def _walk(cls, path: str, kind: str, comments: dict, out: list[Table]) -> None:
             or comments.get((path, "", name))
             or comments.get(("*", "", name))
             or source.get(name)
+            or _docstring_says(cls, name)
         )
         rows.append(
             (
@@ -86,7 +90,7 @@ def _walk(cls, path: str, kind: str, comments: dict, out: list[Table]) -> None:
                 _default(field),
                 _unit(name),
                 _range(field.metadata),
-                describe or field.description or "",
+                describe or field.description or (_doc(inner[0]) if inner else ""),
             )
         )
     if rows:
@@ -136,7 +140,7 @@ def type_name(annotation) -> str:
         return f"list of {type_name(args[0])}" if args else "list"
     if origin is dict:
         return f"table of {type_name(args[1])}" if args else "table"
-    if a is dict:
+    if a is dict or (inspect.isclass(a) and issubclass(a, BaseModel)):
         return "table"
     plain = {str: "text", float: "number", int: "whole number", bool: "true or false"}
     return plain.get(a, getattr(a, "__name__", str(a)))
@@ -185,6 +189,13 @@ def _doc(cls) -> str:
     return " ".join(doc.split("\n\n")[0].split())
 
 
+def _docstring_says(cls, name: str) -> str:
+    """What the model's docstring says of ``name``: after "``name``: " up to ``;`` or a sentence's end."""
+    doc = " ".join((inspect.getdoc(cls) or "").split())
+    found = re.search(rf"``{name}``: (.+?)(?:; |\. |\.$|$)", doc)
+    return found.group(1) if found else ""
+
+
 def _escape(cell: str) -> str:
     return cell.replace("|", "\\|").replace("\n", " ")
 
@@ -217,8 +228,8 @@ def _trailing(line: str) -> str:
 
 
 KEY = re.compile(r"^(#\s*)?([A-Za-z_]\w*)\s*=\s*(.*)$")
-# a key explained in prose: `# name: ...`, `#   a_mm  [mm] ...`
-PROSE = re.compile(r"^#\s{0,3}([a-z_]\w*)(?::\s|\s{2,}|\s+(?=\[))(.*)$")
+# a key explained in prose: `# name: ...`, `#   a_mm  [mm] ...`, `#   q_min_deg, q_max_deg  ...`
+PROSE = re.compile(r"^#(\s{1,3})([a-z_]\w*(?:,\s*[a-z_]\w*)*)(?::\s|\s{2,}|\s+(?=\[))(.*)$")
 HEADER = re.compile(r"^(?:#\s*)?\[\[?([\w.]+)\]\]?")
 
 
@@ -226,30 +237,46 @@ def example_comments(path: Path) -> dict[tuple[str, str, str], str]:
     """{(table, kind, key): its comment} in a commented example TOML, commented-out keys too; a
     comment runs on over the indented comment lines below it. ``[[joints]]`` is the table
     ``[joints]``, and ``kind`` the last ``kind = "..."`` met in that table; a key explained in a
-    prose comment (``# name: ...``, ``#   a_mm  [mm] ...``) is filed under the table ``*``."""
+    prose comment (``# name: ...``, ``#   a_mm  [mm] ...``, running on over the comment lines
+    below it, those of a list item indented further) is filed under the table ``*``."""
     found: dict[tuple[str, str, str], str] = {}
-    table, kind, last = "", "", None
+    table, kind, last, prose = "", "", [], None
     for raw in path.read_text().splitlines():
         line = raw.strip()
-        if raw.startswith(" ") and line.startswith("#") and last is not None:
-            found[last] += " " + line.lstrip("# ")
+        if last and _runs_on(raw, line, prose):
+            for key in last:
+                found[key] += " " + line.lstrip("# ")
             continue
-        last = None
+        last, prose = [], None
         if header := HEADER.match(line):
             name = header.group(1)
             table, kind = (f"[{name}]" if line.lstrip("# ").startswith("[[") else name), ""
-            continue
-        match = KEY.match(line)
-        if not match:
-            if (prose := PROSE.match(line)) and ("*", "", prose.group(1)) not in found:
-                last = ("*", "", prose.group(1))  # a key explained in prose, table unknown
-                found[last] = prose.group(2).strip()
-            continue
-        key, rest = match.group(2), match.group(3)
-        comment = _trailing(f"x = {rest}")
-        if key == "kind":
-            kind = rest.split("#")[0].strip().strip('"')
-        if comment and (table, kind, key) not in found:
-            found[(table, kind, key)] = comment
-            last = (table, kind, key)
+        elif match := KEY.match(line):
+            key, rest = match.group(2), match.group(3)
+            if key == "kind":
+                kind = rest.split("#")[0].strip().strip('"')
+            comment = _trailing(f"x = {rest}")
+            if comment and (table, kind, key) not in found:
+                last = [(table, kind, key)]
+                found[last[0]] = comment
+        elif match := PROSE.match(line):
+            prose = len(match.group(1))
+            keys = [("*", "", k.strip()) for k in match.group(2).split(",")]
+            last = [k for k in keys if k not in found]
+            found.update(dict.fromkeys(last, match.group(3).strip()))
     return found
+
+
+def _runs_on(raw: str, line: str, prose: int | None) -> bool:
+    """Whether a comment line continues the comment before it: an indented one after a key's
+    trailing comment; after a prose one (its key ``prose`` spaces after the ``#``) a comment line
+    that starts no other key, indented further where the key was a list item (2 spaces or more)."""
+    if not line.startswith("#") or not line.lstrip("# "):
+        return False
+    if prose is None:
+        return raw.startswith(" ")
+    body = line[1:]
+    indent = len(body) - len(body.lstrip())
+    if PROSE.match(line) or KEY.match(line) or HEADER.match(line):
+        return False
+    return indent > prose if prose > 1 else indent >= prose
