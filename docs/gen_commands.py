@@ -39,7 +39,15 @@ def option_name(action: argparse.Action) -> str:
     """``--out`` / ``-o, --out`` for an option, its metavar (``SAMPLES``) for a positional."""
     if action.option_strings:
         return ", ".join(action.option_strings)
-    return action.metavar if isinstance(action.metavar, str) else action.dest.upper()
+    return action.metavar if isinstance(action.metavar, str) else action.dest
+
+
+def summaries(p: argparse.ArgumentParser) -> dict[str, str]:
+    """{subcommand: the one line ``--help`` lists it with}."""
+    for action in p._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return {choice.dest: choice.help or "" for choice in action._choices_actions}
+    return {}
 
 
 def top_help() -> str:
@@ -49,14 +57,24 @@ def top_help() -> str:
 
 def pages() -> dict[str, str]:
     """{command: its page's Markdown} for every ``station`` command."""
-    return {name: _page(name, p) for name, p in subcommands(parser()).items()}
+    top = parser()
+    lines = summaries(top)
+    return {name: _page(name, p, lines.get(name, "")) for name, p in subcommands(top).items()}
 
 
-def _page(name: str, p: argparse.ArgumentParser) -> str:
-    parts = [f"# station {name}\n", _usage(p), _table(p)]
+def _page(name: str, p: argparse.ArgumentParser, summary: str) -> str:
+    parts = [f"# station {name}\n", _sentence(summary), _usage(p), _table(p)]
+    lines = summaries(p)
     for sub_name, sub in subcommands(p).items():  # `station sim serve`
-        parts += [f"## station {name} {sub_name}\n", _usage(sub), _table(sub)]
-    return "\n".join(parts)
+        lead = _sentence(lines.get(sub_name, ""))
+        parts += [f"## station {name} {sub_name}\n", lead, _usage(sub), _table(sub)]
+    return "\n".join(part for part in parts if part)
+
+
+def _sentence(summary: str) -> str:
+    """``--help``'s one line for a command as the page's first sentence."""
+    text = _cell(summary)
+    return f"{text[:1].upper()}{text[1:]}.\n" if text else ""
 
 
 def _usage(p: argparse.ArgumentParser) -> str:
