@@ -6,8 +6,11 @@ the site, and the README stays a landing page holding the set-up and test comman
 from __future__ import annotations
 
 import argparse
+import ast
 import html
+import inspect
 import re
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -104,6 +107,31 @@ def test_every_key_of_a_file_is_in_its_reference(site, page):
     tables = {path.split(".")[-1] for path in re.findall(r"<code>\[\[?([\w.]+)\]\]?</code>", text)}
     missing = _schema_keys(model.model_json_schema(), nested) - rows - tables
     assert not missing, f"{page}: no row for {sorted(missing)}"
+
+
+def _written_keys(*functions) -> set[str]:
+    """The literal keys of the dicts the ``as_json`` functions build (``{"verdict": ...}``)."""
+    keys = set()
+    for function in functions:
+        for node in ast.walk(ast.parse(textwrap.dedent(inspect.getsource(function)))):
+            for key in node.keys if isinstance(node, ast.Dict) else ():
+                if isinstance(key, ast.Constant) and isinstance(key.value, str):
+                    keys.add(key.value)
+    return keys
+
+
+def test_every_key_a_report_writes_is_in_its_reference(site):
+    from station.jobs import report, verification
+
+    provenance = report.Provenance.as_json
+    pages = {
+        "report": _written_keys(report.CalibrationReport.as_json, report.FitMetrics.as_json, provenance),
+        "reference/files/verification": _written_keys(verification.VerifyReport.as_json, provenance),
+    }
+    for page, keys in pages.items():
+        text = _text(site, page)
+        missing = sorted(k for k in keys if f"<code>{k}</code>" not in text and f'"{k}"' not in text)
+        assert not missing, f"{page}: {missing} not described"
 
 
 def test_every_former_readme_section_is_a_heading_of_the_site():
