@@ -55,6 +55,12 @@ def top_help() -> str:
     return _usage(parser())
 
 
+def index() -> str:
+    """A Markdown list linking every command's page (from the commands' index page)."""
+    lines = summaries(parser())
+    return "\n".join(f"- [`station {name}`]({name}.md): {_cell(text)}" for name, text in lines.items())
+
+
 def pages() -> dict[str, str]:
     """{command: its page's Markdown} for every ``station`` command."""
     top = parser()

@@ -6,7 +6,8 @@
   with its type, default, unit, range and description; the description from the commented example
   file of that model where it has one, else from the model's source);
 - ``<!-- include PATH -->`` in a page: a shipped file shown whole (the commented examples);
-- ``<!-- help station -->``: what ``station --help`` prints;
+- ``<!-- help station -->``: what ``station --help`` prints; ``<!-- commands list -->``: a link to
+  every command's page with the line ``--help`` lists it with;
 - ``<!-- value MODULE:NAME LANG -->``: a module's constant (the history's SQL layout; a tuple of
   CSV columns as a header line).
 
@@ -27,7 +28,7 @@ if str(ROOT) not in sys.path:  # the tree being documented, not an installed cop
 from docs import gen_commands, gen_keys  # noqa: E402
 
 COMMANDS_NAV = "Commands"  # the nav entry whose pages are the generated command pages
-MARKER = re.compile(r"<!-- (keys|include|help|value) (\S+?)(?: (\S+))? -->")
+MARKER = re.compile(r"<!-- (keys|include|help|value|commands) (\S+?)(?: (\S+))? -->")
 
 
 def on_config(config):
@@ -66,6 +67,8 @@ def _expand_marker(match: re.Match) -> str:
         return gen_keys.markdown(target, example=extra)
     if kind == "help":  # `station --help`
         return gen_commands.top_help()
+    if kind == "commands":  # a link to every command's page
+        return gen_commands.index()
     if kind == "value":  # a module's constant: the history's SQL layout, a CSV's columns
         value = gen_keys.model(target)
         text = value.strip() if isinstance(value, str) else ",".join(value)
