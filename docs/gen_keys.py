@@ -185,13 +185,18 @@ def _range(metadata) -> str:
 
 
 def _doc(cls) -> str:
-    doc = inspect.getdoc(cls) or ""
+    doc = _plain(inspect.getdoc(cls) or "")
     return " ".join(doc.split("\n\n")[0].split())
+
+
+def _plain(doc: str) -> str:
+    """A docstring without Sphinx's roles (``:meth:`x``` reads as ```x```: Markdown has no roles)."""
+    return re.sub(r":(?:meth|func|class|attr|mod|data):`", "`", doc)
 
 
 def _docstring_says(cls, name: str) -> str:
     """What the model's docstring says of ``name``: after "``name``: " up to ``;`` or a sentence's end."""
-    doc = " ".join((inspect.getdoc(cls) or "").split())
+    doc = " ".join(_plain(inspect.getdoc(cls) or "").split())
     found = re.search(rf"``{name}``: (.+?)(?:; |\. |\.$|$)", doc)
     return found.group(1) if found else ""
 
