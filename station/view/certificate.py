@@ -474,20 +474,36 @@ def history_rows(found: list[dict]) -> list[list[str]]:
 
 
 def moves_block(found: list[dict], moved: tuple[dict, ...]) -> str:
-    """The parameters that moved between consecutive calibrations (``station.history.moves``)."""
-    calibrations = sum(r["command"] == "calibrate" for r in found)
-    head = "<h3>Parameters that moved between calibrations</h3>"
-    if calibrations < 2:
-        count = "one calibration" if calibrations == 1 else "no calibration"
+    """The parameters that moved into the latest calibration (``station.history.moves``) as a table;
+    earlier moves counted, not listed (a long history would bury the latest under them)."""
+    calibrations = [r for r in found if r["command"] == "calibrate"]
+    head = "<h3>Parameters that moved in the latest calibration</h3>"
+    if len(calibrations) < 2:
+        count = "one calibration" if calibrations else "no calibration"
         return head + f"<p>{count.capitalize()} of this robot in the history: none to compare.</p>"
-    if not moved:
-        return head + "<p>None beyond 3 combined sigmas.</p>"
-    items = [
-        f"<li>{t(m['param'])} {m['change']:+.3g} {t(unit_of(m['param']))}, {m['sigmas']:.1f} sigma since "
-        f"{when(m['since'])} (record #{m['record']})</li>"
-        for m in moved
+    latest = calibrations[-1]["id"]
+    now = [m for m in moved if m["record"] == latest]
+    earlier = len(moved) - len(now)
+    rows = [
+        [
+            t(m["param"]),
+            f"{m['change']:+.3g} {t(unit_of(m['param']))}",
+            f"{m['sigmas']:.1f}",
+            when(m["since"]),
+        ]
+        for m in now
     ]
-    return head + '<ul class="warnings">' + "".join(items) + "</ul>"
+    body = (
+        table(["parameter", "change", "combined sigmas", "since"], rows, "moves")
+        if now
+        else f"<p>None beyond 3 combined sigmas between records #{calibrations[-2]['id']} and #{latest}.</p>"
+    )
+    if earlier:
+        body += (
+            f'<p class="note">{earlier} earlier move{"s" if earlier > 1 else ""} between older calibrations: '
+            "<code>station history</code> lists them.</p>"
+        )
+    return head + f"<p>Record #{latest} against the calibration before it.</p>" + body
 
 
 def page(cert: Certificate) -> str:

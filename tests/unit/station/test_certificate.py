@@ -215,3 +215,33 @@ def test_a_setup_no_longer_readable_leaves_the_noise_unknown(calibrated, tmp_pat
     text = _certificate(capsys, given, tmp_path / "c.html", db).text
     assert f"unknown: the setup the report names cannot be read now ({broken}: not valid TOML" in text
     assert "per reading" not in text
+
+
+def test_only_the_latest_calibrations_moves_are_listed_earlier_ones_counted():
+    """Three calibrations, J2.a_mm moving between each: the table lists the move into the latest
+    (record 3), the one before is counted, not listed (a long history buried the latest)."""
+    from station.history import moves
+    from station.view.certificate import moves_block
+
+    def record(k, a_mm):
+        figures = {
+            "parameters": {"J2.a_mm": {"value": a_mm, "sigma": 0.01}, "J3.a_mm": {"value": 5, "sigma": 1}}
+        }
+        return {
+            "id": k,
+            "time_utc": f"2026-11-2{k}T10:00:00+00:00",
+            "command": "calibrate",
+            "figures": figures,
+        }
+
+    found = [record(1, 900.0), record(2, 900.5), record(3, 901.25)]
+    page = Page(moves_block(found, tuple(moves(found))))
+    assert "Record #3 against the calibration before it." in page.text
+    assert "J2.a_mm +0.75 mm 53.0" in page.text  # 0.75 mm over sqrt(2) x 0.01 mm
+    assert "+0.5 mm" not in page.text
+    assert "1 earlier move between older calibrations" in page.text
+    steady = [record(1, 900.0), record(2, 900.5), record(3, 900.5)]
+    assert (
+        "None beyond 3 combined sigmas between records #2 and #3."
+        in Page(moves_block(steady, tuple(moves(steady)))).text
+    )
