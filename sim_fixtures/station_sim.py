@@ -39,6 +39,7 @@ from sim_fixtures.rtde_server import RtdeServerProcess, start_on_free_loopback
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, SimClock
 from sim_fixtures.target_channel import TargetChannel, TargetInbox
+from sim_fixtures.unmodelled import KINDS, Unmodelled
 from sim_fixtures.world import Placement, Robot, World
 
 DIAL_RANGE_MM = (-12.5, 12.5)  # travel of a 25 mm indicator: outside it reads ERR3
@@ -69,18 +70,22 @@ class WorldCell:
 
 
 @functools.lru_cache(maxsize=4)
-def make_cell(seed: int, targets_per_line: int = 70) -> WorldCell:
-    """The simulated cell of ``[sim] seed``: ``World.create(seed)`` and its plan along each line
-    (the plan's IK is seeded by ``seed`` too, so every caller gets the same targets)."""
-    world = World.create(seed)
+def make_cell(seed: int, targets_per_line: int = 70, unmodelled: Unmodelled | None = None) -> WorldCell:
+    """The simulated cell of ``[sim] seed``: ``World.create(seed)`` (its true robot carrying
+    ``unmodelled``, ``[sim] unmodelled``) and its plan along each line (the plan's IK is seeded by
+    ``seed`` too, so every caller gets the same targets)."""
+    world = dataclasses.replace(World.create(seed), unmodelled=unmodelled)
     q, lines = world.line_configurations(targets_per_line, np.random.default_rng([seed, 2]))
     return WorldCell(world, q, lines)
 
 
-def planned_cell(seed: int, plan_deg: np.ndarray, plan_lines: np.ndarray) -> WorldCell:
-    """The cell of ``[sim] seed`` walking a designed plan (``station plan``): each planned pose
-    moved onto its true line, as the robot program touches the edge near the planned pose."""
-    world = World.create(seed)
+def planned_cell(
+    seed: int, plan_deg: np.ndarray, plan_lines: np.ndarray, unmodelled: Unmodelled | None = None
+) -> WorldCell:
+    """The cell of ``[sim] seed`` (carrying ``unmodelled``) walking a designed plan (``station
+    plan``): each planned pose moved onto its true line, as the robot program touches the edge near
+    the planned pose."""
+    world = dataclasses.replace(World.create(seed), unmodelled=unmodelled)
     q, lines = world.touch_lines(plan_deg, plan_lines, np.random.default_rng([seed, 5]))
     return WorldCell(world, q, lines)
 
@@ -272,10 +277,11 @@ class SimStation:
         self.cfg = cfg
         self.once = once
         self.clock = SimClock(time.monotonic() + (PLAY_WAIT_S if once else start_delay_s))
+        unmodelled = KINDS[cfg.sim.unmodelled]
         if cell is None and plan is None:
-            cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line)
+            cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line, unmodelled)
         elif cell is None:
-            cell = planned_cell(cfg.sim.seed, *plan)
+            cell = planned_cell(cfg.sim.seed, *plan, unmodelled)
         if cfg.sim.change:  # the robot changed after the plan was taught (a bent link)
             cell = dataclasses.replace(cell, world=cell.world.changed(cfg.sim.change))
         # a program that takes corrected targets reads them from this channel (the JR680's walks its own)

@@ -62,6 +62,9 @@ UR10_LIKE = Unmodelled(
 """Joints 2 and 3 off by 50 arcsec 17 times a turn (what the real UR10 leaves: about 0.3 mm at the
 TCP), and a sag of 0.15 mm at a metre's reach."""
 
+KINDS = {"none": None, "ur10-like": UR10_LIKE}
+"""The unmodelled errors a simulated cell may carry, by the name ``[sim] unmodelled`` gives."""
+
 
 @dataclass(frozen=True)
 class TrackerCell:

@@ -21,7 +21,9 @@ Units as a person measures them: mm and degrees. The nominal robot is the shippe
   N(0, 0.002 mm), 1 um; the controller's joint readings N(0, 0.0005 deg);
 - a gross reading (cable slip, bumped probe) adds 2-5 mm, either sign, to the drawstring;
 - optionally (``JointError``) the joints read other than the links turn: a compliance under gravity,
-  a harmonic of the joint's angle, as ``calib.joint_terms`` models them.
+  a harmonic of the joint's angle, as ``calib.joint_terms`` models them;
+- optionally (``sim_fixtures.unmodelled.Unmodelled``) a smooth error no table expresses (a joint's
+  cyclic error, a sag with reach): the true TCP carries it in every reading, the joints read as ever.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from calib.joint_terms import JointTerms
 from calib.kinematics import tcp_position
 from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees
 from sim_fixtures.sources import Instrument
+from sim_fixtures.unmodelled import Unmodelled
 
 try:
     import tomllib
@@ -47,6 +50,7 @@ JR680_FILE = configs.path("robots/hsr_jr680.toml")
 WORKING_POSE_DEG = np.array([0.0, -50.0, -20.0, 0.0, -90.0, 0.0])
 IK_TOL = 1e-7  # mm (orientation: mm at a metre): a pose counts as reached below this error
 IK_DAMPING = 1e-6  # Newton's damping: only keeps a step finite at an exact singularity
+UNMODELLED_PASSES = 4  # re-aims of the IK at an unmodelled error: each gains ~3 orders (it is smooth)
 
 
 @dataclass(frozen=True)
@@ -269,6 +273,7 @@ class World:
     lines: tuple[GaugeLine, ...]
     noise: Noise = field(default_factory=Noise)
     joint_error: JointError | None = None
+    unmodelled: Unmodelled | None = None
 
     @classmethod
     def create(cls, seed: int = 0, n_lines: int = 3, noise: Noise | None = None) -> World:
@@ -316,18 +321,25 @@ class World:
         }
 
     def true_tcp_mm(self, q_deg) -> np.ndarray:
-        return self.true.tcp(q_deg)
+        """Where the TCP truly is [mm, base frame] at joint readings (N, 6) or (6,) [deg]: the true
+        table's, plus the ``unmodelled`` error where the cell has one (the truth the residual map
+        is checked against)."""
+        if self.unmodelled is None:
+            return self.true.tcp(q_deg)
+        q = np.radians(np.atleast_2d(np.asarray(q_deg, float)))
+        p = self.unmodelled.tcp_mm(self.true.dh, q, self.true.tool)
+        return p if np.ndim(q_deg) == 2 else p[0]
 
     def true_length_mm(self, q_deg) -> np.ndarray:
         """Noise-free drawstring reading [mm] for configurations (N, 6) [deg]."""
         return (
-            np.linalg.norm(self.true.tcp(np.atleast_2d(q_deg)) - self.anchor_mm, axis=1)
+            np.linalg.norm(self.true_tcp_mm(np.atleast_2d(q_deg)) - self.anchor_mm, axis=1)
             - self.length_offset_mm
         )
 
     def true_dial_mm(self, q_deg, line_ids) -> np.ndarray:
         """Noise-free dial reading [mm]: the TCP's offset from its line along the dial axis."""
-        p = self.true.tcp(np.atleast_2d(q_deg))
+        p = self.true_tcp_mm(np.atleast_2d(q_deg))
         by_id = {ln.id: ln for ln in self.lines}
         return np.array(
             [
@@ -348,7 +360,7 @@ class World:
                     offset = rng.uniform(-1, 1) * self.noise.placement_mm
                     pos = ln.centre + s * ln.direction + offset * ln.dial_axis
                     pose = tool_pose(pos, tilted(ln.approach, max_tilt_deg, rng), rng.uniform(-np.pi, np.pi))
-                    (q,), (reached,) = self.true.ik(pose[None], seed[None])
+                    (q,), (reached,) = self.true_ik(pose[None], seed[None])
                 q_all.append(q)
                 ids.append(ln.id)
                 seed = q
@@ -391,12 +403,26 @@ class World:
         for k, (q, lid) in enumerate(zip(q_plan, line_ids, strict=True)):
             ln = by_id[int(lid)]
             targets[k] = self.true.pose(q)
+            if self.unmodelled is not None:
+                targets[k, :3, 3] = self.true_tcp_mm(q)
             rel = targets[k, :3, 3] - ln.centre
             targets[k, :3, 3] = ln.centre + (rel @ ln.direction) * ln.direction + off(ln, rel)
-        q_true, reached = self.true.ik(targets, q_plan)
+        q_true, reached = self.true_ik(targets, q_plan)
         if every:
             return q_true, reached
         return q_true[reached].reshape(-1, 6), np.asarray(line_ids, int)[reached]
+
+    def true_ik(self, targets: np.ndarray, seeds_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The joint readings [deg] (N, 6) at which the true TCP (``true_tcp_mm``) stands at the
+        positions of ``targets`` (N, 4, 4), the flange at their orientations, and which (N,) the true
+        robot reaches (``Robot.ik``). The ``unmodelled`` error (a fraction of a mm, smooth) is taken
+        out by re-aiming the table's TCP at the target less that error, ``UNMODELLED_PASSES`` times."""
+        q, reached = self.true.ik(targets, seeds_deg)
+        aimed = np.array(targets, float)
+        for _ in range(UNMODELLED_PASSES if self.unmodelled is not None else 0):
+            aimed[:, :3, 3] = targets[:, :3, 3] - (self.true_tcp_mm(q) - self.true.tcp(q))
+            q, reached = self.true.ik(aimed, q)
+        return q, reached
 
     def _seed_for(self, ln: GaugeLine) -> np.ndarray:
         """A configuration at the line's centre with the tool along its approach direction: of the

@@ -73,6 +73,8 @@ class SimConfig(Section):
     joint_offset_deg: Annotated[
         list[Annotated[float, Field(ge=-3600, le=3600)]], AfterValidator(_six_or_none)
     ] = []
+    # a smooth error no table expresses in the true robot (``sim_fixtures.unmodelled.KINDS``)
+    unmodelled: Literal["none", "ur10-like"] = "none"
 
     def convention(self, controller=None) -> tuple[list[float], list[float]]:
         """The simulated controller's ``joint_sign`` and ``joint_offset_deg`` [deg] (6 each): this
