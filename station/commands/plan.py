@@ -41,6 +41,16 @@ def register(sub) -> None:
         help="a short verification plan instead (station verify): N poses (default 15) on one gauge line, "
         "those most sensitive to joint zeros and link lengths and twists",
     )
+    p.add_argument(
+        "--near",
+        type=Path,
+        metavar="PROGRAM.csv",
+        help="add gauge-line contacts near this program's poses (q1_deg..q6_deg per row, the "
+        "controller's joints, as station compensate's), so the residual map is learnt where it works",
+    )
+    p.add_argument(
+        "--near-poses", type=_positive, default=60, metavar="N", help="contacts --near adds (default 60)"
+    )
     p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -68,10 +78,7 @@ def run(args) -> int:
         )
         return 0
     with parameters_as_flags(FLAGS):
-        design = planning.design(
-            robot,
-            setup,
-            where,
+        design = _design(args, robot, setup, where)(
             per_line=args.per_line,
             n_select=args.select,
             seed=args.seed,
@@ -91,6 +98,30 @@ def run(args) -> int:
     print(planning.summary(design))
     print("wrote " + ", ".join(str(o.path) for o in outputs))
     return 0
+
+
+def _design(args, robot, setup, where):
+    """``planning.design`` on the robot and setup, or with ``--near`` ``planning.near_design`` on the
+    program's poses too (read in the controller's joints, converted by the robot file's
+    ``[controller]``), awaiting ``design``'s options."""
+    import functools
+
+    from station.formats.program import load_program
+    from station.jobs import planning
+
+    if args.near is None:
+        return functools.partial(planning.design, robot, setup, where)
+    program = load_program(args.near)
+    q_model = robot.controller.model_deg(program.q_deg)
+    return functools.partial(
+        planning.near_design,
+        robot,
+        setup,
+        q_model,
+        where,
+        n_near=args.near_poses,
+        program_where=str(args.near),
+    )
 
 
 def _inputs(args):
