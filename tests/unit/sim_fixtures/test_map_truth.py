@@ -1,0 +1,48 @@
+"""Issue 36's done-when, at reduced size (``benchmarks/residual_map_sim.py`` at full): a cell
+measured on a ``station plan --near`` plan of a program, calibrated, checked at the program's
+poses against the simulated truth."""
+
+import importlib.util
+
+import pytest
+
+from benchmarks import residual_map_sim as sim
+from sim_fixtures.world import World
+
+NOISE_MM = World.create(0).noise.length_mm
+DRAWSTRING_MAP = importlib.util.find_spec("calib.map_rows") is not None
+
+
+@pytest.fixture(scope="module")
+def plan_and_program():
+    program = sim.program_deg(30)
+    return sim.near_plan(program, 30), program
+
+
+@pytest.fixture(scope="module")
+def cells(plan_and_program):
+    plan, program = plan_and_program
+    kinds = ("tracker", "drawstring") if DRAWSTRING_MAP else ("tracker",)
+    return {u: sim.one_cell(1, u, plan, program, kinds) for u in (True, False)}
+
+
+def test_the_plan_reaches_every_program_pose(cells):
+    assert all(c["near_poses"] == 30 for c in cells.values())
+
+
+def test_a_cell_without_the_error_meets_the_program_with_the_table_alone(cells):
+    # nothing unmodelled: the table alone puts the program within twice the drawstring's noise
+    assert cells[False]["tracker"]["table_rmse_mm"] <= 2 * NOISE_MM
+
+
+def test_the_unmodelled_error_is_what_the_table_leaves_and_a_tracker_map_takes_much_of_it(cells):
+    c = cells[True]["tracker"]
+    assert c["table_rmse_mm"] > 5 * NOISE_MM  # the truth carries it: no table expresses it
+    assert c["on"] and c["map_rmse_mm"] < 0.5 * c["table_rmse_mm"]
+    # 30 poses inside a 95 % bound: 27 or more unless the bound is too tight (binomial, p < 2 %)
+    assert c["inside_95"] >= 0.9
+
+
+@pytest.mark.skipif(not DRAWSTRING_MAP, reason="no drawstring-row map (calib.map_rows) on this branch")
+def test_the_calibrations_own_rows_keep_the_map_off_without_the_error(cells):
+    assert not cells[False]["drawstring"]["on"]
