@@ -118,23 +118,33 @@ def posterior_covariance(gram: np.ndarray, noise: float, prior: np.ndarray) -> n
 
 
 class Folds:
-    """Per interleaved fold, the Gram matrix and moment of its rows, and the features and residuals
-    of the rows it predicts."""
+    """Per interleaved fold, the Gram matrix and moment of its observations, and the features and
+    values of the observations it predicts.
 
-    def __init__(self, q: np.ndarray, jacobian: np.ndarray, error_mm: np.ndarray):
-        fold = np.arange(q.shape[0]) % FOLDS
-        self.noise = float(np.mean(error_mm**2))
+    Parameters
+    ----------
+    design : ndarray, shape (K, F)
+        Each observation's response [mm/rad] to the coefficients (``features`` seen along the
+        observation's direction).
+    value_mm : ndarray, shape (K,)
+        The observed residuals [mm].
+    fold : ndarray, shape (K,)
+        The fold of each observation (its row's).
+    """
+
+    def __init__(self, design: np.ndarray, value_mm: np.ndarray, fold: np.ndarray):
+        self.noise = float(np.mean(value_mm**2))
         self.grams, self.moments, self.held = [], [], []
         for f in range(FOLDS):
-            rows = fold == f
-            a = features(q[rows], jacobian[rows]).reshape(-1, ANGLE_JOINTS * 2 * HARMONICS)
+            a, e = design[fold == f], value_mm[fold == f]
             self.grams.append(a.T @ a)
-            self.moments.append(a.T @ error_mm[rows].ravel())
-            self.held.append((a, error_mm[rows].ravel()))
+            self.moments.append(a.T @ e)
+            self.held.append((a, e))
         self.gram, self.moment = sum(self.grams), sum(self.moments)
 
     def error(self, length_deg: float, sigma_deg: float) -> float:
-        """3-D RMS error [mm] of every row predicted from the other folds."""
+        """3-D RMS error [mm] (three components of the mean square) of every observation predicted
+        from the other folds."""
         prior = prior_variance(length_deg, sigma_deg)
         squares = 0.0
         for g, m, (a, e) in zip(self.grams, self.moments, self.held, strict=True):
@@ -161,11 +171,31 @@ def search(folds: Folds) -> dict[tuple[float, float], float]:
 
 def fit_angle_errors(q: np.ndarray, jacobian: np.ndarray, error_mm: np.ndarray) -> AngleErrors | None:
     """Angle errors of joints 1-3 from rows ``q`` (N, 6) [rad], ``jacobian`` (N, 3, ANGLE_JOINTS)
-    [mm/rad] and residuals ``error_mm`` (N, 3) [mm, base frame]; None unless they cut the table's
-    fold error by ``MIN_GAIN``."""
+    [mm/rad] and residual vectors ``error_mm`` (N, 3) [mm, base frame] (a tracker's rows: each
+    observes its whole error); None unless they cut the table's fold error by ``MIN_GAIN``."""
     if q.shape[0] < 2 * FOLDS:
         return None
-    folds = Folds(q, jacobian, error_mm)
+    design = features(q, jacobian).reshape(-1, ANGLE_JOINTS * 2 * HARMONICS)
+    fold = np.repeat(np.arange(q.shape[0]) % FOLDS, 3)
+    return fit_observed_angle_errors(design, error_mm.ravel(), fold)
+
+
+def observed_features(q: np.ndarray, jacobian: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """The response (K, F) [mm/rad] to each coefficient of observations along unit ``direction``
+    (K, 3) (base frame) of the TCP's error at readings ``q`` (K, 6) [rad] with ``jacobian``
+    (K, 3, ANGLE_JOINTS): ``features`` seen along each direction."""
+    along = np.einsum("kc,kcj->kj", direction, jacobian)[:, None, :]
+    return features(q, along)[:, 0, :]
+
+
+def fit_observed_angle_errors(
+    design: np.ndarray, value_mm: np.ndarray, fold: np.ndarray
+) -> AngleErrors | None:
+    """Angle errors of joints 1-3 from observations ``value_mm`` (K,) [mm] of the TCP's error with
+    responses ``design`` (K, F) [mm/rad] (``features``, ``observed_features``), each in the
+    interleaved ``fold`` (K,) of its row; None unless they cut the table's fold error by
+    ``MIN_GAIN``."""
+    folds = Folds(design, value_mm, fold)
     (length, sigma), best = min(search(folds).items(), key=lambda item: item[1])
     if best > (1.0 - MIN_GAIN) * np.sqrt(3.0 * folds.noise):
         return None

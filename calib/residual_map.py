@@ -31,7 +31,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.angle_errors import AngleErrors, fit_angle_errors, joint_jacobian
+from calib.angle_errors import (
+    AngleErrors,
+    features,
+    fit_observed_angle_errors,
+    joint_jacobian,
+    observed_features,
+)
+from calib.map_rows import Observations
 
 MAP_JOINTS = 3
 """The map's kernel reads joints 1-3 (those that carry the arm)."""
@@ -40,7 +47,9 @@ LENGTH_SCALES_DEG = (2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 25.0)
 SHARED_FRACTIONS = (0.5, 0.75, 0.9, 0.97)
 """Shares of the rows' mean square tried for the shared error (ratios 1, 3, 9, 32 to the noise)."""
 NEIGHBOURS = 40
-"""Rows each prediction is computed from."""
+"""Rows each prediction is computed from (a position instrument's: three components each)."""
+OBSERVED_NEIGHBOURS = 60
+"""Observations each prediction is computed from where rows observe projections of the error."""
 FOLDS = 5
 """Interleaved cross-validation folds."""
 CV_ROWS = 2000
@@ -97,6 +106,52 @@ class SharedError:
             distances, self.error_mm[index], length, self.shared_mm2, self.noise_mm2
         )
         return mean, variance + self.noise_mm2
+
+
+@dataclass(frozen=True)
+class ObservedShared:
+    """The shared error (``SharedError``'s kernel, one Gaussian process per base-frame component)
+    learnt from observations of its projections (``calib.map_rows``): observation ``k`` of the pose
+    ``q[k]`` reads ``direction[k] . e(q[k])`` plus noise, so two observations covary by the kernel
+    times the dot product of their directions (the Gaussian process with a linear observation
+    operator; a tracker's rows are the case of the three axes).
+
+    Attributes
+    ----------
+    q : ndarray, shape (K, 6)
+        The pose of each observation [rad].
+    direction : ndarray, shape (K, 3)
+        Its unit direction, base frame.
+    value_mm : ndarray, shape (K,)
+        What it observed of the error the angle errors leave [mm].
+    length_scale_deg, shared_mm2, noise_mm2, cv_rmse_mm, table_cv_rmse_mm : float
+        As ``SharedError``'s (the fold errors over the held-out observations, as three components
+        of their mean square).
+    """
+
+    q: np.ndarray
+    direction: np.ndarray
+    value_mm: np.ndarray
+    length_scale_deg: float
+    shared_mm2: float
+    noise_mm2: float
+    cv_rmse_mm: float
+    table_cv_rmse_mm: float
+
+    def predict(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``SharedError.predict``: the posterior mean (M, 3) [mm, base frame] at the poses ``q``
+        (M, 6) [rad], and the variance per component (M,) [mm^2] of what is left there (the mean
+        of the three components' posterior variances, plus ``noise_mm2``)."""
+        points = embedding(self.q)
+        queries = embedding(np.asarray(q, float))
+        index = neighbours(queries, points, OBSERVED_NEIGHBOURS)
+        distances = local_distances(queries, points, index)
+        near = self.direction[index]
+        correlations = observed_correlations(distances, near, near, np.radians(self.length_scale_deg))
+        mean, variance = observed_posterior(
+            correlations, self.value_mm[index], self.shared_mm2, self.noise_mm2
+        )
+        return mean, np.mean(variance, axis=1) + self.noise_mm2
 
 
 def embedding(q: np.ndarray) -> np.ndarray:
@@ -169,9 +224,41 @@ def local_posterior(
     return mean, np.maximum(variance, 0.0)
 
 
+def observed_correlations(
+    distances: tuple[np.ndarray, np.ndarray], directions: np.ndarray, facing: np.ndarray, length_rad: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's correlations among each query's k neighbouring observations (M, k, k) and with
+    the directions asked about at the query (M, k, c): the squared-exponential of ``distances``
+    (``local_distances`` [rad^2]) at ``length_rad`` [rad], times the dot products of the
+    neighbours' unit ``directions`` (M, k, 3) among themselves and their ``facing`` (M, k, c) (dot
+    products with the c unit directions asked about: the base frame's axes, ``directions`` itself;
+    an observation's own, (M, k, 1))."""
+    among, to_query = distances
+    dots = np.matmul(directions, directions.transpose(0, 2, 1))
+    return np.exp(-among / (2.0 * length_rad**2)) * dots, np.exp(-to_query / (2.0 * length_rad**2))[
+        :, :, None
+    ] * facing
+
+
+def observed_posterior(
+    correlations: tuple[np.ndarray, np.ndarray], values: np.ndarray, shared: float, noise: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian-process posterior at each query from its k neighbouring observations of projections
+    (``observed_correlations``), their observed ``values`` (M, k) [mm], the shared and noise
+    variance [mm^2]: the mean (M, c) [mm] of the error along each direction asked about and the
+    variance (M, c) [mm^2] of the shared error along it (without the noise)."""
+    among, cross = correlations
+    cov = shared * among + noise * np.eye(among.shape[1])
+    solved = np.linalg.solve(cov, np.concatenate([values[:, :, None], shared * cross], axis=2))
+    mean = shared * np.einsum("mkc,mk->mc", cross, solved[:, :, 0])
+    variance = shared - shared * np.einsum("mkc,mkc->mc", cross, solved[:, :, 1:])
+    return mean, np.maximum(variance, 0.0)
+
+
 def rms3(error: np.ndarray) -> float:
-    """3-D RMS [mm] of error vectors (N, 3)."""
-    return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
+    """3-D RMS [mm] of error vectors (N, 3); of observations (N, 1), three components of their mean
+    square."""
+    return float(np.sqrt(3.0 * np.mean(error**2)))
 
 
 class Folds:
@@ -204,7 +291,47 @@ class Folds:
         return local_posterior(self.distances, self.values, np.radians(length_deg), shared, noise)
 
 
-def search(folds: Folds) -> dict[tuple[float, float], float]:
+class ObservedFolds:
+    """``Folds`` of observations (``calib.map_rows.Observations``): the observations of at most
+    ``CV_ROWS`` rows (evenly spaced) predicted from the observations of the other folds' rows.
+
+    Parameters
+    ----------
+    rows : Observations
+        The rows and what they observe.
+    value_mm : ndarray, shape (K,)
+        What is left to predict of each observation [mm].
+    """
+
+    def __init__(self, rows, value_mm: np.ndarray):
+        n = rows.q.shape[0]
+        fold = rows.row % FOLDS
+        picked = np.unique(np.linspace(0, n - 1, min(n, CV_ROWS)).astype(int))
+        asked = np.flatnonzero(np.isin(rows.row, picked))
+        points = embedding(rows.q[rows.row])
+        index = neighbours(points[asked], points, OBSERVED_NEIGHBOURS, fold, fold[asked])
+        self.distances = local_distances(points[asked], points, index)
+        self.directions = rows.direction[index]
+        self.facing = np.einsum("mkc,mc->mk", self.directions, rows.direction[asked])[:, :, None]
+        self.correlations = {}
+        self.values = value_mm[index]
+        self.error = value_mm[asked, None]
+        self.total = float(np.mean(value_mm**2))
+        """The observations' mean square [mm^2]."""
+
+    def predict(self, length_deg: float, share: float) -> tuple[np.ndarray, np.ndarray]:
+        """``Folds.predict`` of the held-out observations: mean (M, 1) [mm], variance (M,) [mm^2]."""
+        if length_deg not in self.correlations:
+            length = np.radians(length_deg)
+            self.correlations[length_deg] = observed_correlations(
+                self.distances, self.directions, self.facing, length
+            )
+        shared, noise = share * self.total, (1.0 - share) * self.total
+        mean, variance = observed_posterior(self.correlations[length_deg], self.values, shared, noise)
+        return mean, variance[:, 0]
+
+
+def search(folds: Folds | ObservedFolds) -> dict[tuple[float, float], float]:
     """Cross-validated 3-D RMS error [mm] per (length [deg], shared fraction) the search visits:
     coordinate descent over the grid (the length at the middling share, the share at that length,
     the length again; 14 of its 28 points)."""
@@ -221,29 +348,44 @@ def search(folds: Folds) -> dict[tuple[float, float], float]:
     return scores
 
 
-def variance_scale(folds: Folds, length_deg: float, share: float) -> float:
+def variance_scale(folds: Folds | ObservedFolds, length_deg: float, share: float) -> float:
     """The factor on both variances that makes the folds' standardised errors (error minus mean,
     squared, over the posterior variance plus the noise, per component) average one: the kernel's
     amplitude as the held-out rows show it (it leaves the mean as it is)."""
     mean, variance = folds.predict(length_deg, share)
-    squared = np.sum((folds.error - mean) ** 2, axis=1)
-    return float(np.mean(squared / (3.0 * (variance + (1.0 - share) * folds.total))))
+    return float(np.mean((folds.error - mean) ** 2 / (variance + (1.0 - share) * folds.total)[:, None]))
 
 
-def fit_shared(q: np.ndarray, error_mm: np.ndarray) -> SharedError | None:
-    """The shared error of the rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm,
-    measured minus the table's TCP, base frame], at the grid point of least cross-validated error;
-    None where it does not cut the table's cross-validated error by ``MIN_GAIN`` (or too few rows to
-    have neighbours in every fold)."""
-    if q.shape[0] < 2 * FOLDS:
-        return None
-    folds = Folds(q, error_mm)
+def best_kernel(folds: Folds | ObservedFolds) -> tuple[float, ...] | None:
+    """The grid point of least cross-validated error: length [deg], shared and noise variance
+    [mm^2] (scaled by ``variance_scale``), its fold error and the table's [mm]; None where it does
+    not cut the table's fold error by ``MIN_GAIN``."""
     (length, share), best = min(search(folds).items(), key=lambda item: item[1])
     table = rms3(folds.error)
     if best > (1.0 - MIN_GAIN) * table:
         return None
     scale = variance_scale(folds, length, share) * folds.total
-    return SharedError(q, error_mm, length, share * scale, (1 - share) * scale, best, table)
+    return length, share * scale, (1 - share) * scale, best, table
+
+
+def fit_shared(q: np.ndarray, error_mm: np.ndarray) -> SharedError | None:
+    """The shared error of the rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm,
+    measured minus the table's TCP, base frame] (``best_kernel``); None where it does not cut the
+    table's cross-validated error by ``MIN_GAIN`` (or too few rows to have neighbours in every
+    fold)."""
+    if q.shape[0] < 2 * FOLDS:
+        return None
+    found = best_kernel(Folds(q, error_mm))
+    return None if found is None else SharedError(q, error_mm, *found)
+
+
+def fit_observed_shared(rows, value_mm: np.ndarray) -> ObservedShared | None:
+    """``fit_shared`` of observations: ``rows`` (``calib.map_rows.Observations``) with what is left
+    of each observation ``value_mm`` (K,) [mm]."""
+    if rows.q.shape[0] < 2 * FOLDS:
+        return None
+    found = best_kernel(ObservedFolds(rows, value_mm))
+    return None if found is None else ObservedShared(rows.q[rows.row], rows.direction, value_mm, *found)
 
 
 @dataclass(frozen=True)
@@ -268,7 +410,7 @@ class ResidualMap:
     dh: np.ndarray
     tool_mm: np.ndarray
     angles: AngleErrors | None
-    shared: SharedError | None
+    shared: SharedError | ObservedShared | None
     cv_rmse_mm: float
     table_cv_rmse_mm: float
 
@@ -293,20 +435,34 @@ class ResidualMap:
 
 
 def fit_map(q: np.ndarray, error_mm: np.ndarray, dh: np.ndarray, tool_mm: np.ndarray) -> ResidualMap | None:
-    """The residual map of rows ``q`` (N, 6) [rad] with residuals ``error_mm`` (N, 3) [mm, measured
-    minus the table's TCP, base frame] of the table ``dh`` (6, 4) (rad, mm) with the TCP ``tool_mm``
-    (3,) [mm]: the angle errors where they cut the folds' error by their ``MIN_GAIN``, then the
-    shared error of what is left where it cuts that by ``MIN_GAIN``; None where neither does (or
-    the rows fit exactly). The rows are a position instrument's (three components each)."""
-    if not np.any(error_mm):
+    """The residual map of a position instrument's rows ``q`` (N, 6) [rad] with residuals
+    ``error_mm`` (N, 3) [mm, measured minus the table's TCP, base frame] (``fit_rows_map``)."""
+    return fit_rows_map(Observations.of_positions(q, error_mm), dh, tool_mm)
+
+
+def fit_rows_map(rows: Observations, dh: np.ndarray, tool_mm: np.ndarray) -> ResidualMap | None:
+    """The residual map of what ``rows`` observe (``calib.map_rows``) of the table ``dh`` (6, 4)
+    (rad, mm) with the TCP ``tool_mm`` (3,) [mm]: the angle errors where they cut the folds' error
+    by their ``MIN_GAIN``, then the shared error of what is left where it cuts that by
+    ``MIN_GAIN``; None where neither does (or too few rows, or the rows fit exactly). A position
+    instrument's rows take the shared error's three independent components (``SharedError``),
+    other rows the observation operator (``ObservedShared``)."""
+    if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
         return None
-    jacobian = joint_jacobian(dh, q, tool_mm)
-    angles = fit_angle_errors(q, jacobian, error_mm)
-    left = error_mm if angles is None else error_mm - angles.mean(q, jacobian)
-    shared = fit_shared(q, left)
+    jacobian = joint_jacobian(dh, rows.q, tool_mm)
+    if rows.positions:
+        design = features(rows.q, jacobian).reshape(rows.value_mm.size, -1)
+    else:
+        design = observed_features(rows.q[rows.row], jacobian[rows.row], rows.direction)
+    angles = fit_observed_angle_errors(design, rows.value_mm, rows.row % FOLDS)
+    left = rows.value_mm if angles is None else rows.value_mm - design @ angles.weights
+    if rows.positions:
+        shared = fit_shared(rows.q, left.reshape(-1, 3))
+    else:
+        shared = fit_observed_shared(rows, left)
     if angles is None and shared is None:
         return None
-    table = rms3(error_mm)
+    table = rms3(rows.value_mm[:, None])
     best = shared.cv_rmse_mm if shared is not None else float(np.sqrt(3.0 * angles.rest_mm2))
     return ResidualMap(np.asarray(dh, float), np.asarray(tool_mm, float), angles, shared, best, table)
 
@@ -329,7 +485,11 @@ def map_arrays(found: ResidualMap) -> dict[str, np.ndarray]:
         out["shared_kernel"] = np.array(
             [s.length_scale_deg, s.shared_mm2, s.noise_mm2, s.cv_rmse_mm, s.table_cv_rmse_mm]
         )
-        out["shared_q"], out["shared_error_mm"] = s.q[:, :MAP_JOINTS], s.error_mm
+        if isinstance(s, ObservedShared):
+            out["observed_q"], out["observed_direction"] = s.q[:, :MAP_JOINTS], s.direction
+            out["observed_value_mm"] = s.value_mm
+        else:
+            out["shared_q"], out["shared_error_mm"] = s.q[:, :MAP_JOINTS], s.error_mm
     return out
 
 
@@ -341,9 +501,17 @@ def map_from_arrays(arrays: dict[str, np.ndarray]) -> ResidualMap:
         length, sigma, rest = (float(v) for v in arrays["angle_kernel"])
         angles = AngleErrors(length, sigma, arrays["angle_weights"], arrays["angle_covariance"], rest)
     if "shared_kernel" in arrays:
-        q = arrays["shared_q"]
-        q = np.hstack([q, np.zeros((q.shape[0], 6 - MAP_JOINTS))])
-        length, shared_mm2, noise_mm2, cv, table = (float(v) for v in arrays["shared_kernel"])
-        shared = SharedError(q, arrays["shared_error_mm"], length, shared_mm2, noise_mm2, cv, table)
+        kernel = (float(v) for v in arrays["shared_kernel"])
+        if "observed_q" in arrays:
+            q = whole_readings(arrays["observed_q"])
+            shared = ObservedShared(q, arrays["observed_direction"], arrays["observed_value_mm"], *kernel)
+        else:
+            shared = SharedError(whole_readings(arrays["shared_q"]), arrays["shared_error_mm"], *kernel)
     cv, table = (float(v) for v in arrays["cv_rmse_mm"])
     return ResidualMap(arrays["dh"], arrays["tool_mm"], angles, shared, cv, table)
+
+
+def whole_readings(q: np.ndarray) -> np.ndarray:
+    """Readings (N, 6) [rad] of joints 1-3's ``q`` (N, 3), the wrist's read as 0 (the kernel ignores
+    them)."""
+    return np.hstack([q, np.zeros((q.shape[0], 6 - MAP_JOINTS))])
