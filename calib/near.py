@@ -82,33 +82,11 @@ def line_contacts(
     rng: np.random.Generator,
     tries: int = TRIES,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Configurations touching a gauge line near the program's poses.
-
-    Parameters
-    ----------
-    dh : ndarray, shape (6, 4)
-        Nominal D-H table, internal units.
-    tool : ndarray, shape (3,)
-        TCP in the flange frame [mm].
-    limits : ndarray, shape (6, 2)
-        Joint limits [rad].
-    line : tuple
-        ``(point [mm] (3,), unit direction (3,), usable length [mm], unit tool approach (3,))``.
-    program_q : ndarray, shape (P, 6)
-        The program's configurations [rad].
-    rng : numpy.random.Generator
-        Draws the moves along the line.
-    tries : int
-        Contacts per program pose: the nearest point of the line, then points up to ``ALONG_MM``
-        either way of it.
-
-    Returns
-    -------
-    q : ndarray, shape (P * tries, 6)
-        Configurations [rad] solved from each program pose.
-    valid : ndarray of bool, shape (P * tries,)
-        Reached, inside the limits and away from singularities (as ``calib.experiment``'s candidates).
-    """
+    """Configurations (P * tries, 6) [rad] touching a gauge line near the program's poses
+    ``program_q`` (P, 6) [rad], each solved from its pose, and which of them (P * tries,) are
+    reached inside the limits away from singularities. ``dh``, ``tool``, ``limits`` and ``line`` as
+    ``calib.experiment.line_candidates``'s; per pose ``tries`` contacts: the line's nearest point to
+    its TCP, then points up to ``ALONG_MM`` either way of it (drawn from ``rng``)."""
     point, direction, length, approach = line
     seeds = np.repeat(program_q, tries, axis=0)
     tcp, rotation = ik.tool_frames(dh, seeds, tool)

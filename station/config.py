@@ -58,8 +58,9 @@ def _six_or_none(values: list) -> list:
 
 
 class SimConfig(Section):
-    """The simulated cell that ``station sim serve`` runs: world seed, robot program motion, and the
-    joint convention its simulated controller publishes and takes targets in (:meth:`convention`)."""
+    """The simulated cell that ``station sim serve`` runs: world seed, robot program motion, the
+    true robot's ``unmodelled`` error (``sim_fixtures.unmodelled.KINDS``), and the joint convention
+    its simulated controller publishes and takes targets in (:meth:`convention`)."""
 
     seed: int = Field(0, ge=0)
     speed_deg_s: float = Field(30.0, gt=0, le=1000)
@@ -73,7 +74,6 @@ class SimConfig(Section):
     joint_offset_deg: Annotated[
         list[Annotated[float, Field(ge=-3600, le=3600)]], AfterValidator(_six_or_none)
     ] = []
-    # a smooth error no table expresses in the true robot (``sim_fixtures.unmodelled.KINDS``)
     unmodelled: Literal["none", "ur10-like"] = "none"
 
     def convention(self, controller=None) -> tuple[list[float], list[float]]:

@@ -48,9 +48,7 @@ def register(sub) -> None:
         help="add gauge-line contacts near this program's poses (q1_deg..q6_deg per row, the "
         "controller's joints, as station compensate's), so the residual map is learnt where it works",
     )
-    p.add_argument(
-        "--near-poses", type=_positive, default=60, metavar="N", help="contacts --near adds (default 60)"
-    )
+    p.add_argument("--near-poses", type=_positive, metavar="N", help="contacts --near adds (default 60)")
     p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -113,14 +111,9 @@ def _design(args, robot, setup, where):
         return functools.partial(planning.design, robot, setup, where)
     program = load_program(args.near)
     q_model = robot.controller.model_deg(program.q_deg)
+    given = {} if args.near_poses is None else {"n_near": args.near_poses}
     return functools.partial(
-        planning.near_design,
-        robot,
-        setup,
-        q_model,
-        where,
-        n_near=args.near_poses,
-        program_where=str(args.near),
+        planning.near_design, robot, setup, q_model, where, program_where=str(args.near), **given
     )
 
 

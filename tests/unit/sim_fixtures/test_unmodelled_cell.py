@@ -8,7 +8,7 @@ import pytest
 
 import configs
 from errors import InputError
-from sim_fixtures.station_sim import make_cell
+from sim_fixtures.station_sim import SimStation, make_cell
 from sim_fixtures.unmodelled import UR10_LIKE
 from sim_fixtures.world import World
 from station.config import station_config
@@ -69,3 +69,13 @@ def test_the_station_config_names_the_kind():
     raw["sim"]["unmodelled"] = "ur5"
     with pytest.raises(InputError, match=r"^s.toml: sim.unmodelled: .*'none' or 'ur10-like'$"):
         station_config(raw, "s.toml")
+
+
+def test_sim_serve_s_cell_carries_it_in_its_readings():
+    raw = read_toml(configs.path("station.toml"))
+    raw["sim"].update(unmodelled="ur10-like", targets_per_line=8)
+    station = SimStation(station_config(raw, "s.toml"))
+    world, state = station.source.cell.world, station.source.state(0.0)  # still at the first target
+    assert world.unmodelled is UR10_LIKE
+    assert state.length_mm == pytest.approx(world.true_length_mm(np.array(state.q_deg))[0])
+    assert np.array_equal(station.plan_deg, make_cell(0, 8, UR10_LIKE).plan_deg)

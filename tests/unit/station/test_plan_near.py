@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+import tomli_w
 
 import configs
 from calib.near import NEAR_DEG, chord_deg
@@ -88,3 +89,21 @@ def test_a_bad_program_is_a_one_line_error(tmp_path, capsys, edit, expected):
     assert cli.main(plan_argv(tmp_path, tmp_path / "far.csv")) == 2
     (err,) = errors_of(capsys)
     assert expected in err and not (tmp_path / "plan.csv").exists()
+
+
+def test_the_program_is_read_in_the_controllers_joints(tmp_path):
+    """A KUKA-like ``[controller]`` in the robot file: the same program in the controller's joints
+    gives the same plan as in the model's under the shipped file."""
+    sign, offset = np.array([-1, 1, 1, -1, 1, -1]), np.array([0.0, -90.0, 90.0, 0.0, 0.0, 0.0])
+    robot = tmp_path / "kuka.toml"
+    controller = {"joint_sign": sign.tolist(), "joint_offset_deg": offset.tolist()}
+    robot.write_text(ROBOT.read_text() + "\n" + tomli_w.dumps({"controller": controller}))
+    q = program_deg()
+    plans = []
+    for name, robot_file, program in (("model", ROBOT, q), ("kuka", robot, sign * (q - offset))):
+        argv = plan_argv(tmp_path, write_program(tmp_path / f"{name}.csv", program))
+        argv[argv.index("--robot") + 1] = str(robot_file)
+        argv[argv.index("--out") + 1] = str(tmp_path / f"{name}-plan.csv")
+        assert cli.main(argv + ["--near-poses", "20"]) == 0
+        plans.append(load_plan(tmp_path / f"{name}-plan.csv"))
+    assert np.allclose(plans[0].q_deg, plans[1].q_deg, atol=1e-4)
