@@ -9,8 +9,10 @@ sessions measured as ``station sample`` would (5 readings averaged per capture),
 - ``drawstring``: the calibration's own rows (drawstring along the cable, dial across the lines:
   ``calib.map_rows``, ``calib.residual_map.fit_rows_map``), where that is on the branch;
 - ``tracker``: a laser tracker's rows at the same poses (noise 0.02 mm per axis), the table's
-  frame registered onto the truth on those poses (``calib.residual_map.fit_map``): the map's
-  best case, with its whole error seen.
+  frame registered onto the truth on those poses (``calib.residual_map.fit_map``): the map with
+  the whole error the calibrated table leaves seen;
+- ``ideal``: the same tracker rows of the true table's residual, the unmodelled error alone (no
+  calibration absorbing part of it): what the plan and the map reach where the table is right.
 
 At the program's poses near the measured poses (a plan pose within ``calib.near.NEAR_DEG``), the
 true TCP against the table's prediction alone and the table's plus the map's (both in the table's
@@ -18,7 +20,7 @@ frame registered on the measured poses): RMS [mm], how many lie inside the map's
 (chi-square, 3 degrees), against the instruments' noise (the drawstring's 0.02 mm). Cells without
 the unmodelled error: how many seeds keep the map off.
 
-Usage: ``python benchmarks/residual_map_sim.py [--seeds 20] [--rows drawstring|tracker|both] [--json]``.
+Usage: ``python benchmarks/residual_map_sim.py [--seeds 20] [--rows drawstring|tracker|ideal|all] [--json]``.
 """
 
 from __future__ import annotations
@@ -109,6 +111,20 @@ def tracker_map(world: World, outcome, q_deg: np.ndarray, rng: np.random.Generat
     return fit_map(q, measured - p_table, dh_table(x), outcome.model.tcp_in_flange(x))
 
 
+def ideal(world: World, measured, program: np.ndarray, rng: np.random.Generator) -> dict:
+    """``at_program``'s errors of the true table (``world.true``) and its map from a tracker's rows
+    at the measured poses: the unmodelled error alone, as a perfect calibration leaves it."""
+    q = np.radians(measured.q_true_deg)
+    seen = world.true_tcp_mm(measured.q_true_deg) - world.true.tcp(measured.q_true_deg)
+    found = fit_map(q, seen + rng.normal(0, TRACKER_MM, seen.shape), world.true.dh, world.true.tool)
+    error = world.true_tcp_mm(program) - world.true.tcp(program)
+    out = {"table": error, "map": error, "variance": None, "found": found}
+    if found is not None:
+        mean, out["variance"] = found.predict(np.radians(program))
+        out["map"] = error - mean
+    return out
+
+
 def drawstring_map(outcome):
     """The map of the calibration's own rows (``calib.map_rows``); None where it stays off.
     Raises ImportError where the branch has no drawstring-row map."""
@@ -149,11 +165,17 @@ def one_cell(seed: int, unmodelled: bool, plan, program, kinds) -> dict:
     out = {"seed": seed, "near_poses": int(near.sum())}
     for kind in kinds:
         t0 = time.perf_counter()
-        if kind == "tracker":
-            found = tracker_map(world, outcome, measured.q_deg, np.random.default_rng([seed, 11]))
+        rng = np.random.default_rng([seed, 11])
+        if kind == "ideal":
+            e = ideal(world, measured, program[near], rng)
+            found = e["found"]
         else:
-            found = drawstring_map(outcome)
-        e = at_program(world, outcome, found, measured.q_true_deg, program[near])
+            found = (
+                tracker_map(world, outcome, measured.q_deg, rng)
+                if kind == "tracker"
+                else drawstring_map(outcome)
+            )
+            e = at_program(world, outcome, found, measured.q_true_deg, program[near])
         inside = None
         if found is not None:
             inside = float(np.mean(np.sum(e["map"] ** 2, axis=1) <= CHI2_3_95 * e["variance"]))
@@ -201,10 +223,10 @@ def main(argv=None) -> int:
         "--seeds", type=int, default=20, help="cells with and cells without the error (default 20)"
     )
     ap.add_argument("--near-poses", type=int, default=60, help="contacts --near adds (default 60)")
-    ap.add_argument("--rows", choices=("drawstring", "tracker", "both"), default="both")
+    ap.add_argument("--rows", choices=("drawstring", "tracker", "ideal", "all"), default="all")
     ap.add_argument("--json", type=Path, help="write every cell's figures here")
     args = ap.parse_args(argv)
-    kinds = ("drawstring", "tracker") if args.rows == "both" else (args.rows,)
+    kinds = ("drawstring", "tracker", "ideal") if args.rows == "all" else (args.rows,)
     if "drawstring" in kinds:
         try:
             import calib.map_rows  # noqa: F401

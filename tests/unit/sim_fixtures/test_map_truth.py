@@ -22,7 +22,7 @@ def plan_and_program():
 @pytest.fixture(scope="module")
 def cells(plan_and_program):
     plan, program = plan_and_program
-    kinds = ("tracker", "drawstring") if DRAWSTRING_MAP else ("tracker",)
+    kinds = ("tracker", "ideal", "drawstring") if DRAWSTRING_MAP else ("tracker", "ideal")
     return {u: sim.one_cell(1, u, plan, program, kinds) for u in (True, False)}
 
 
@@ -41,6 +41,14 @@ def test_the_unmodelled_error_is_what_the_table_leaves_and_a_tracker_map_takes_m
     assert c["on"] and c["map_rmse_mm"] < 0.5 * c["table_rmse_mm"]
     # 30 poses inside a 95 % bound: 27 or more unless the bound is too tight (binomial, p < 2 %)
     assert c["inside_95"] >= 0.9
+
+
+def test_where_the_table_is_right_the_near_plan_s_map_meets_the_program_within_twice_the_noise(cells):
+    # the unmodelled error alone, seen by a tracker at the plan's poses: the plan covers the
+    # program densely enough for the map to take it to the instruments' level
+    c = cells[True]["ideal"]
+    assert c["on"] and c["table_rmse_mm"] > 5 * NOISE_MM
+    assert c["map_rmse_mm"] <= 2 * NOISE_MM and c["inside_95"] >= 0.9
 
 
 @pytest.mark.skipif(not DRAWSTRING_MAP, reason="no drawstring-row map (calib.map_rows) on this branch")
