@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 from calib.kinematics import THETA, tcp_jacobian
 
@@ -108,8 +109,9 @@ class AngleErrors:
 
 def posterior_mean(gram: np.ndarray, moment: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:
     """Posterior mean (F,) [rad] of the coefficients from ``gram`` = A^T A, ``moment`` = A^T e, white
-    ``noise`` [mm^2] per component and ``prior`` (F,) [rad^2]."""
-    return np.linalg.solve(gram / noise + np.diag(1.0 / prior), moment / noise)
+    ``noise`` [mm^2] per component and ``prior`` (F,) [rad^2] (a Cholesky solve: the matrix is
+    positive definite)."""
+    return cho_solve(cho_factor(gram / noise + np.diag(1.0 / prior)), moment / noise)
 
 
 def posterior_covariance(gram: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:

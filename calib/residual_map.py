@@ -38,6 +38,7 @@ from calib.angle_errors import (
     joint_jacobian,
     observed_features,
 )
+from calib.kinematics import THETA, tcp_jacobian, tcp_position
 from calib.map_rows import Observations
 
 MAP_JOINTS = 3
@@ -293,7 +294,8 @@ class Folds:
 
 class ObservedFolds:
     """``Folds`` of observations (``calib.map_rows.Observations``): the observations of at most
-    ``CV_ROWS`` rows (evenly spaced) predicted from the observations of the other folds' rows.
+    ``CV_ROWS`` rows (evenly spaced) predicted from the observations of the other folds' rows, each
+    row's at once (its observations' directions asked about together, padded to the most a row has).
 
     Parameters
     ----------
@@ -305,14 +307,18 @@ class ObservedFolds:
 
     def __init__(self, rows, value_mm: np.ndarray):
         n = rows.q.shape[0]
-        fold = rows.row % FOLDS
         picked = np.unique(np.linspace(0, n - 1, min(n, CV_ROWS)).astype(int))
         asked = np.flatnonzero(np.isin(rows.row, picked))
+        at, slot = row_slots(np.searchsorted(picked, rows.row[asked]), picked.size)
+        asked_directions = np.zeros((picked.size, slot.max() + 1, 3))
+        asked_directions[at, slot] = rows.direction[asked]
+        self.held = (at, slot)
         points = embedding(rows.q[rows.row])
-        index = neighbours(points[asked], points, OBSERVED_NEIGHBOURS, fold, fold[asked])
-        self.distances = local_distances(points[asked], points, index)
+        queries = embedding(rows.q[picked])
+        index = neighbours(queries, points, OBSERVED_NEIGHBOURS, rows.row % FOLDS, picked % FOLDS)
+        self.distances = local_distances(queries, points, index)
         self.directions = rows.direction[index]
-        self.facing = np.einsum("mkc,mc->mk", self.directions, rows.direction[asked])[:, :, None]
+        self.facing = np.einsum("mkc,msc->mks", self.directions, asked_directions)
         self.correlations = {}
         self.values = value_mm[index]
         self.error = value_mm[asked, None]
@@ -328,7 +334,17 @@ class ObservedFolds:
             )
         shared, noise = share * self.total, (1.0 - share) * self.total
         mean, variance = observed_posterior(self.correlations[length_deg], self.values, shared, noise)
-        return mean, variance[:, 0]
+        return mean[self.held][:, None], variance[self.held]
+
+
+def row_slots(at: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """For observations of rows ``at`` (K,) (indices below ``m``): ``at`` and each one's place
+    among its row's observations (K,), in their order."""
+    counts = np.bincount(at, minlength=m)
+    order = np.argsort(at, kind="stable")
+    slot = np.empty(at.size, int)
+    slot[order] = np.arange(at.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    return at, slot
 
 
 def search(folds: Folds | ObservedFolds) -> dict[tuple[float, float], float]:
@@ -515,3 +531,22 @@ def whole_readings(q: np.ndarray) -> np.ndarray:
     """Readings (N, 6) [rad] of joints 1-3's ``q`` (N, 3), the wrist's read as 0 (the kernel ignores
     them)."""
     return np.hstack([q, np.zeros((q.shape[0], 6 - MAP_JOINTS))])
+
+
+MAPPED_PASSES = 2
+"""Newton steps of ``mapped_readings`` (the map changes by micrometres over the step)."""
+
+
+def mapped_readings(found: ResidualMap, q: np.ndarray) -> np.ndarray:
+    """Readings (N, 6) [rad] at which the table alone puts the TCP where the table plus the map's
+    prediction put it at readings ``q`` (N, 6) [rad]: ``q`` moved by the least joint motion that
+    carries the table's TCP by the prediction (the TCP's Jacobian by the six joints, its
+    pseudo-inverse). What a measurement model of the table alone takes to judge table + map."""
+    q = np.asarray(q, float)
+    target = tcp_position(found.dh, q, found.tool_mm) + found.predict(q)[0]
+    out = q.copy()
+    for _ in range(MAPPED_PASSES):
+        p, jac = tcp_jacobian(found.dh, out, found.tool_mm)
+        joints = jac[:, :, [4 * j + THETA for j in range(6)]]
+        out += np.einsum("njc,nc->nj", np.linalg.pinv(joints), target - p)
+    return out

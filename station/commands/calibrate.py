@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,6 +55,12 @@ def register(sub) -> None:
     )
     p.add_argument("--report", type=Path, help="report JSON to write")
     p.add_argument(
+        "--no-map",
+        action="store_true",
+        help="fit no residual map (by default the error the table leaves, learnt from the rows where "
+        "the rows left out in turn show a gain, is stored beside the table as OUT's .map.npz)",
+    )
+    p.add_argument(
         "--plot", type=Path, help="PNG to write: error per sample and per line, predicted workspace error"
     )
     add_history_flags(p)
@@ -62,8 +69,10 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from station.formats.base import Output, check_writable, toml_text, write_outputs
+    from station.formats.tables import map_entry
     from station.jobs import calibration
     from station.jobs.report import corrected_table
+    from station.jobs.residual_map import fit_table_map
 
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
         if path:
@@ -84,8 +93,13 @@ def run(args) -> int:
             notes=inputs.notes,
             stage=ticker.stage,
         )
+        found, map_report = None, None
+        if not outcome.report.fit_check.refusal:
+            ticker.stage("fitting the residual map")
+            found, map_report = fit_table_map(outcome.model, outcome.calibration.x, not args.no_map)
     if outcome.report.fit_check.refusal:
         raise InputError(f"{args.samples}: {outcome.report.fit_check.refusal}; nothing written")
+    report = dataclasses.replace(outcome.report, map=map_report)
     table = corrected_table(
         inputs.robot,
         outcome.calibration,
@@ -94,19 +108,22 @@ def run(args) -> int:
         model=args.model,
         payload=outcome.payload,
     )
-    outputs = [Output.text(args.out, "--out", toml_text(table))]
+    outputs = []
+    if found is not None:
+        table["map"], map_path, map_data = map_entry(found, map_report.rows, args.out)
+        outputs.append(Output(map_path, "--out", lambda tmp: tmp.write_bytes(map_data)))
+    outputs.insert(0, Output.text(args.out, "--out", toml_text(table)))
     if args.report:
-        report = json.dumps(outcome.report.as_json(), indent=2) + "\n"
-        outputs.append(Output.text(args.report, "--report", report))
+        outputs.append(Output.text(args.report, "--report", json.dumps(report.as_json(), indent=2) + "\n"))
     if args.plot:
         from station.view.plots import calibration_figure
 
         data = calibration.residual_rows(outcome)
         outputs.append(Output(args.plot, "--plot", lambda tmp: calibration_figure(data, tmp)))
     write_outputs(outputs)
-    print(summary(outcome.report))
+    print(summary(report))
     print("wrote " + ", ".join(str(o.path) for o in outputs))
-    record_history(args, inputs.robot, "calibrate", inputs.samples.path, args.out, outcome.report.as_json())
+    record_history(args, inputs.robot, "calibrate", inputs.samples.path, args.out, report.as_json())
     return 0
 
 
@@ -186,6 +203,8 @@ def summary(report: CalibrationReport) -> str:
     mode = report.fit_check.dial_mode if report.fit_check else None
     if mode and not any(mode in w for w in report.warnings):
         lines.append(f"dial-less: {mode}")
+    if report.map is not None:
+        lines.append(report.map.text())
     lines += [f"warning: {w}" for w in report.warnings]
     lines.append(f"note: {HOLDOUT_SCOPES[report.holdout_scope]}")
     lines.append(f"next: {report.next}")

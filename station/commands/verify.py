@@ -45,7 +45,7 @@ def run(args) -> int:
     from station.formats.base import Output, check_writable, write_outputs
     from station.formats.samples import load_samples
     from station.formats.session_folder import load_robot_and_setup
-    from station.formats.tables import check_same_robot, load_robot
+    from station.formats.tables import check_same_robot, load_map, load_robot
     from station.jobs import verification
 
     for path, flag in ((args.report, "--report"), (args.plot, "--plot")):
@@ -54,13 +54,20 @@ def run(args) -> int:
     session = args.samples if args.samples.is_dir() else None
     robot, setup, setup_where, session_samples = load_robot_and_setup(session, args.robot, args.setup)
     table = load_robot(args.table)
+    residual_map = load_map(table, args.table)
     if robot is not None:
         where = str(args.robot) if args.robot else f"{session / 'session.toml'} [robot]"
         check_same_robot(table, str(args.table), robot, where)
     samples = load_samples(session_samples or args.samples)
     with parameters_as_flags(FLAGS):
         outcome = verification.verify_samples(
-            samples, table, setup, table_where=str(args.table), setup_where=setup_where, robot=robot
+            samples,
+            table,
+            setup,
+            table_where=str(args.table),
+            setup_where=setup_where,
+            robot=robot,
+            residual_map=residual_map,
         )
     report = outcome.report
     outputs = []

@@ -6,6 +6,9 @@ Values stay in the contract's units (mm, degrees).
 
 from __future__ import annotations
 
+import hashlib
+import io
+from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
@@ -14,6 +17,7 @@ from pydantic import Field, NonNegativeFloat, model_validator
 from calib.conventions import com_from_mdh, controller_joints, dh_from_mdh, dh_name, mdh_name, model_joints
 from calib.joint_terms import TERM_KINDS, JointTerms, LinkMasses, Term
 from calib.params import DH_KEYS, DH_NAMES, dh_from_degrees, display_factor
+from calib.residual_map import ResidualMap, map_arrays, map_from_arrays
 from calib.robot_model import RobotModel
 from errors import InputError
 from station.formats.base import (
@@ -105,9 +109,27 @@ class Controller(Strict):
         return np.asarray(self.joint_sign, float) * np.asarray(reading_deg_s, float)
 
 
+MAP_SUFFIX = ".map.npz"
+"""A corrected table ``T.toml``'s residual map is ``T.map.npz`` beside it."""
+
+
+class MapFile(Strict):
+    """A corrected table's ``[map]``: its residual map (``calib.residual_map.map_arrays``, NumPy's
+    ``.npz``) in ``file`` (beside the table, its name relative to the table's folder), written with
+    the table as one (``station calibrate``), its ``sha256`` (a map of another calibration is
+    refused), the ``rows`` it was fitted on and the share of the held-out rows' mean square error
+    it takes out (``explained``)."""
+
+    file: str
+    sha256: Annotated[str, Field(pattern=r"^[0-9a-f]{64}$")]
+    rows: Annotated[int, Field(ge=1)]
+    explained: float
+
+
 class RobotFile(Strict):
-    """A robot model (contract: robot model TOML); a corrected table adds ``calibration`` and,
-    where it identified compliances, the ``payload`` they were identified with. ``convention``
+    """A robot model (contract: robot model TOML); a corrected table adds ``calibration``, where it
+    identified compliances the ``payload`` they were identified with, and where it carries a
+    residual map its ``map`` (``MapFile``, ``load_map``). ``convention``
     ``mdh``: Craig's modified D-H (``calib.conventions``), everything else computes with its
     standard equivalent (:meth:`table_deg`)."""
 
@@ -121,6 +143,7 @@ class RobotFile(Strict):
     calibration: dict | None = None
     controller_hash: str | None = None  # the controller's factory-calibration id (UR: ``hash``)
     controller: Controller = Controller()  # the controller's joint convention (default: the identity)
+    map: MapFile | None = None
 
     @model_validator(mode="after")
     def _serial_names_a_robot(self) -> RobotFile:
@@ -409,3 +432,45 @@ def load_setup(path) -> SetupFile:
     points = {f"lines.{k}.point_mm": ln.point_mm for k, ln in enumerate(setup.lines) if ln.point_mm}
     check_positions_in_mm(str(path), points)
     return setup
+
+
+def map_entry(found: ResidualMap, rows: int, table_path) -> tuple[dict, Path, bytes]:
+    """What a corrected table at ``table_path`` stores of the map ``found`` fitted on ``rows`` rows:
+    its ``[map]`` block, the map file's path (``MAP_SUFFIX`` beside the table) and content."""
+    buffer = io.BytesIO()
+    np.savez(buffer, **map_arrays(found))
+    data = buffer.getvalue()
+    path = Path(table_path).with_suffix(MAP_SUFFIX)
+    entry = {
+        "file": path.name,
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "rows": int(rows),
+        "explained": float(found.explained),
+    }
+    return entry, path, data
+
+
+def load_map(table: RobotFile, where) -> ResidualMap | None:
+    """The residual map a corrected table read from ``where`` names in its ``[map]`` (None where it
+    names none); ``InputError`` naming the table and the file where it is missing, is not the one
+    the table was written with, or cannot be read."""
+    if table.map is None:
+        return None
+    path = Path(where).parent / table.map.file
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(
+            f"{where}: map.file {table.map.file}: cannot read {path} ({exc.strerror or exc}); "
+            "keep the map file beside its table (station calibrate writes both)"
+        ) from None
+    if hashlib.sha256(data).hexdigest() != table.map.sha256:
+        raise InputError(
+            f"{where}: map.file {path} is not the map this table was written with (sha256 differs); "
+            "calibrate again, or remove the table's [map] to use the table alone"
+        )
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as arrays:
+            return map_from_arrays({key: arrays[key] for key in arrays.files})
+    except (ValueError, KeyError, OSError) as exc:
+        raise InputError(f"{where}: map.file {path}: not a residual map ({exc})") from None

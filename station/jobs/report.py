@@ -20,6 +20,7 @@ from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
 from station.formats.tables import Payload, RobotFile
 from station.jobs.absorbed import LineDial
+from station.jobs.residual_map import MapReport
 
 
 @dataclass(frozen=True)
@@ -201,7 +202,9 @@ class CalibrationReport:
     (``dial``: ``axis``, ``gated`` or ``none``, ``station.jobs.absorbed.DIAL_MODE_TEXT``);
     ``provenance`` (robot, samples, setup, date, version);
     ``holdout_scope`` (``none``, ``same lines``, ``new lines``, ``poses``: what the hold-out figure
-    can speak for); ``next``, what to do now in one sentence (docs/report.md lists every key)."""
+    can speak for); ``next``, what to do now in one sentence; ``map``, the residual map
+    ``station calibrate`` fitted or left off (``station.jobs.residual_map.MapReport``; None where
+    none was asked of it) (docs/report.md lists every key)."""
 
     kind: str
     method: str
@@ -227,6 +230,7 @@ class CalibrationReport:
     provenance: Provenance | None = None
     holdout_scope: str = "none"
     next: str = ""
+    map: MapReport | None = None
 
     def as_json(self) -> dict:
         """The contract's REPORT.json object (keys in the contract's order, plain JSON values)."""
@@ -263,6 +267,8 @@ class CalibrationReport:
         if self.provenance is not None:
             out.update(self.provenance.as_json())
         out["holdout_scope"] = self.holdout_scope
+        if self.map is not None:
+            out["map"] = self.map.as_json()
         out["next"] = self.next
         return out
 

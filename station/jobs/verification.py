@@ -11,7 +11,7 @@ uncertainty from its covariance) and names the parameters a recalibration would 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from calib.kinematics import dh_table
 from calib.metrics import error_metrics
 from calib.models import GROUP_PRIOR, MeasurementModel
 from calib.params import display_unit
+from calib.residual_map import ResidualMap
 from calib.special import gammaincinv
 from calib.verification import Change, DriftTest, caught_changes, drift_test, likely_changes
 from errors import InputError
@@ -40,6 +41,7 @@ from station.jobs.calibration import (
 )
 from station.jobs.planning import USUALLY_MOVE
 from station.jobs.report import ERROR_HEADER, Provenance, error_row
+from station.jobs.residual_map import mapped_q_deg
 
 DRIFT_P = 1e-3
 """The chi-square's p-value below which the residual is more than an unchanged robot leaves."""
@@ -178,11 +180,14 @@ class VerifyReport:
     table_calibrated_utc: str | None = None
     provenance: Provenance | None = None
     next: str = ""
+    map: dict | None = None
 
     def as_json(self) -> dict:
         """V.json: the contract's keys, what table it judged (``table_kind``: ``corrected`` or
         ``nominal``, ``table_calibrated_utc``: the corrected table's calibration date), the robot,
-        samples, setup, date and station version (as REPORT.json) and ``next``."""
+        samples, setup, date and station version (as REPORT.json), ``map`` where the table carries a
+        residual map (``map_judged``: it was judged with the map's prediction added), and
+        ``next``."""
         return {
             "verdict": self.verdict,
             "meaning": self.meaning,
@@ -206,6 +211,7 @@ class VerifyReport:
             "table_kind": self.table_kind,
             "table_calibrated_utc": self.table_calibrated_utc,
             **(self.provenance.as_json() if self.provenance is not None else {}),
+            **({"map": self.map} if self.map is not None else {}),
             "next": self.next,
         }
 
@@ -235,14 +241,18 @@ def verify_samples(
     table_where: str = "table",
     setup_where: str = "setup",
     robot: RobotFile | None = None,
+    residual_map: ResidualMap | None = None,
 ) -> VerifyOutcome:
     """Judge ``table`` (a corrected table, or any robot file) on ``samples``: the setup unknowns
     fitted with the table and its terms held; ``robot`` (the nominal file, default the table) names
-    the robot in the report. Raises ``InputError`` for too few samples, a joint
+    the robot in the report; with the table's ``residual_map``, the table plus the map's prediction
+    is judged (each row's joints moved to where the table alone reaches what table and map reach:
+    ``station.jobs.residual_map.mapped_q_deg``). Raises ``InputError`` for too few samples, a joint
     beyond the table's limits, a drawstring set without a setup (``ParameterError``)."""
     t0 = time.perf_counter()
     check_joint_limits(samples, table)
-    model, x0 = table_held(samples, table, setup, setup_where)
+    judged_samples = replace(samples, q_deg=mapped_q_deg(residual_map, samples.q_deg))
+    model, x0 = table_held(judged_samples, table, setup, setup_where)
     held = setup_unknowns(model)
     check_distinct_poses(model, int(held.sum()), samples.path)
     check_dials(model, x0, samples.path)
@@ -286,8 +296,20 @@ def verify_samples(
         table_calibrated_utc=calibrated,
         provenance=provenance(samples, robot or table, setup_where if setup is not None else None),
         next=next_step(verdict, kind, likely, overall["rmse_mm"]),
+        map=None if residual_map is None else map_judged(residual_map, samples),
     )
     return VerifyOutcome(report, model, x)
+
+
+def map_judged(found: ResidualMap, samples: Samples) -> dict:
+    """V.json's ``map``: judged with it, and the size of its prediction at the samples [mm] (3-D
+    RMS and largest)."""
+    size = np.linalg.norm(found.predict(np.radians(samples.q_deg))[0], axis=1)
+    return {
+        "judged": True,
+        "predicted_rmse_mm": float(np.sqrt(np.mean(size**2))),
+        "predicted_max_mm": float(size.max()),
+    }
 
 
 def table_held(
@@ -500,6 +522,11 @@ def summary(report: VerifyReport) -> str:
     )
     if report.downweighted:
         lines.append(f"down-weighted rows (gross readings): {list(report.downweighted)}")
+    if report.map is not None:
+        lines.append(
+            f"judged with the table's residual map (its prediction at these samples: "
+            f"{report.map['predicted_rmse_mm']:.3f} mm RMS)"
+        )
     lines.append(f"verdict: {report.verdict} ({report.meaning})")
     lines.append(f"next: {report.next}")
     return "\n".join(lines)
