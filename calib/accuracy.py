@@ -55,9 +55,11 @@ def workspace_error_modes(
     cov: np.ndarray,
     terms: JointTerms | None = None,
     tool_fitted: bool = False,
+    left: np.ndarray | None = None,
 ) -> np.ndarray:
     """Variances of the independent modes of the TCP error field after a rigid re-fit of the base:
-    the eigenvalues of ``C^1/2 J_perp^T J_perp C^1/2 / N`` (module docstring).
+    the eigenvalues of ``C^1/2 J_perp^T J_perp C^1/2 / N`` (module docstring); with ``left``, each
+    configuration's field scaled by the root of its share of the error left there.
 
     Parameters
     ----------
@@ -74,6 +76,9 @@ def workspace_error_modes(
         The robot's joint-space terms (default: none), linearised at zero.
     tool_fitted : bool
         Whether ``cov`` covers the TCP's flange coordinates (a calibration that fitted them).
+    left : ndarray, shape (N,), optional
+        Share (0-1) of the table's error variance left at each configuration (a residual map's,
+        ``calib.residual_map.left_share``: small near the rows it learnt from, 1 far from them).
 
     Returns
     -------
@@ -81,6 +86,8 @@ def workspace_error_modes(
         Mode variances [mm^2], descending, >= 0; their sum is the expected squared RMS error.
     """
     a_perp = _non_rigid_fields(dh, tool, q, terms, tool_fitted)
+    if left is not None:
+        a_perp = a_perp * np.repeat(np.sqrt(left), 3)[:, None]
     s, u = np.linalg.eigh(cov)
     root = u * np.sqrt(np.clip(s, 0.0, None))
     field = a_perp @ root

@@ -533,6 +533,15 @@ def whole_readings(q: np.ndarray) -> np.ndarray:
     return np.hstack([q, np.zeros((q.shape[0], 6 - MAP_JOINTS))])
 
 
+def left_share(found: ResidualMap, q: np.ndarray) -> np.ndarray:
+    """Share (N,) of the error the table alone leaves that is left with the map at readings ``q``
+    (N, 6) [rad]: the map's variance there over the table's mean square per component on the
+    folds, at most 1 (near the rows the map learnt from: the instrument's noise and what neighbours
+    do not share; far from them: 1, the table's)."""
+    table_mm2 = found.table_cv_rmse_mm**2 / 3.0
+    return np.minimum(found.predict(q)[1] / table_mm2, 1.0)
+
+
 MAPPED_PASSES = 2
 """Newton steps of ``mapped_readings`` (the map changes by micrometres over the step)."""
 

@@ -39,7 +39,7 @@ def run(args) -> int:
     from calib.compensation import CompensationOptions
     from station.formats.base import Output, check_writable, write_outputs
     from station.formats.program import load_program
-    from station.formats.tables import check_same_robot, check_same_tool, load_robot
+    from station.formats.tables import check_same_robot, check_same_tool, load_map, load_robot
     from station.jobs import compensate as compensation
 
     check_writable(args.out, "--out")
@@ -50,6 +50,7 @@ def run(args) -> int:
     check_same_robot(table, str(args.table), nominal, str(args.robot))
     check_same_tool(table, str(args.table), nominal, str(args.robot))
     table.covariance(str(args.table))  # a malformed covariance is bad input before any work
+    residual_map = load_map(table, args.table)
     outcome = compensation.run(
         program,
         table,
@@ -57,6 +58,7 @@ def run(args) -> int:
         table_where=str(args.table),
         nominal_where=str(args.robot),
         options=CompensationOptions(wrist_margin=np.radians(args.wrist_margin_deg)),
+        residual_map=residual_map,
     )
     outputs = [Output.text(args.out, "--out", outcome.text)]
     if args.report:

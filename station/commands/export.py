@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from errors import InputError
@@ -47,6 +48,9 @@ def run(args) -> int:
         check_same_robot(robot, str(args.table), nominal, str(args.robot))
     result = exporting.export(robot, args.fmt, source=str(args.table), nominal=nominal, hash_=args.hash_)
     write_outputs([Output.text(args.out, "--out", result.text)])
+    left_out = exporting.map_left_out(robot, args.fmt, str(args.table))
+    if left_out is not None:
+        print(f"station: {left_out}", file=sys.stderr)
     for note in result.notes:
         print(f"note: {note}")
     for warning in result.warnings:

@@ -96,7 +96,7 @@ def _second_pass(args, plan, nominal):
     import numpy as np
 
     from station.formats.session_folder import measured_targets
-    from station.formats.tables import check_same_robot, check_same_tool, load_robot
+    from station.formats.tables import check_same_robot, check_same_tool, load_map, load_robot
     from station.jobs.correction import offline_correction, unmeasured_first
 
     table = load_robot(args.table)
@@ -115,7 +115,7 @@ def _second_pass(args, plan, nominal):
             "robot's base, which the lines' placement absorbs): give the first pass's session folder, whose "
             "lines register it, or the contacts may land millimetres off"
         )
-    fix = offline_correction(plan, nominal, table, setup, samples)
+    fix = offline_correction(plan, nominal, table, setup, samples, load_map(table, args.table))
     plan = replace(plan, q_deg=fix.q_deg)
     moved = fix.shift_mm[fix.ok]
     print(

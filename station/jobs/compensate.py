@@ -10,6 +10,8 @@ import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes, workspace_rmse_bound
 from calib.compensation import Compensation, CompensationOptions, Status, compensate
+from calib.residual_map import MAPPED_PASSES, ResidualMap, left_share
+from calib.robot_model import RobotModel
 from station.formats.program import Program
 from station.formats.tables import RobotFile
 
@@ -30,16 +32,18 @@ def run(
     table_where: str,
     nominal_where: str,
     options: CompensationOptions | None = None,
+    residual_map: ResidualMap | None = None,
 ) -> Outcome:
-    """Compensate ``program`` for the calibrated ``table`` (its ``nominal`` model wrote the program).
-    The program's joints are the controller's: converted to the model's by the nominal robot file's
-    ``[controller]`` on read, and back on write."""
+    """Compensate ``program`` for the calibrated ``table`` (its ``nominal`` model wrote the program)
+    and its ``residual_map`` (``mapped_compensation``). The program's joints are the controller's:
+    converted to the model's by the nominal robot file's ``[controller]`` on read, and back on
+    write."""
     t0 = time.perf_counter()
     calibrated = table.model()
     options = options or CompensationOptions()
     controller = nominal.controller
     q_model = controller.model_deg(program.q_deg)
-    comp = compensate(nominal.model(), calibrated, np.radians(q_model), options)
+    comp = mapped_compensation(nominal.model(), calibrated, np.radians(q_model), options, residual_map)
     status = [status_text(comp, i, options, calibrated.limits) for i in range(len(program))]
     q_out = np.where(
         (comp.status == Status.OK)[:, None], controller.controller_deg(np.degrees(comp.q)), program.q_deg
@@ -58,7 +62,8 @@ def run(
         "shift_mm": _rms_max(comp.shift[ok]),
         "joint_change_deg": {"max": float(np.degrees(comp.joint_change[ok].max(initial=0.0)))},
         "model_error_mm": _rms_max(comp.model_error),
-        "predicted": predicted_accuracy(calibrated, comp.q[ok], cov),
+        "predicted": predicted_accuracy(calibrated, comp.q[ok], cov, residual_map),
+        **({"map": {"used": True}} if residual_map is not None else {}),
         "flagged": [
             {"row": int(i), "status": status[i], "model_error_mm": float(comp.model_error[i])}
             for i in np.flatnonzero(~ok)
@@ -75,13 +80,41 @@ NO_COVARIANCE = (
 )
 
 
-def predicted_accuracy(model, q: np.ndarray, cov: np.ndarray | None) -> dict | None:
+def mapped_compensation(
+    nominal: RobotModel,
+    calibrated: RobotModel,
+    q: np.ndarray,
+    options: CompensationOptions,
+    residual_map: ResidualMap | None = None,
+    meant: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Compensation:
+    """``calib.compensation.compensate`` of program rows ``q`` (N, 6) [rad] toward the poses
+    ``meant`` (default: the nominal model's at ``q``), where the calibrated model plus the
+    ``residual_map``'s prediction reach them: the target moved against the prediction at the
+    compensated joints, ``MAPPED_PASSES`` times (it changes by micrometres between passes)."""
+    comp = compensate(nominal, calibrated, q, options, meant)
+    if residual_map is None:
+        return comp
+    p_meant, r_meant = nominal.tool_frames(q) if meant is None else meant
+    for _ in range(MAPPED_PASSES):
+        comp = compensate(
+            nominal, calibrated, q, options, (p_meant - residual_map.predict(comp.q)[0], r_meant)
+        )
+    return comp
+
+
+def predicted_accuracy(
+    model, q: np.ndarray, cov: np.ndarray | None, residual_map: ResidualMap | None = None
+) -> dict | None:
     """The calibration's expected RMS TCP error [mm] over configurations ``q`` (N, 6) [rad], and the
-    RMS one calibration stays below with 95 %, after a rigid re-fit of the base (``calib.accuracy``);
-    None without a covariance or with fewer than 3 rows."""
+    RMS one calibration stays below with 95 %, after a rigid re-fit of the base (``calib.accuracy``),
+    each configuration's share counted by what the ``residual_map`` leaves there (its variance over
+    the table's: ``calib.residual_map.left_share``; 1 far from its rows); None without a
+    covariance or with fewer than 3 rows."""
     if cov is None or len(q) < 3:
         return None
-    modes = workspace_error_modes(model.dh, model.tool, q, cov, model.terms)
+    left = None if residual_map is None else left_share(residual_map, q)
+    modes = workspace_error_modes(model.dh, model.tool, q, cov, model.terms, left=left)
     return {
         "rmse_mm": predicted_workspace_rmse(modes),
         "rmse_95_mm": workspace_rmse_bound(modes, 0.95),
@@ -133,6 +166,10 @@ def summary(report: dict) -> str:
         f"targets shifted {report['shift_mm']['rms']:.3f} mm RMS (max {report['shift_mm']['max']:.3f}), "
         f"joints by up to {report['joint_change_deg']['max']:.3f} deg",
     ]
+    if "map" in report:
+        lines.append(
+            "targets compensated for the table plus its residual map (the error it learnt near the rows)"
+        )
     if report["predicted"] is not None:
         p = report["predicted"]
         lines.append(

@@ -24,12 +24,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from calib.calibrate import hold_robot
-from calib.compensation import Status, compensate
+from calib.compensation import CompensationOptions, Status
 from calib.registration import register_lines
+from calib.residual_map import ResidualMap
 from calib.robot_model import RobotModel
 from station.formats.plan import Plan
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
+from station.jobs.compensate import mapped_compensation
+from station.jobs.residual_map import fit_table_map
 from station.jobs.running import Refit
 from station.jobs.verification import table_held
 
@@ -86,18 +89,31 @@ def correct_targets(
     robot: RobotFile, setup: SetupFile, fit: Refit, plan_q_deg: np.ndarray, plan_lines: np.ndarray
 ) -> TargetCorrection:
     """The corrected joints of plan rows ``plan_q_deg`` (M, 6) [deg] on lines ``plan_lines`` (M,),
-    written with ``robot``'s nominal model, for the robot as ``fit`` models it (module notes)."""
+    written with ``robot``'s nominal model, for the robot as ``fit`` models it (module notes), plus
+    the residual map of the refit's rows where they show one (``station.jobs.residual_map``)."""
     calibrated = calibrated_model(robot, fit)
+    found, _ = fit_table_map(fit.model, fit.x)
+    fitted = fitted_lines(setup, fit)
     return TargetCorrection(
-        fit.n, *_corrected(robot, setup, calibrated, fitted_lines(setup, fit), plan_q_deg, plan_lines)
+        fit.n, *_corrected(robot, setup, calibrated, fitted, plan_q_deg, plan_lines, found)
     )
 
 
-def _corrected(robot, setup, calibrated: RobotModel, fitted: dict, plan_q_deg, plan_lines, meant_pose=None):
-    """The joints (M, 6) [deg] at which ``calibrated`` reaches each plan row's contact pose
-    (``meant_pose`` (M, 6: mm, rotation vector deg), else ``robot``'s nominal TCP at the planned
-    joints; the setup's frame), carried into its frame through the ``fitted`` lines and onto them;
-    whether each was corrected (M,) and how far the nominal model sees it move (M,) [mm]."""
+def _corrected(
+    robot,
+    setup,
+    calibrated: RobotModel,
+    fitted: dict,
+    plan_q_deg,
+    plan_lines,
+    residual_map=None,
+    meant_pose=None,
+):
+    """The joints (M, 6) [deg] at which ``calibrated`` (plus its ``residual_map``'s prediction)
+    reaches each plan row's contact pose (``meant_pose`` (M, 6: mm, rotation vector deg), else
+    ``robot``'s nominal TCP at the planned joints; the setup's frame), carried into its frame
+    through the ``fitted`` lines and onto them; whether each was corrected (M,) and how far the
+    nominal model sees it move (M,) [mm]."""
     nominal = robot.model()
     q0 = np.radians(plan_q_deg)
     if meant_pose is None:
@@ -109,7 +125,7 @@ def _corrected(robot, setup, calibrated: RobotModel, fitted: dict, plan_q_deg, p
     for lid, (point, direction) in fitted.items():  # onto the line the fit placed
         rows = np.asarray(plan_lines) == lid
         p_cal[rows] = point + np.outer((p_cal[rows] - point) @ direction, direction)
-    comp = compensate(nominal, calibrated, q0, meant=(p_cal, rot_cal))
+    comp = mapped_compensation(nominal, calibrated, q0, CompensationOptions(), residual_map, (p_cal, rot_cal))
     return np.degrees(comp.q), comp.status == Status.OK, comp.shift
 
 
@@ -124,16 +140,22 @@ def table_lines(
 
 
 def offline_correction(
-    plan: Plan, nominal: RobotFile, table: RobotFile, setup: SetupFile | None, samples: Samples | None
+    plan: Plan,
+    nominal: RobotFile,
+    table: RobotFile,
+    setup: SetupFile | None,
+    samples: Samples | None,
+    residual_map: ResidualMap | None = None,
 ) -> TargetCorrection:
-    """The joints at which the corrected ``table`` puts the TCP on each of ``plan``'s contact poses
+    """The joints at which the corrected ``table`` (plus its ``residual_map``'s prediction) puts
+    the TCP on each of ``plan``'s contact poses
     (its ``x_mm..rz_deg``, else the ``nominal`` model's TCP at the planned joints), from the
     planned joints; with the first pass's ``samples`` (and its ``setup``), carried into the table's
     frame through the lines they place (else the table's frame taken for the setup's); ``n``: the
     samples the table was calibrated on (0 if it does not say)."""
     fitted = {} if samples is None or setup is None else table_lines(table, setup, samples)
     calibrated = table.model()
-    found = _corrected(nominal, setup, calibrated, fitted, plan.q_deg, plan.line, plan.pose)
+    found = _corrected(nominal, setup, calibrated, fitted, plan.q_deg, plan.line, residual_map, plan.pose)
     return TargetCorrection(int((table.calibration or {}).get("n_samples", 0)), *found)
 
 

@@ -41,6 +41,21 @@ def export(
     return Export(done.text, [*done.notes, note], done.warnings)
 
 
+MAP_LEFT_OUT = (
+    "{table}'s residual map ({file}) is left out: {fmt} holds a table, not the error learnt near "
+    "the measured poses; `station compensate --table {table}` applies it"
+)
+"""The one line on stderr where the exported table carries a residual map (``[map]``)."""
+
+
+def map_left_out(robot: RobotFile, fmt: str, source: str) -> str | None:
+    """What an export of ``robot`` (read from ``source``) leaves out of its residual map, None where
+    it carries none."""
+    if robot.map is None:
+        return None
+    return MAP_LEFT_OUT.format(table=source, file=robot.map.file, fmt=fmt)
+
+
 UNIVERSAL_ROBOT = re.compile(r"^\s*(ur\s?-?\d|universal robots)", re.IGNORECASE)
 """A robot name Universal Robots' kinematics file is meant for: UR3, UR10e, UR-16, Universal Robots ..."""
 
