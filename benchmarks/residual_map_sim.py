@@ -2,7 +2,7 @@
 
 Simulated JR680 cells (``sim_fixtures.world``, ``[sim] unmodelled = "ur10-like"``: joints 2 and 3
 off by 0.014 deg 17 times a turn, a sag of 0.15 mm at a metre's reach), each measured on one plan
-made with ``station plan --near`` a user's program (``station.jobs.planning.near_design``), the
+made with ``station plan --near`` a user's program (``station.jobs.near_planning.near_design``), the
 sessions measured as ``station sample`` would (5 readings averaged per capture), calibrated as
 ``station calibrate`` does (``calibrate_samples``); the map fitted on the calibration's rows:
 
@@ -50,8 +50,8 @@ from sim_fixtures.unmodelled import UR10_LIKE  # noqa: E402
 from sim_fixtures.world import World  # noqa: E402
 from station.formats.samples import load_samples  # noqa: E402
 from station.formats.tables import load_robot, load_setup  # noqa: E402
-from station.jobs import planning  # noqa: E402
 from station.jobs.calibration import calibrate_samples  # noqa: E402
+from station.jobs.near_planning import near_design  # noqa: E402
 
 CHI2_3_95 = 7.8147
 """95 % quantile of the chi-square distribution with 3 degrees of freedom."""
@@ -76,7 +76,7 @@ def program_deg(n: int = PROGRAM_POSES, seed: int = 0) -> np.ndarray:
 def near_plan(program: np.ndarray, near_poses: int):
     """``station plan --near``'s plan for ``program`` on the sim cell's setup."""
     robot, setup = load_robot(ROBOT), load_setup(SETUP)
-    return planning.near_design(
+    return near_design(
         robot, setup, program, str(SETUP), n_near=near_poses, suggest=False, readings=READINGS
     ).plan
 

@@ -99,13 +99,13 @@ def run(args) -> int:
 
 
 def _design(args, robot, setup, where):
-    """``planning.design`` on the robot and setup, or with ``--near`` ``planning.near_design`` on the
+    """``planning.design`` on the robot and setup, or with ``--near`` ``near_planning.near_design`` on the
     program's poses too (read in the controller's joints, converted by the robot file's
     ``[controller]``), awaiting ``design``'s options."""
     import functools
 
     from station.formats.program import load_program
-    from station.jobs import planning
+    from station.jobs import near_planning, planning
 
     if args.near is None:
         return functools.partial(planning.design, robot, setup, where)
@@ -113,7 +113,7 @@ def _design(args, robot, setup, where):
     q_model = robot.controller.model_deg(program.q_deg)
     given = {} if args.near_poses is None else {"n_near": args.near_poses}
     return functools.partial(
-        planning.near_design, robot, setup, q_model, where, program_where=str(args.near), **given
+        near_planning.near_design, robot, setup, q_model, where, program_where=str(args.near), **given
     )
 
 
