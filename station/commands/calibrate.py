@@ -100,6 +100,9 @@ def run(args) -> int:
     if outcome.report.fit_check.refusal:
         raise InputError(f"{args.samples}: {outcome.report.fit_check.refusal}; nothing written")
     report = dataclasses.replace(outcome.report, map=map_report)
+    if found is not None:  # the workspace figure counts what the map leaves at each pose
+        workspace = calibration.predicted_workspace(inputs.robot, outcome.calibration, outcome.model, found)
+        report = dataclasses.replace(report, workspace=workspace)
     table = corrected_table(
         inputs.robot,
         outcome.calibration,

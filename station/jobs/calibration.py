@@ -43,6 +43,7 @@ from calib.models import (
 from calib.observability import MCSResult, select_configurations
 from calib.params import DH_NAMES, dh_from_degrees, display_factor, display_unit
 from calib.position import PositionModel, PositionSamples
+from calib.residual_map import ResidualMap, left_share
 from calib.selection import TermSelection
 from errors import InputError, ParameterError
 from station.formats.samples import Samples
@@ -634,17 +635,23 @@ def _errors(model: MeasurementModel, x: np.ndarray) -> ErrorMetrics:
     return ErrorMetrics(**error_metrics(model.row_error_mm(x)))
 
 
-def predicted_workspace(robot: RobotFile, cal: Calibration, model: MeasurementModel) -> WorkspacePrediction:
+def predicted_workspace(
+    robot: RobotFile, cal: Calibration, model: MeasurementModel, residual_map: ResidualMap | None = None
+) -> WorkspacePrediction:
     """Expected RMS error [mm] of the measured point (the model's TCP) over random configurations
     within the joint limits, and the RMS one calibration stays below with 95 % probability: the
     parameters' uncertainty and, where the fit found one, the error neighbouring poses share that no
-    table takes out (``cal.discrepancy``)."""
+    table takes out (``cal.discrepancy``); with a ``residual_map``, each configuration's share of
+    both counted by what the map leaves there (``calib.residual_map.left_share``: 1 far from its
+    rows, so a workspace mostly far from them keeps the table's figure)."""
     q = workspace_configurations(robot)
     dh = dh_table(cal.x)
+    left = None if residual_map is None else left_share(residual_map, q)
     modes = workspace_error_modes(
-        dh, model.tcp_in_flange(cal.x), q, cal.robot_covariance, model.terms, model.tool_mask.any()
+        dh, model.tcp_in_flange(cal.x), q, cal.robot_covariance, model.terms, model.tool_mask.any(), left
     )
     shared = cal.discrepancy.tcp_rms_mm if cal.discrepancy is not None else 0.0
+    shared *= 1.0 if left is None else float(np.sqrt(np.mean(left)))
     return WorkspacePrediction(
         float(np.hypot(predicted_workspace_rmse(modes), shared)),
         float(np.hypot(workspace_rmse_bound(modes, 0.95), shared)),
