@@ -36,6 +36,11 @@ from station.jobs.residual_map import fit_table_map
 from station.jobs.running import Refit
 from station.jobs.verification import table_held
 
+SESSION_MAP_ROWS = 60
+"""A running calibration's rows from which its corrected targets add the residual map's prediction:
+fewer rarely show a held-out gain, and every judged refit would pay the map's fit (the worker
+shares the machine with the session)."""
+
 
 @dataclass(frozen=True)
 class TargetCorrection:
@@ -90,9 +95,10 @@ def correct_targets(
 ) -> TargetCorrection:
     """The corrected joints of plan rows ``plan_q_deg`` (M, 6) [deg] on lines ``plan_lines`` (M,),
     written with ``robot``'s nominal model, for the robot as ``fit`` models it (module notes), plus
-    the residual map of the refit's rows where they show one (``station.jobs.residual_map``)."""
+    the residual map of the refit's rows where they show one (``station.jobs.residual_map``; from
+    ``SESSION_MAP_ROWS`` rows on)."""
     calibrated = calibrated_model(robot, fit)
-    found, _ = fit_table_map(fit.model, fit.x)
+    found = fit_table_map(fit.model, fit.x)[0] if fit.n >= SESSION_MAP_ROWS else None
     fitted = fitted_lines(setup, fit)
     return TargetCorrection(
         fit.n, *_corrected(robot, setup, calibrated, fitted, plan_q_deg, plan_lines, found)
