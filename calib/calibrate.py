@@ -25,7 +25,7 @@ from calib.accuracy import robot_covariance
 from calib.discrepancy import Blocks, Correlated, Discrepancy, estimate, tcp_rms_mm
 from calib.identifiability import redundancy_partners, select_columns, weakly_determined
 from calib.kinematics import N_DH
-from calib.lm import LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
+from calib.lm import NORMAL_ROWS, LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
 from calib.models import GROUP_PRIOR, MeasurementModel
 from calib.params import display_unit
 
@@ -364,9 +364,9 @@ def hold_robot(
     """The setup unknowns fitted with the robot (table and terms) held at ``x``'s (n,): the
     contract's "before" at the nominal robot, ``station verify`` at a corrected one. Returns the
     prior-augmented model (centred at ``x``), the fit and its noise scale per residual group."""
-    prior = WithPrior(model, x)
-    result, scale = robust_fit(prior, np.asarray(x, float), setup_unknowns(model), options)
-    return prior, result, scale
+    held = WithPrior(model.holding_robot(), x)
+    result, scale = robust_fit(held, np.asarray(x, float), setup_unknowns(model), options)
+    return WithPrior(model, x), result, scale
 
 
 def calibrate(
@@ -437,11 +437,9 @@ def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOpt
     sigma, cov, robot_cov = _uncertainty(weighted, result, cal.identified, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[cal.identified] = sigma
-    r, jac = prior.residuals_and_jacobian(result.x)
     after = replace(
         result,
-        residuals=r,
-        jacobian=jac[:, cal.identified],
+        residuals=prior.residuals_and_jacobian(result.x, jacobian=False)[0],
         weights=weights,
         history=cal.after.history + result.history,
     )
@@ -529,19 +527,38 @@ def covariance(
         Of ``workspace_mask(model)``'s entries, internal units, with the held ones considered.
     """
     _, jac = model.residuals_and_jacobian(x)
-    jac = jac * np.broadcast_to(row_weights, model.groups.shape)[:, None]
-    a = jac[:, free]
-    gain = np.linalg.pinv(a.T @ a) @ a.T  # (k, m): the fit's response to its weighted rows
-    spread = (
-        gain * np.broadcast_to(row_weights, model.groups.shape) * np.broadcast_to(noise, model.groups.shape)
-    )
-    cov = spread @ spread.T
+    w = np.broadcast_to(row_weights, model.groups.shape)
     held = np.flatnonzero(~model.setup_mask & ~free)
+    normal, spread, cross = _sandwich_products(jac, w, w * np.broadcast_to(noise, w.shape), free, held)
+    inverse = np.linalg.pinv(normal)  # (A^T A)^-1
+    cov = inverse @ spread @ inverse.T
     robot = np.flatnonzero(workspace_mask(model))
     robot_cov = robot_covariance(
-        cov, -gain @ jac[:, held], np.flatnonzero(free), held, model.model.prior_sigma()[held], robot
+        cov, -inverse @ cross, np.flatnonzero(free), held, model.model.prior_sigma()[held], robot
     )
     return cov, robot_cov
+
+
+def _sandwich_products(
+    jac: np.ndarray, w: np.ndarray, spread_w: np.ndarray, free: np.ndarray, held: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """With ``A = W J_free`` (``jac`` (m, n), row weights ``w`` (m,)): ``A^T A`` (k, k), ``A^T S^2 A``
+    (k, k) with ``S = diag(spread_w)`` (m,) and ``A^T W J_held`` (k, h), summed over blocks of rows
+    (``calib.lm.NORMAL_ROWS``) instead of from weighted copies of the whole Jacobian."""
+    f = np.flatnonzero(free)
+    normal, spread, cross = (
+        np.zeros((f.size, f.size)),
+        np.zeros((f.size, f.size)),
+        np.zeros((f.size, held.size)),
+    )
+    for s in range(0, len(jac), NORMAL_ROWS):
+        block, wb = jac[s : s + NORMAL_ROWS], w[s : s + NORMAL_ROWS, None]
+        a = block[:, f] * wb
+        spread_a = a * spread_w[s : s + NORMAL_ROWS, None]
+        normal += a.T @ a
+        spread += spread_a.T @ spread_a
+        cross += a.T @ (block[:, held] * wb)
+    return normal, spread, cross
 
 
 def workspace_mask(model: MeasurementModel) -> np.ndarray:

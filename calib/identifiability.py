@@ -100,18 +100,20 @@ def select_columns(jac: np.ndarray, order: np.ndarray, rtol: float = 1e-6) -> np
         The columns kept.
     """
     keep = np.zeros(jac.shape[1], bool)
-    basis = np.empty((jac.shape[0], 0))
+    space = np.empty((jac.shape[0], len(order)))  # the kept columns' orthonormal basis, filled in turn
+    size = 0
     norms = np.linalg.norm(jac, axis=0)
     for k in order:
         col, norm = jac[:, k], norms[k]
         if norm <= 1e-9 * norms.max():
             continue
-        rest = col / norm
+        rest, basis = col / norm, space[:, :size]
         for _ in range(2):  # re-orthogonalise once: classical Gram-Schmidt loses orthogonality
             rest = rest - basis @ (basis.T @ rest)
         if np.linalg.norm(rest) > rtol:
             keep[k] = True
-            basis = np.column_stack([basis, rest / np.linalg.norm(rest)])
+            space[:, size] = rest / np.linalg.norm(rest)
+            size += 1
     return keep
 
 

@@ -19,6 +19,9 @@ THETA, D, A, ALPHA = range(4)
 N_JOINTS = 6
 N_DH = N_JOINTS * len(DH_COLUMNS)
 """Number of D-H table parameters: they lead every parameter vector ``x`` (``dh_table(x)``)."""
+KINEMATICS_ROWS = 8192
+"""Rows per block of ``tcp_position`` and ``tcp_jacobian``: a block's frames stay a few MB (on
+100,000 rows, whole-array frames cost more in page faults than in arithmetic)."""
 
 
 def dh_table(x: np.ndarray) -> np.ndarray:
@@ -73,6 +76,44 @@ def joint_transforms(dh: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
+def frame_axes(dh: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The axes and origins of the D-H frames 0..6 in the base frame, coordinate-major.
+
+    Composes ``A_1 ... A_i`` column by column (frame i's x is ``cos(theta) x + sin(theta) y`` of frame
+    i-1, and so on) on arrays of all rows at once, instead of a (4, 4) product per row.
+
+    Parameters
+    ----------
+    dh : ndarray, shape (6, 4)
+        D-H table, internal units.
+    q : ndarray, shape (N, 6) or (6,)
+        Joint readings [rad].
+
+    Returns
+    -------
+    x, y, z : ndarray, shape (7, 3, N)
+        Unit axes of frames 0..6 (frame 0 the base, 6 the flange).
+    o : ndarray, shape (7, 3, N)
+        Their origins [mm].
+    """
+    q = np.atleast_2d(q)
+    theta = (dh[:, THETA] + q).T  # (6, N)
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(dh[:, ALPHA]), np.sin(dh[:, ALPHA])
+    x, y, z, o = (np.empty((N_JOINTS + 1, 3, q.shape[0])) for _ in range(4))
+    for axis, k in ((x, 0), (y, 1), (z, 2)):
+        axis[0] = np.eye(3)[:, k, None]
+    o[0] = 0.0
+    for i in range(N_JOINTS):
+        u = x[i] * ct[i] + y[i] * st[i]
+        v = y[i] * ct[i] - x[i] * st[i]
+        x[i + 1] = u
+        y[i + 1] = v * ca[i] + z[i] * sa[i]
+        z[i + 1] = z[i] * ca[i] - v * sa[i]
+        o[i + 1] = o[i] + dh[i, A] * u + dh[i, D] * z[i]
+    return x, y, z, o
+
+
 def base_from_frames(dh: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Poses of the D-H frames 0..6 in the base frame: ``A_1 ... A_i``.
 
@@ -88,11 +129,11 @@ def base_from_frames(dh: np.ndarray, q: np.ndarray) -> np.ndarray:
     ndarray, shape (N, 7, 4, 4)
         ``base_from_frame_i``, translations in mm; frame 0 is the identity, frame 6 the flange.
     """
-    links = joint_transforms(dh, q)
-    frames = np.empty((links.shape[0], N_JOINTS + 1, 4, 4))
-    frames[:, 0] = np.eye(4)
-    for i in range(N_JOINTS):
-        frames[:, i + 1] = frames[:, i] @ links[:, i]
+    x, y, z, o = frame_axes(dh, q)
+    frames = np.zeros((x.shape[2], N_JOINTS + 1, 4, 4))
+    for k, column in enumerate((x, y, z, o)):
+        frames[:, :, :3, k] = column.transpose(2, 0, 1)
+    frames[:, :, 3, 3] = 1.0
     return frames
 
 
@@ -131,7 +172,17 @@ def tcp_position(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
     ndarray, shape (N, 3)
         TCP positions [mm].
     """
-    return tool_point(base_from_frames(dh, q)[:, N_JOINTS], tool)
+    q = np.atleast_2d(q)
+    p = np.empty((3, q.shape[0]))
+    for s in range(0, q.shape[0], KINEMATICS_ROWS):
+        p[:, s : s + KINEMATICS_ROWS] = _flange_point(*frame_axes(dh, q[s : s + KINEMATICS_ROWS]), tool)
+    return p.T
+
+
+def _flange_point(x, y, z, o, tool) -> np.ndarray:
+    """The TCP (3, N) [mm] of ``frame_axes``'s flange frame and the tool (3,) [mm]."""
+    t = np.asarray(tool, float)
+    return x[N_JOINTS] * t[0] + y[N_JOINTS] * t[1] + z[N_JOINTS] * t[2] + o[N_JOINTS]
 
 
 def tcp_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,16 +207,30 @@ def tcp_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.nd
     jac : ndarray, shape (N, 3, N_DH)
         ``dp / d dh.ravel()``: mm/rad for the angles, mm/mm for the lengths.
     """
-    frames = base_from_frames(dh, q)
-    p = tool_point(frames[:, N_JOINTS], tool)
-    z_prev, o_prev = frames[:, :N_JOINTS, :3, 2], frames[:, :N_JOINTS, :3, 3]  # (N, 6, 3)
-    x_this, o_this = frames[:, 1:, :3, 0], frames[:, 1:, :3, 3]
-    jac = np.empty((p.shape[0], 3, N_JOINTS, len(DH_COLUMNS)))
-    jac[:, :, :, THETA] = np.cross(z_prev, p[:, None, :] - o_prev).transpose(0, 2, 1)
-    jac[:, :, :, D] = z_prev.transpose(0, 2, 1)
-    jac[:, :, :, A] = x_this.transpose(0, 2, 1)
-    jac[:, :, :, ALPHA] = np.cross(x_this, p[:, None, :] - o_this).transpose(0, 2, 1)
-    return p, jac.reshape(p.shape[0], 3, N_DH)
+    q = np.atleast_2d(q)
+    p = np.empty((3, q.shape[0]))
+    jac = np.empty((3, N_JOINTS, len(DH_COLUMNS), q.shape[0]))  # coordinate, joint, column, row
+    for s in range(0, q.shape[0], KINEMATICS_ROWS):
+        e = s + KINEMATICS_ROWS
+        x, y, z, o = frame_axes(dh, q[s:e])
+        p[:, s:e] = pb = _flange_point(x, y, z, o, tool)
+        jac[:, :, THETA, s:e] = _cross(z[:N_JOINTS], pb - o[:N_JOINTS]).transpose(1, 0, 2)
+        jac[:, :, D, s:e] = z[:N_JOINTS].transpose(1, 0, 2)
+        jac[:, :, A, s:e] = x[1:].transpose(1, 0, 2)
+        jac[:, :, ALPHA, s:e] = _cross(x[1:], pb - o[1:]).transpose(1, 0, 2)
+    return p.T, jac.transpose(3, 0, 1, 2).reshape(q.shape[0], 3, N_DH)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of (k, 3, N) vectors along axis 1."""
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )
 
 
 def parallel_axis_pairs(dh: np.ndarray, tol_rad: float = 1e-6) -> list[int]:

@@ -14,7 +14,9 @@ symmetric positive definite system of a few dozen unknowns; both are backward st
 calibrations agree to about 1e-13 relative, or to the stop tolerances where the rounding moves the
 stop by an iteration), and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
 ``damping_update``: Nielsen's rule): ``mu *= max(1/3, 1 - (2 gain - 1)^3)`` on success, else
-``mu *= nu``, ``nu *= 2``.
+``mu *= nu``, ``nu *= 2``. ``J^T W^2 J`` and ``J^T W^2 r`` are summed over blocks of rows
+(``normal_equations``: no weighted copy of a million rows' Jacobian), and a step's predicted cost
+reduction is the linearised one from them, ``-g^T dx - dx^T J^T W^2 J dx / 2``.
 
 Stops (``status``) when
 
@@ -100,8 +102,6 @@ class LMResult:
         ``F(x)`` (module docstring).
     residuals : ndarray, shape (m,)
         Whitened residuals at ``x``.
-    jacobian : ndarray, shape (m, n_free)
-        Their Jacobian by the free entries at ``x``.
     weights : ndarray, shape (m,)
         Robust IRLS weights ``sqrt(rho')`` (1 for the linear loss).
     free : ndarray of bool, shape (n,)
@@ -117,7 +117,6 @@ class LMResult:
     x: np.ndarray
     cost: float
     residuals: np.ndarray
-    jacobian: np.ndarray
     weights: np.ndarray
     free: np.ndarray
     status: int
@@ -256,7 +255,7 @@ def levenberg_marquardt(
     Returns
     -------
     LMResult
-        The solution (full vector), cost, residuals, Jacobian of the free columns, robust weights,
+        The solution (full vector), cost, residuals, robust weights,
         ``status`` (see the module docstring) with its message, and the history of trials.
 
     Raises
@@ -287,11 +286,11 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
     status, nit = 0, 0
     while nit < options.max_iter and status == 0:
         nit += 1
-        wj, wr = jac[:, free] * w[:, None], r * w
-        diag = np.maximum(diag, np.linalg.norm(wj, axis=0))
+        wr = r * w
+        normal, gradient = normal_equations(jac, free, w, wr)
+        diag = np.maximum(diag, np.sqrt(np.diag(normal)))
         d = np.where(diag > 0, diag, 1.0)
-        js = wj / d
-        hess, grad = js.T @ js, js.T @ wr
+        hess, grad = normal / np.outer(d, d), gradient / d
         if np.max(np.abs(grad)) < options.gtol:
             status = 1
             break
@@ -303,7 +302,7 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
             nfev += 1
             terms_new, w_new = loss_terms(r_new, scale, options.loss)
             cost_new = terms_new.sum()
-            predicted = 0.5 * (wr @ wr - np.sum((wr + wj @ step) ** 2))
+            predicted = -(gradient @ step) - 0.5 * step @ normal @ step  # of the linearised cost
             gain = gain_ratio(cost - cost_new, predicted)
             step_norm = float(np.linalg.norm(d * step))
             history.append(Iteration(float(min(cost, cost_new)), float(mu), step_norm, gain > 0))
@@ -321,12 +320,12 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
             cost, cost_new, step_norm, float(np.linalg.norm(d * x[free])), options.ftol, options.xtol
         )
         x, w, cost = x_new, w_new, cost_new
+        del jac  # not alive beside the next one
         r, jac = fun_jac(x)
     return LMResult(
         x=x,
         cost=float(cost),
         residuals=r,
-        jacobian=jac[:, free],
         weights=w,
         free=free,
         status=status,
@@ -335,6 +334,27 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
         nfev=nfev,
         history=history,
     )
+
+
+NORMAL_ROWS = 8192
+"""Rows per block of ``normal_equations``: a block's weighted copy stays a few MB."""
+
+
+def normal_equations(
+    jac: np.ndarray, free: np.ndarray, w: np.ndarray, wr: np.ndarray, rows: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(W J)^T W J`` (k, k) and ``(W J)^T W r`` (k,) of the ``free`` columns (k) of ``jac`` (m, n)
+    with row weights ``w`` (m,) and weighted residuals ``wr`` (m,), over ``rows`` (indices; default
+    all), summed ``NORMAL_ROWS`` rows at a time instead of from a weighted copy of the Jacobian."""
+    cols = np.flatnonzero(free)
+    normal, gradient = np.zeros((cols.size, cols.size)), np.zeros(cols.size)
+    for s in range(0, len(jac) if rows is None else rows.size, NORMAL_ROWS):
+        block = slice(s, s + NORMAL_ROWS) if rows is None else rows[s : s + NORMAL_ROWS]
+        wj = jac[block, cols] if rows is None else jac[np.ix_(block, cols)]
+        wj *= w[block, None]
+        normal += wj.T @ wj
+        gradient += wr[block] @ wj
+    return normal, gradient
 
 
 def _damped_step(hess: np.ndarray, grad: np.ndarray, mu: float) -> np.ndarray:
@@ -395,7 +415,7 @@ def _check_start_evaluation(r, jac, n: int, free: np.ndarray) -> None:
     bad_r = ~np.isfinite(r)
     if bad_r.any():
         raise ValueError(f"`fun_jac(x0)` returned non-finite residuals at rows {_where(bad_r)}")
-    bad_j = ~np.isfinite(jac[:, free])
+    bad_j = ~np.isfinite(jac)[:, free]
     if bad_j.any():
         entries = np.flatnonzero(free)[bad_j.any(axis=0)]
         raise ValueError(

@@ -336,6 +336,10 @@ class PositionModel:
         """Each row's whitened x, y, z position error (N, 3)."""
         return self.residuals(x).reshape(len(self.samples), 3)
 
+    def holding_robot(self) -> PositionModel:
+        """This model itself: the tracker's and the probe's columns need the kinematics anyway."""
+        return self
+
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
         """Whitened residuals (3N,) and their analytic Jacobian (3N, n), None unless ``jacobian``."""
         return self._evaluate(x, jacobian)

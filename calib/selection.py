@@ -45,6 +45,7 @@ import numpy as np
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate
 from calib.joint_terms import COMPLIANCE, COMPLIANCE_PRIOR, JointTerms, TermGroup
 from calib.kmeans import REGION_JOINTS, region_folds
+from calib.lm import normal_equations
 from calib.models import MeasurementModel
 from calib.special import gammaincc
 
@@ -191,15 +192,15 @@ def _fold_errors(model, x, free, weights, folds) -> np.ndarray:
     ``free`` unknowns on the other folds' rows and the prior rows (centred at ``model.x0``)."""
     prior = WithPrior(model, model.x0)
     r, jac = prior.residuals_and_jacobian(x)
-    wj, wr = jac[:, free] * weights[:, None], r * weights
+    wr = r * weights
     # normal equations of all rows, less each fold's: a few unknowns, so one product for all folds
     # (the whitened, prior-regularised Jacobian is well enough conditioned to square)
-    normal, gradient = wj.T @ wj, wj.T @ wr
+    normal, gradient = normal_equations(jac, free, weights, wr)
     out = np.empty(len(model.samples))
     for rows in folds:
-        left = np.isin(prior.rows, rows)
-        a = normal - wj[left].T @ wj[left]
-        step = np.linalg.lstsq(a, -(gradient - wj[left].T @ wr[left]), rcond=None)[0]
+        left = np.flatnonzero(np.isin(prior.rows, rows))
+        fold_normal, fold_gradient = normal_equations(jac, free, weights, wr, left)
+        step = np.linalg.lstsq(normal - fold_normal, -(gradient - fold_gradient), rcond=None)[0]
         x_fold = x.copy()
         x_fold[free] += step
         out[rows] = model.with_samples(model.samples.subset(rows)).row_error_mm(x_fold)

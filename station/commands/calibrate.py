@@ -11,7 +11,12 @@ from typing import TYPE_CHECKING
 from calib.methods import ALL_METHODS, DEFAULT_TERM_MODEL, TERM_MODELS
 from errors import InputError
 from station.commands.flags import parameters_as_flags
-from station.commands.long_work import Ticker, available_memory_bytes, check_calibrate_memory
+from station.commands.long_work import (
+    Ticker,
+    available_memory_bytes,
+    check_calibrate_memory,
+    reuse_freed_memory,
+)
 from station.commands.verify import add_history_flags, record_history
 
 if TYPE_CHECKING:
@@ -80,6 +85,7 @@ def run(args) -> int:
     inputs = load_inputs(args)
     rows = len(inputs.samples) + (len(inputs.holdout) if inputs.holdout is not None else 0)
     check_calibrate_memory(str(args.samples), rows, available_memory_bytes())
+    reuse_freed_memory()
     with parameters_as_flags(FLAGS), Ticker(f"calibrate: {len(inputs.samples)} rows") as ticker:
         outcome = calibration.calibrate_samples(
             inputs.samples,

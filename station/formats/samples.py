@@ -101,7 +101,38 @@ _LIMITS = {**dict.fromkeys(Q_COLUMNS, (MAX_JOINT_DEG, "deg")), "dial_mm": (MAX_D
 def parse_numbers(path, body, cols, names, allow_empty=False) -> np.ndarray:
     """(N, len(cols)) numbers from columns ``cols`` (named ``names``) of the rows ``body``: joints
     within MAX_JOINT_DEG, the dial within MAX_DIAL_MM, lengths within MAX_LENGTH_MM (an empty cell is
-    NaN where ``allow_empty``); a bad cell is an InputError naming the file, the row and the column."""
+    NaN where ``allow_empty``); a bad cell is an InputError naming the file, the row and the column.
+
+    Each column is read whole (Python's ``float`` on every cell, the limits checked on the array);
+    only a file with a bad cell is read again cell by cell, to name the first."""
+    try:
+        return np.stack(
+            [
+                _column(body, c, *_LIMITS.get(name, (MAX_LENGTH_MM, "mm")), allow_empty)
+                for c, name in zip(cols, names, strict=True)
+            ],
+            axis=1,
+        )
+    except ValueError:
+        return _parse_cells(path, body, cols, names, allow_empty)
+
+
+def _column(body, c: int, limit: float, unit: str, allow_empty: bool) -> np.ndarray:
+    """Column ``c`` of ``body`` as numbers (N,), NaN for an empty cell where ``allow_empty``;
+    ValueError where a cell is no finite number within ``-limit .. limit``."""
+    cells = [row[c] if c < len(row) else "" for row in body]
+    empty = np.zeros(len(cells), bool)
+    if allow_empty:
+        empty = np.fromiter((not s.strip() for s in cells), bool, len(cells))
+        cells = ["nan" if e else s for s, e in zip(cells, empty, strict=True)]
+    values = np.fromiter(map(float, cells), float, len(cells))
+    if not np.all(empty | (np.isfinite(values) & (np.abs(values) <= limit))):
+        raise ValueError(f"a cell is no finite number within -{limit:g} .. {limit:g} {unit}")
+    return values
+
+
+def _parse_cells(path, body, cols, names, allow_empty) -> np.ndarray:
+    """``parse_numbers`` cell by cell, row by row: the InputError of the first bad cell."""
     out = np.empty((len(body), len(cols)))
     for i, row in enumerate(body):
         for j, (c, name) in enumerate(zip(cols, names, strict=True)):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from calib import ik
+from calib import ik, kinematics
 from calib.kinematics import (
     N_DH,
     base_from_frames,
@@ -74,6 +74,17 @@ def test_jacobian_matches_finite_differences(rng):
         dx[k] = h
         fd = (tcp_position(dh_table(x + dx), q, tool) - tcp_position(dh_table(x - dx), q, tool)) / (2 * h)
         np.testing.assert_allclose(jac[:, :, k], fd, atol=1e-5 * max(1.0, np.abs(fd).max()))
+
+
+def test_blocks_of_rows_give_the_whole_arrays(rng, monkeypatch):
+    """``KINEMATICS_ROWS`` at a time (3 here, 20 rows: a short last block) is row for row the same."""
+    dh, q, tool = _random_dh(rng), rng.uniform(-np.pi, np.pi, (20, 6)), rng.uniform(-100, 100, 3)
+    whole_p, (whole_jp, whole_jac) = tcp_position(dh, q, tool), tcp_jacobian(dh, q, tool)
+    monkeypatch.setattr(kinematics, "KINEMATICS_ROWS", 3)
+    p, jac = tcp_jacobian(dh, q, tool)
+    np.testing.assert_array_equal(tcp_position(dh, q, tool), whole_p)
+    np.testing.assert_array_equal(p, whole_jp)
+    np.testing.assert_array_equal(jac, whole_jac)
 
 
 def test_geometric_jacobian_matches_finite_differences(rng):

@@ -88,6 +88,16 @@ def test_model_jacobian_matches_finite_differences(rng, with_terms):
             )
 
 
+def test_holding_the_robot_leaves_the_setup_columns_and_zeros_the_robots(rng):
+    model = _model(rng, 3, with_terms=True)
+    x = model.x0 + rng.normal(0, 1e-3, model.x0.size)
+    r, jac = model.residuals_and_jacobian(x)
+    held_r, held_jac = model.holding_robot().residuals_and_jacobian(x)
+    np.testing.assert_array_equal(held_r, r)
+    np.testing.assert_array_equal(held_jac[:, model.setup_mask], jac[:, model.setup_mask])
+    assert not held_jac[:, ~model.setup_mask].any() and jac[:, ~model.setup_mask].any()
+
+
 def test_single_line_holds_the_anchor_rotation_about_it(rng):
     assert "anchor.about_line_mm" in _model(rng, 1).gauges()
     assert "anchor.about_line_mm" not in _model(rng, 3).gauges()

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from calib import lm
 from calib.lm import LMOptions, check_termination, damping_update, gain_ratio, levenberg_marquardt
 
 
@@ -36,7 +37,6 @@ def test_held_parameters_do_not_move(rng):
     x0 = np.array([1.0, 0.5, 0.5])
     res = levenberg_marquardt(fun_jac, x0, free=np.array([True, True, False]))
     assert res.x[2] == 0.5
-    assert res.jacobian.shape[1] == 2
 
 
 def test_cauchy_loss_ignores_gross_errors(rng):
@@ -149,3 +149,16 @@ def test_gain_ratio_fails_steps_the_model_predicts_nothing_for():
 )
 def test_check_termination(cost_new, step, status):
     assert check_termination(1.0, cost_new, step, 2.0, ftol=1e-9, xtol=1e-9) == status
+
+
+@pytest.mark.parametrize("rows", [None, np.array([3, 10, 11, 12, 40, 49])])
+def test_normal_equations_in_blocks_are_the_weighted_products(rng, monkeypatch, rows):
+    """Summed over blocks of 4 rows, of all rows or a subset: the products of the weighted copy."""
+    monkeypatch.setattr(lm, "NORMAL_ROWS", 4)
+    jac, w, wr = rng.normal(size=(50, 5)), rng.uniform(0.1, 1.0, 50), rng.normal(size=50)
+    free = np.array([True, False, True, True, False])
+    normal, gradient = lm.normal_equations(jac, free, w, wr, rows)
+    picked = np.arange(50) if rows is None else rows
+    wj = jac[np.ix_(picked, np.flatnonzero(free))] * w[picked, None]
+    np.testing.assert_allclose(normal, wj.T @ wj, rtol=1e-12)
+    np.testing.assert_allclose(gradient, wj.T @ wr[picked], rtol=1e-12)
