@@ -1,14 +1,25 @@
-"""Time and peak memory of ``station calibrate`` as the rows grow (issue 21 item 6).
+"""Time and peak memory of ``station calibrate`` as the rows grow (issue 21 item 6; issue 37's
+targets: 100,000 rows <= 10 s, 1,000,000 rows <= 60 s and <= 4 GB).
 
-    python benchmarks/calibrate_scaling.py [--rows 10000 100000 1000000] [--model auto]
+    python benchmarks/calibrate_scaling.py [--rows 10000 100000 1000000] [--model auto] [--tree DIR]
 
 Each set is a simulated JR680 session (``sim_fixtures.scenario``: 70 configurations on each of 3
 gauge lines) measured again and again, each row with fresh instrument noise, up to the row count
 (the real case: a long session or repeated captures). The whole command runs in a child process
-(interpreter start and CSV loading included); reported: wall seconds, seconds per 1,000 rows, peak
-RSS (``os.wait4``) and memory per row above the 10,000-row run's. Linear scaling shows as a constant
-time and memory per row. ``OPENBLAS_NUM_THREADS`` is passed through as set (on a loaded machine set
-it to 1: OpenBLAS threads that spin for a core taken by others slowed a 20,000-row run threefold).
+(interpreter start and CSV loading included); reported: wall seconds, seconds per 1,000 rows, the
+child's CPU seconds (user + system: on a shared machine the wall time is the load's as much as the
+command's), peak RSS (``os.wait4``), memory per row above the first run's and the load average at
+the start. ``--tree`` runs the command of another checkout on the same rows (e.g. a ``git worktree``
+of the commit before, for before and after in one run). ``OPENBLAS_NUM_THREADS`` is passed through
+as set (on a loaded machine set it to 1: OpenBLAS threads that spin for a core taken by others
+slowed a 20,000-row run threefold).
+
+Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, load at the start):
+
+- 100,000 rows: 107.2 s, 93.4 CPU s, 1,071 MB before the blocked kinematics and normal equations
+  (153cc48, load 1.9); 30.5 s, 30.1 CPU s, 694 MB with them (f4dd7ce, load 2.0).
+- 1,000,000 rows: 2,183 s, 8,270 MB (issue 21's run, load 11-12); 340.5 s, 334.4 CPU s, 6,207 MB
+  with them (load 2.9): 6.1 KB a row above 100,000 rows.
 """
 
 from __future__ import annotations
@@ -39,13 +50,14 @@ def write_rows(folder: Path, rows: int, seed: int = 0):
     return sc
 
 
-def measure(rows: int, model: str) -> dict:
+def measure(rows: int, model: str, tree: Path = ROOT) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         sc = write_rows(Path(tmp), rows)
         cmd = [sys.executable, "-m", "station.cli", "calibrate", str(sc.samples), "--robot", str(sc.robot)]
         cmd += ["--setup", str(sc.setup), "--out", str(Path(tmp) / "out.toml"), "--model", model]
+        load = os.getloadavg()[0]
         t0 = time.monotonic()
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(cmd, cwd=tree, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         stderr = proc.stderr.read()
         proc.stdout.read()
         _, status, usage = os.wait4(proc.pid, 0)
@@ -53,6 +65,8 @@ def measure(rows: int, model: str) -> dict:
     return {
         "rows": rows,
         "s": seconds,
+        "cpu_s": usage.ru_utime + usage.ru_stime,
+        "load": load,
         "peak_mb": usage.ru_maxrss / 1024,
         "exit": os.waitstatus_to_exitcode(status),
         "progress": [line for line in stderr.splitlines() if line.startswith("calibrate: ")],
@@ -64,18 +78,25 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, nargs="+", default=[10000, 100000, 1000000])
     parser.add_argument("--model", default="auto", help="station calibrate --model (default auto)")
+    parser.add_argument("--tree", type=Path, default=ROOT, help="checkout whose station runs (default this)")
     args = parser.parse_args()
-    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}, --model {args.model}")
-    print(f"{'rows':>9} {'s':>8} {'s/1k rows':>10} {'peak MB':>9} {'KB/row':>7}  exit  progress lines")
+    threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
+    print(f"OPENBLAS_NUM_THREADS={threads}, --model {args.model}, station of {args.tree}")
+    print(
+        f"{'rows':>9} {'s':>8} {'s/1k rows':>10} {'CPU s':>7} {'load':>5} {'peak MB':>9} {'KB/row':>7}",
+        end="",
+    )
+    print("  exit  progress lines")
     first = None
     for rows in args.rows:
-        r = measure(rows, args.model)
+        r = measure(rows, args.model, args.tree)
         per_row = (
             "" if first is None else f"{(r['peak_mb'] - first['peak_mb']) * 1e3 / (rows - first['rows']):.1f}"
         )
         first = first or r
         print(
-            f"{rows:>9} {r['s']:>8.1f} {r['s'] / rows * 1e3:>10.3f} {r['peak_mb']:>9.0f} {per_row:>7}"
+            f"{rows:>9} {r['s']:>8.1f} {r['s'] / rows * 1e3:>10.3f} {r['cpu_s']:>7.1f} {r['load']:>5.1f}"
+            f" {r['peak_mb']:>9.0f} {per_row:>7}"
             f"  {r['exit']:>4}  {len(r['progress'])}",
             flush=True,
         )

@@ -25,7 +25,16 @@ from calib.accuracy import robot_covariance
 from calib.discrepancy import Blocks, Correlated, Discrepancy, estimate, tcp_rms_mm
 from calib.identifiability import redundancy_partners, select_columns, weakly_determined
 from calib.kinematics import N_DH
-from calib.lm import NORMAL_ROWS, LMOptions, LMResult, levenberg_marquardt, loss_terms, robust_scale
+from calib.lm import (
+    LMOptions,
+    LMResult,
+    block_sum,
+    levenberg_marquardt,
+    loss_terms,
+    robust_scale,
+    row_blocks,
+    weighted_blocks,
+)
 from calib.models import GROUP_PRIOR, MeasurementModel
 from calib.params import display_unit
 
@@ -386,7 +395,9 @@ def calibrate(
     Returns
     -------
     Calibration
+        Fitted on ``model.by_axes()`` (the faster frame composition; planning keeps the products).
     """
+    model = model.by_axes()
     start = fit_setup(model, options)
     after, scale = robust_fit(start.prior, start.before.x, start.free, options, callback, start.scale)
     sigma, cov, robot_cov = _uncertainty(start.prior, after, start.free, scale)
@@ -527,38 +538,26 @@ def covariance(
         Of ``workspace_mask(model)``'s entries, internal units, with the held ones considered.
     """
     _, jac = model.residuals_and_jacobian(x)
-    w = np.broadcast_to(row_weights, model.groups.shape)
+    w, noise = np.broadcast_to(row_weights, model.groups.shape), np.broadcast_to(noise, model.groups.shape)
     held = np.flatnonzero(~model.setup_mask & ~free)
-    normal, spread, cross = _sandwich_products(jac, w, w * np.broadcast_to(noise, w.shape), free, held)
-    inverse = np.linalg.pinv(normal)  # (A^T A)^-1
-    cov = inverse @ spread @ inverse.T
+    inverse = np.linalg.pinv(block_sum(a.T @ a for a in weighted_blocks(jac, np.flatnonzero(free), w)))
+    cov = cross = None
+    for a, a_held, w_block, noise_block in zip(
+        weighted_blocks(jac, np.flatnonzero(free), w),
+        weighted_blocks(jac, held, w),
+        row_blocks(w),
+        row_blocks(noise),
+        strict=True,
+    ):
+        gain = inverse @ a.T  # the fit's response to these weighted rows
+        spread = gain * w_block * noise_block
+        products = spread @ spread.T, -gain @ a_held
+        cov, cross = products if cov is None else (cov + products[0], cross + products[1])
     robot = np.flatnonzero(workspace_mask(model))
     robot_cov = robot_covariance(
-        cov, -inverse @ cross, np.flatnonzero(free), held, model.model.prior_sigma()[held], robot
+        cov, cross, np.flatnonzero(free), held, model.model.prior_sigma()[held], robot
     )
     return cov, robot_cov
-
-
-def _sandwich_products(
-    jac: np.ndarray, w: np.ndarray, spread_w: np.ndarray, free: np.ndarray, held: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """With ``A = W J_free`` (``jac`` (m, n), row weights ``w`` (m,)): ``A^T A`` (k, k), ``A^T S^2 A``
-    (k, k) with ``S = diag(spread_w)`` (m,) and ``A^T W J_held`` (k, h), summed over blocks of rows
-    (``calib.lm.NORMAL_ROWS``) instead of from weighted copies of the whole Jacobian."""
-    f = np.flatnonzero(free)
-    normal, spread, cross = (
-        np.zeros((f.size, f.size)),
-        np.zeros((f.size, f.size)),
-        np.zeros((f.size, held.size)),
-    )
-    for s in range(0, len(jac), NORMAL_ROWS):
-        block, wb = jac[s : s + NORMAL_ROWS], w[s : s + NORMAL_ROWS, None]
-        a = block[:, f] * wb
-        spread_a = a * spread_w[s : s + NORMAL_ROWS, None]
-        normal += a.T @ a
-        spread += spread_a.T @ spread_a
-        cross += a.T @ (block[:, held] * wb)
-    return normal, spread, cross
 
 
 def workspace_mask(model: MeasurementModel) -> np.ndarray:

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.kinematics import N_JOINTS, THETA, base_from_frames, tcp_jacobian
+from calib.kinematics import N_JOINTS, THETA, base_from_frames, tcp_jacobian, tcp_jacobian_by_axes
 
 G_MS2 = 9.80665
 MICRO = 1e-6  # compliances are in urad / (N m)
@@ -235,7 +235,7 @@ class JointTerms:
         return out
 
     def tcp_jacobian(
-        self, dh: np.ndarray, q: np.ndarray, tool: np.ndarray, c: np.ndarray, basis: np.ndarray
+        self, dh: np.ndarray, q: np.ndarray, tool: np.ndarray, c: np.ndarray, basis: np.ndarray, by_axes=False
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """TCP positions and their derivatives by the table and by the terms.
 
@@ -251,6 +251,9 @@ class JointTerms:
             Term values, internal units.
         basis : ndarray, shape (N, K)
             ``self.basis(q)`` (computed once per row set).
+        by_axes : bool
+            Compose the frames by ``kinematics.tcp_jacobian_by_axes`` (a fit's many rows), not by
+            ``kinematics.tcp_jacobian``'s products.
 
         Returns
         -------
@@ -261,5 +264,5 @@ class JointTerms:
         jac_terms : ndarray, shape (N, 3, K)
             ``dp / dc``.
         """
-        p, jac = tcp_jacobian(dh, self.link_angles(q, c, basis), tool)
+        p, jac = (tcp_jacobian_by_axes if by_axes else tcp_jacobian)(dh, self.link_angles(q, c, basis), tool)
         return p, jac, jac[:, :, THETA + 4 * self.joints] * basis[:, None, :]

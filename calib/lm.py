@@ -14,9 +14,10 @@ symmetric positive definite system of a few dozen unknowns; both are backward st
 calibrations agree to about 1e-13 relative, or to the stop tolerances where the rounding moves the
 stop by an iteration), and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
 ``damping_update``: Nielsen's rule): ``mu *= max(1/3, 1 - (2 gain - 1)^3)`` on success, else
-``mu *= nu``, ``nu *= 2``. ``J^T W^2 J`` and ``J^T W^2 r`` are summed over blocks of rows
-(``normal_equations``: no weighted copy of a million rows' Jacobian), and a step's predicted cost
-reduction is the linearised one from them, ``-g^T dx - dx^T J^T W^2 J dx / 2``.
+``mu *= nu``, ``nu *= 2``. The column-scaled ``J^T W^2 J``, ``J^T W^2 r`` and a step's predicted
+cost reduction ``(|W r|^2 - |W (r + J dx)|^2) / 2`` are summed over blocks of ``NORMAL_ROWS`` rows
+(no weighted copy of a million rows' Jacobian); on rows that fit one block each is, to the last
+digit, the whole-array product (planning's small fits compute what they did before blocks).
 
 Stops (``status``) when
 
@@ -281,16 +282,16 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
     terms, w = loss_terms(r, scale, options.loss)
     cost, nfev = terms.sum(), 1
     mu, nu = options.damping, 2.0
-    diag = np.zeros(free.sum())
+    diag, cols = np.zeros(free.sum()), np.flatnonzero(free)
     history: list[Iteration] = []
     status, nit = 0, 0
     while nit < options.max_iter and status == 0:
         nit += 1
         wr = r * w
-        normal, gradient = normal_equations(jac, free, w, wr)
-        diag = np.maximum(diag, np.sqrt(np.diag(normal)))
+        squares = (np.add.reduce(wj * wj, axis=0) for wj in weighted_blocks(jac, cols, w))
+        diag = np.maximum(diag, np.sqrt(block_sum(squares)))
         d = np.where(diag > 0, diag, 1.0)
-        hess, grad = normal / np.outer(d, d), gradient / d
+        hess, grad = _scaled_normal_equations(jac, cols, w, wr, d)
         if np.max(np.abs(grad)) < options.gtol:
             status = 1
             break
@@ -302,7 +303,8 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
             nfev += 1
             terms_new, w_new = loss_terms(r_new, scale, options.loss)
             cost_new = terms_new.sum()
-            predicted = -(gradient @ step) - 0.5 * step @ normal @ step  # of the linearised cost
+            blocks = zip(weighted_blocks(jac, cols, w), row_blocks(wr), strict=True)
+            predicted = 0.5 * (wr @ wr - block_sum(np.sum((wr_b + wj @ step) ** 2) for wj, wr_b in blocks))
             gain = gain_ratio(cost - cost_new, predicted)
             step_norm = float(np.linalg.norm(d * step))
             history.append(Iteration(float(min(cost, cost_new)), float(mu), step_norm, gain > 0))
@@ -337,7 +339,42 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
 
 
 NORMAL_ROWS = 8192
-"""Rows per block of ``normal_equations``: a block's weighted copy stays a few MB."""
+"""Rows per block of ``normal_equations`` and the solver's products: a block's weighted copy stays a
+few MB."""
+
+
+def row_blocks(a: np.ndarray):
+    """``a``'s consecutive blocks of ``NORMAL_ROWS`` rows."""
+    return (a[s : s + NORMAL_ROWS] for s in range(0, len(a), NORMAL_ROWS))
+
+
+def weighted_blocks(jac: np.ndarray, cols: np.ndarray, w: np.ndarray):
+    """The weighted columns ``cols`` (k indices) of ``W J`` (``jac`` (m, n), row weights ``w`` (m,)),
+    a block of ``NORMAL_ROWS`` rows (rows, k) at a time: products without a weighted copy of all."""
+    for block, w_block in zip(row_blocks(jac), row_blocks(w), strict=True):
+        wj = block[:, cols]
+        wj *= w_block[:, None]
+        yield wj
+
+
+def block_sum(parts):
+    """The sum of ``parts`` (arrays or numbers), the first taken as it is: on a single block of rows
+    each product is, to the last digit, the whole-array product's."""
+    total = None
+    for part in parts:
+        total = part if total is None else total + part
+    return total
+
+
+def _scaled_normal_equations(jac, cols, w, wr, d) -> tuple[np.ndarray, np.ndarray]:
+    """The column-scaled Gauss-Newton matrix ``(W J D^-1)^T W J D^-1`` (k, k) and gradient
+    ``(W J D^-1)^T W r`` (k,), ``D = diag(d)``, of the columns ``cols``, summed over blocks of rows."""
+    hess = grad = None
+    for wj, wr_block in zip(weighted_blocks(jac, cols, w), row_blocks(wr), strict=True):
+        js = wj / d
+        h, g = js.T @ js, js.T @ wr_block
+        hess, grad = (h, g) if hess is None else (hess + h, grad + g)
+    return hess, grad
 
 
 def normal_equations(

@@ -340,6 +340,10 @@ class PositionModel:
         """This model itself: the tracker's and the probe's columns need the kinematics anyway."""
         return self
 
+    def by_axes(self) -> PositionModel:
+        """This model itself: its kinematics stay the row-by-row products (needs their rotations)."""
+        return self
+
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
         """Whitened residuals (3N,) and their analytic Jacobian (3N, n), None unless ``jacobian``."""
         return self._evaluate(x, jacobian)

@@ -12,9 +12,9 @@ from errors import InputError
 
 PROGRESS_S = 10.0
 """A progress line this often [s] while the work lasts (none for work done sooner)."""
-CALIBRATE_ROW_BYTES = 10_000
-"""Peak memory of ``station calibrate`` per sample row [bytes]: 8.3 KB measured between 10,000 and
-100,000 rows (``benchmarks/calibrate_scaling.py``), rounded up."""
+CALIBRATE_ROW_BYTES = 7_000
+"""Peak memory of ``station calibrate`` per sample row [bytes]: 6.1 KB measured between 100,000 and
+1,000,000 rows (``benchmarks/calibrate_scaling.py``), rounded up."""
 CALIBRATE_BASE_BYTES = 150_000_000
 """Its peak memory with few rows [bytes] (the interpreter, numpy, scipy: 111 MB measured on 2,000)."""
 

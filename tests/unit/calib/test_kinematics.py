@@ -13,7 +13,9 @@ from calib.kinematics import (
     dh_table,
     parallel_axis_pairs,
     tcp_jacobian,
+    tcp_jacobian_by_axes,
     tcp_position,
+    tcp_position_by_axes,
 )
 from sim_fixtures.world import JR680_FILE, Robot
 
@@ -79,12 +81,23 @@ def test_jacobian_matches_finite_differences(rng):
 def test_blocks_of_rows_give_the_whole_arrays(rng, monkeypatch):
     """``KINEMATICS_ROWS`` at a time (3 here, 20 rows: a short last block) is row for row the same."""
     dh, q, tool = _random_dh(rng), rng.uniform(-np.pi, np.pi, (20, 6)), rng.uniform(-100, 100, 3)
-    whole_p, (whole_jp, whole_jac) = tcp_position(dh, q, tool), tcp_jacobian(dh, q, tool)
+    whole_p, (whole_jp, whole_jac) = tcp_position_by_axes(dh, q, tool), tcp_jacobian_by_axes(dh, q, tool)
     monkeypatch.setattr(kinematics, "KINEMATICS_ROWS", 3)
-    p, jac = tcp_jacobian(dh, q, tool)
-    np.testing.assert_array_equal(tcp_position(dh, q, tool), whole_p)
+    p, jac = tcp_jacobian_by_axes(dh, q, tool)
+    np.testing.assert_array_equal(tcp_position_by_axes(dh, q, tool), whole_p)
     np.testing.assert_array_equal(p, whole_jp)
     np.testing.assert_array_equal(jac, whole_jac)
+
+
+def test_the_frame_axes_compose_the_products_frames(rng):
+    """Both compositions give the same TCPs and derivatives (to the rounding of a few products of
+    metre-sized lengths: 1e-12 relative)."""
+    dh, q, tool = _random_dh(rng), rng.uniform(-np.pi, np.pi, (50, 6)), rng.uniform(-100, 100, 3)
+    p, jac = tcp_jacobian(dh, q, tool)
+    p_axes, jac_axes = tcp_jacobian_by_axes(dh, q, tool)
+    np.testing.assert_allclose(tcp_position_by_axes(dh, q, tool), p, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(p_axes, p, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(jac_axes, jac, rtol=0, atol=1e-9)
 
 
 def test_geometric_jacobian_matches_finite_differences(rng):

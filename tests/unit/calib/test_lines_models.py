@@ -2,6 +2,8 @@ import numpy as np
 import pytest
 
 import configs
+from calib import lm
+from calib.calibrate import WithPrior, covariance
 from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.lines import LineReference, fit_line, line_residual
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
@@ -96,6 +98,73 @@ def test_holding_the_robot_leaves_the_setup_columns_and_zeros_the_robots(rng):
     np.testing.assert_array_equal(held_r, r)
     np.testing.assert_array_equal(held_jac[:, model.setup_mask], jac[:, model.setup_mask])
     assert not held_jac[:, ~model.setup_mask].any() and jac[:, ~model.setup_mask].any()
+
+
+def test_the_jacobian_is_the_einsums_then_the_whitening_to_the_last_digit(rng):
+    """What planning's choices turn on: the chain rule through the TCP in blocks of rows is, bit for
+    bit, an einsum over the TCP's coordinates whitened afterwards (the drawstring rows divided by
+    their noise, the line rows multiplied by their weights)."""
+    model = _model(rng, 3, with_terms=True)
+    x = model.x0 + rng.normal(0, 1e-3, model.x0.size)
+    _, jac = model.residuals_and_jacobian(x)
+    p, dp = model._robot_jacobian(x)  # (3, N, 24 + K)
+    robot = ~model.setup_mask
+    rel = p - model.anchor(x)
+    u = rel / np.linalg.norm(rel, axis=1)[:, None]
+    n = len(model.samples)
+    expected = np.einsum("nk,knj->nj", u, dp) / model.setup_values.sigma_length
+    np.testing.assert_array_equal(jac[:n][:, robot], expected)
+    at = n
+    for lid in model.line_ids:
+        rows, (w_line, shift) = model._on_line[lid], model._line_weights[lid]
+        _, dr_dp, _ = line_residual(model.frame.lines[lid], x[model._line_cols[lid]], p[rows] - shift)
+        expected = w_line[:, :, None] * np.einsum("nik,knj->nij", dr_dp, dp[:, rows])
+        got = jac[at : at + 2 * rows.size][:, robot]
+        np.testing.assert_array_equal(got, expected.reshape(-1, robot.sum()))
+        at += 2 * rows.size
+
+
+def test_by_axes_is_the_same_model_to_the_rounding_and_stays_so(rng):
+    model = _model(rng, 3, with_terms=True)
+    fast = model.by_axes()
+    x = model.x0 + rng.normal(0, 1e-3, model.x0.size)
+    (r, jac), (r_fast, jac_fast) = model.residuals_and_jacobian(x), fast.residuals_and_jacobian(x)
+    np.testing.assert_allclose(r_fast, r, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(jac_fast, jac, rtol=0, atol=1e-9 * np.abs(jac).max())
+    assert not np.array_equal(jac_fast, jac)  # the other composition: its own last digits
+    rows = model.samples.subset(np.arange(0, 36, 2))
+    for derived in (fast.with_samples(rows), fast.with_terms(JointTerms()), fast.holding_robot()):
+        assert derived._by_axes
+    assert not model.with_samples(rows)._by_axes
+
+
+def _sandwich(prior, x, free, w, noise):
+    """The covariance's sandwich from the weighted copy of the whole Jacobian."""
+    _, jac = prior.residuals_and_jacobian(x)
+    jac = jac * w[:, None]
+    a = jac[:, free]
+    gain = np.linalg.pinv(a.T @ a) @ a.T
+    spread = gain * w * noise
+    return spread @ spread.T
+
+
+def test_the_covariance_in_blocks_of_rows_is_the_sandwich(rng, monkeypatch):
+    """On rows that fit one block, the whole-array sandwich to the last digit (planning's promise
+    as it was); in blocks of 10 rows, the same to the rounding of its inverse."""
+    model = _model(rng, 3, with_terms=True)
+    prior = WithPrior(model, model.x0)
+    x = model.x0 + rng.normal(0, 1e-4, model.x0.size)
+    free = model.setup_mask.copy()
+    free[[1, 5, 6, 9]] = True
+    free[np.flatnonzero(np.isin(model.names, list(model.gauges())))] = False
+    w, noise = rng.uniform(0.5, 1.0, prior.groups.size), rng.uniform(0.8, 1.2, prior.groups.size)
+    expected = _sandwich(prior, x, free, w, noise)
+    np.testing.assert_array_equal(covariance(prior, x, free, w, noise)[0], expected)
+    monkeypatch.setattr(lm, "NORMAL_ROWS", 10)
+    rounding = 1e-15 * np.linalg.cond(expected)  # the inverse's rounding grows with its condition
+    np.testing.assert_allclose(
+        covariance(prior, x, free, w, noise)[0], expected, rtol=0, atol=rounding * np.abs(expected).max()
+    )
 
 
 def test_single_line_holds_the_anchor_rotation_about_it(rng):

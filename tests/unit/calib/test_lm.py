@@ -162,3 +162,35 @@ def test_normal_equations_in_blocks_are_the_weighted_products(rng, monkeypatch, 
     wj = jac[np.ix_(picked, np.flatnonzero(free))] * w[picked, None]
     np.testing.assert_allclose(normal, wj.T @ wj, rtol=1e-12)
     np.testing.assert_allclose(gradient, wj.T @ wr[picked], rtol=1e-12)
+
+
+def test_the_solvers_products_on_one_block_are_the_whole_arrays_to_the_last_digit(rng, monkeypatch):
+    """The scaled normal equations: on rows that fit one block, exactly the whole-array products
+    (what planning's fits computed before blocks); on several blocks the same to the rounding."""
+    jac, w, wr = rng.normal(size=(50, 5)), rng.uniform(0.1, 1.0, 50), rng.normal(size=50)
+    free, d = np.array([True, False, True, True, False]), rng.uniform(0.5, 2.0, 3)
+    js = jac[:, free] * w[:, None] / d
+    hess, grad = lm._scaled_normal_equations(jac, np.flatnonzero(free), w, wr, d)
+    np.testing.assert_array_equal(hess, js.T @ js)
+    np.testing.assert_array_equal(grad, js.T @ wr)
+    monkeypatch.setattr(lm, "NORMAL_ROWS", 7)
+    hess, grad = lm._scaled_normal_equations(jac, np.flatnonzero(free), w, wr, d)
+    np.testing.assert_allclose(hess, js.T @ js, rtol=1e-12)
+    np.testing.assert_allclose(grad, js.T @ wr, rtol=1e-12, atol=1e-14)
+
+
+def test_the_fit_is_the_same_whatever_the_block_of_rows(rng, monkeypatch):
+    """A fit over 300 rows in blocks of 16 lands where the one-block fit does."""
+    t = np.linspace(0, 3, 300)
+    y = 2.0 * np.exp(-0.7 * t) + 0.3 + rng.normal(0, 0.01, t.size)
+
+    def fun_jac(x, jacobian=True):
+        e = np.exp(-x[1] * t)
+        r = x[0] * e + x[2] - y
+        return r, (np.column_stack([e, -x[0] * t * e, np.ones_like(t)]) if jacobian else None)
+
+    whole = levenberg_marquardt(fun_jac, np.array([1.0, 0.1, 0.0]))
+    monkeypatch.setattr(lm, "NORMAL_ROWS", 16)
+    blocks = levenberg_marquardt(fun_jac, np.array([1.0, 0.1, 0.0]))
+    np.testing.assert_allclose(blocks.x, whole.x, rtol=1e-9)
+    assert blocks.nit == whole.nit

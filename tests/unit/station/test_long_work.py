@@ -58,7 +58,7 @@ def test_rows_beyond_the_available_memory_are_refused_naming_what_fits():
         check_calibrate_memory("s.csv", rows, need // 2)
     text = str(err.value)
     most = (need // 2 - CALIBRATE_BASE_BYTES) // CALIBRATE_ROW_BYTES
-    assert text.startswith("s.csv: 2000000 rows need about 20.1 GB") and f"at most about {most} rows" in text
+    assert text.startswith("s.csv: 2000000 rows need about 14.2 GB") and f"at most about {most} rows" in text
 
 
 def test_calibrate_refuses_rows_the_memory_cannot_hold_before_any_work(
