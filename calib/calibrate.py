@@ -26,6 +26,7 @@ from calib.discrepancy import Blocks, Correlated, Discrepancy, estimate, tcp_rms
 from calib.identifiability import redundancy_partners, select_columns, weakly_determined
 from calib.kinematics import N_DH
 from calib.lm import (
+    NORMAL_ROWS,
     LMOptions,
     LMResult,
     block_sum,
@@ -277,7 +278,7 @@ def identify(
     held : dict of str to str
         Every held parameter of ``model.names`` and why.
     """
-    _, jac = model.residuals_and_jacobian(x)
+    jac = column_geometry(model.residuals_and_jacobian(x)[1])
     names = model.names
     candidates = [k for k in np.flatnonzero(~model.setup_mask) if names[k] not in gauges]
     order = np.concatenate([np.flatnonzero(free_setup), candidates]).astype(int)
@@ -304,6 +305,18 @@ def identify(
     robot = np.zeros(len(names), bool)
     robot[[k for k in kept_robot if k not in weak]] = True
     return robot, held
+
+
+def column_geometry(jac: np.ndarray) -> np.ndarray:
+    """``jac`` (m, n) itself on rows that fit one block (``NORMAL_ROWS``: planning's, as before);
+    on more, ``R`` (n, n) of its QR factorisation, built block by block: the same column norms and
+    angles (``R^T R = J^T J``, all ``identify`` looks at) in n rows instead of m."""
+    if len(jac) <= NORMAL_ROWS:
+        return jac
+    r = np.empty((0, jac.shape[1]))
+    for block in row_blocks(jac):
+        r = np.linalg.qr(np.vstack([r, block]), mode="r")
+    return r
 
 
 def weak_reason(name: str, sigma: float, prior: float, what: str) -> str:

@@ -86,21 +86,9 @@ def frame_axes(dh: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     """The axes and origins of the D-H frames 0..6 in the base frame, coordinate-major.
 
     Composes ``A_1 ... A_i`` column by column (frame i's x is ``cos(theta) x + sin(theta) y`` of frame
-    i-1, and so on) on arrays of all rows at once, instead of a (4, 4) product per row.
-
-    Parameters
-    ----------
-    dh : ndarray, shape (6, 4)
-        D-H table, internal units.
-    q : ndarray, shape (N, 6) or (6,)
-        Joint readings [rad].
-
-    Returns
-    -------
-    x, y, z : ndarray, shape (7, 3, N)
-        Unit axes of frames 0..6 (frame 0 the base, 6 the flange).
-    o : ndarray, shape (7, 3, N)
-        Their origins [mm].
+    i-1, and so on) on arrays of all rows at once, instead of a (4, 4) product per row. ``dh`` (6, 4)
+    and ``q`` (N, 6) as for ``base_from_frames``; returns the unit axes ``x, y, z`` and the origins
+    ``o`` [mm] of frames 0..6 (0 the base, 6 the flange), each (7, 3, N).
     """
     q = np.atleast_2d(q)
     theta = (dh[:, THETA] + q).T  # (6, N)

@@ -14,10 +14,11 @@ symmetric positive definite system of a few dozen unknowns; both are backward st
 calibrations agree to about 1e-13 relative, or to the stop tolerances where the rounding moves the
 stop by an iteration), and updates the damping ``mu`` by the gain ratio (``gain_ratio``,
 ``damping_update``: Nielsen's rule): ``mu *= max(1/3, 1 - (2 gain - 1)^3)`` on success, else
-``mu *= nu``, ``nu *= 2``. The column-scaled ``J^T W^2 J``, ``J^T W^2 r`` and a step's predicted
-cost reduction ``(|W r|^2 - |W (r + J dx)|^2) / 2`` are summed over blocks of ``NORMAL_ROWS`` rows
-(no weighted copy of a million rows' Jacobian); on rows that fit one block each is, to the last
-digit, the whole-array product (planning's small fits compute what they did before blocks).
+``mu *= nu``, ``nu *= 2``. On rows that fit one block (``NORMAL_ROWS``) the column-scaled ``J^T W^2
+J``, ``J^T W^2 r`` and a step's predicted cost reduction ``(|W r|^2 - |W (r + J dx)|^2) / 2`` are
+whole-array products (planning's small fits, to the last digit as before blocks); on more rows
+``J^T W^2 J`` and ``J^T W^2 r`` are summed over blocks in one pass (no weighted copy of a million
+rows' Jacobian) and the predicted reduction is ``-g^T dx - dx^T J^T W^2 J dx / 2`` from them.
 
 Stops (``status``) when
 
@@ -282,16 +283,13 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
     terms, w = loss_terms(r, scale, options.loss)
     cost, nfev = terms.sum(), 1
     mu, nu = options.damping, 2.0
-    diag, cols = np.zeros(free.sum()), np.flatnonzero(free)
+    diag = np.zeros(free.sum())
     history: list[Iteration] = []
     status, nit = 0, 0
     while nit < options.max_iter and status == 0:
         nit += 1
         wr = r * w
-        squares = (np.add.reduce(wj * wj, axis=0) for wj in weighted_blocks(jac, cols, w))
-        diag = np.maximum(diag, np.sqrt(block_sum(squares)))
-        d = np.where(diag > 0, diag, 1.0)
-        hess, grad = _scaled_normal_equations(jac, cols, w, wr, d)
+        diag, d, hess, grad, predict = _gauss_newton(jac, free, w, wr, diag)
         if np.max(np.abs(grad)) < options.gtol:
             status = 1
             break
@@ -303,9 +301,7 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
             nfev += 1
             terms_new, w_new = loss_terms(r_new, scale, options.loss)
             cost_new = terms_new.sum()
-            blocks = zip(weighted_blocks(jac, cols, w), row_blocks(wr), strict=True)
-            predicted = 0.5 * (wr @ wr - block_sum(np.sum((wr_b + wj @ step) ** 2) for wj, wr_b in blocks))
-            gain = gain_ratio(cost - cost_new, predicted)
+            gain = gain_ratio(cost - cost_new, predict(step))
             step_norm = float(np.linalg.norm(d * step))
             history.append(Iteration(float(min(cost, cost_new)), float(mu), step_norm, gain > 0))
             if callback is not None:
@@ -366,15 +362,31 @@ def block_sum(parts):
     return total
 
 
-def _scaled_normal_equations(jac, cols, w, wr, d) -> tuple[np.ndarray, np.ndarray]:
-    """The column-scaled Gauss-Newton matrix ``(W J D^-1)^T W J D^-1`` (k, k) and gradient
-    ``(W J D^-1)^T W r`` (k,), ``D = diag(d)``, of the columns ``cols``, summed over blocks of rows."""
-    hess = grad = None
-    for wj, wr_block in zip(weighted_blocks(jac, cols, w), row_blocks(wr), strict=True):
+def _gauss_newton(jac, free, w, wr, diag):
+    """The iteration's linearisation from the Jacobian ``jac`` (m, n), its ``free`` columns (k), the
+    row weights ``w`` and weighted residuals ``wr`` (m,): the column scales ``diag`` (k,) kept at
+    their largest so far and ``d`` (no zeros), the column-scaled Gauss-Newton matrix (k, k) and
+    gradient (k,), and ``predict(dx)``: the cost reduction the linearised model predicts for a step.
+
+    Rows that fit one block (``NORMAL_ROWS``) are multiplied as whole arrays, the same to the last
+    digit as before blocks (planning's small fits); more rows in one pass over blocks of them
+    (``normal_equations``), the prediction ``-g^T dx - dx^T J^T W^2 J dx / 2`` from its products."""
+    if len(jac) <= NORMAL_ROWS:
+        wj = jac[:, free] * w[:, None]
+        diag = np.maximum(diag, np.linalg.norm(wj, axis=0))
+        d = np.where(diag > 0, diag, 1.0)
         js = wj / d
-        h, g = js.T @ js, js.T @ wr_block
-        hess, grad = (h, g) if hess is None else (hess + h, grad + g)
-    return hess, grad
+        return diag, d, js.T @ js, js.T @ wr, lambda step: 0.5 * (wr @ wr - np.sum((wr + wj @ step) ** 2))
+    normal, gradient = normal_equations(jac, free, w, wr)
+    diag = np.maximum(diag, np.sqrt(np.diag(normal)))
+    d = np.where(diag > 0, diag, 1.0)
+    return (
+        diag,
+        d,
+        normal / np.outer(d, d),
+        gradient / d,
+        lambda step: -(gradient @ step) - 0.5 * step @ normal @ step,
+    )
 
 
 def normal_equations(

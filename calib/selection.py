@@ -189,7 +189,9 @@ def screened_errors(
 
 def _fold_errors(model, x, free, weights, folds) -> np.ndarray:
     """Row errors [mm] of each fold's rows after one weighted Gauss-Newton step from ``x`` in the
-    ``free`` unknowns on the other folds' rows and the prior rows (centred at ``model.x0``)."""
+    ``free`` unknowns on the other folds' rows and the prior rows (centred at ``model.x0``), with
+    the model's TCPs composed by ``kinematics.frame_axes``."""
+    model = model.by_axes()
     prior = WithPrior(model, model.x0)
     r, jac = prior.residuals_and_jacobian(x)
     wr = r * weights
@@ -411,6 +413,7 @@ def select_terms(
     TermSelection
     """
     folds = kfold(model.placement_ids(), k) if folds is None else folds
+    model = model.by_axes()  # every fit and fold step below on the faster frame composition
     kept: list[TermGroup] = []
     err, cal = cross_validated_errors(model.with_terms(_terms(pool, kept)), folds, options)
     nominal = rms(nominal_errors(model.with_terms(_terms(pool, kept)), cal, folds))

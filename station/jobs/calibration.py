@@ -203,7 +203,7 @@ def calibrate_samples(
     for rows in (samples, holdout):
         if rows is not None:
             check_joint_limits(rows, robot)
-    model = build_model(samples, robot, setup, setup_where)
+    model = build_model(samples, robot, setup, setup_where).by_axes()  # the fits' faster frames
     validate(model, samples.path, method, select)
     if terms not in MODELS:
         raise ParameterError(MESSAGES["terms"], value=terms, choices=", ".join(MODELS))

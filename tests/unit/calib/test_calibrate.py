@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import configs
-from calib.calibrate import identify
-from calib.identifiability import structural_holds
+from calib import calibrate as calibrate_module
+from calib.calibrate import column_geometry, identify
+from calib.identifiability import select_columns, structural_holds
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
 from calib.params import DH_NAMES, dh_from_degrees
@@ -178,3 +179,19 @@ def test_clean_averaged_captures_downweight_nothing_while_a_gross_reading_still_
     gross = s.length_mm.copy()
     gross[17] += 10 * setup.drawstring.sigma_mm
     assert downweighted(gross) == (17,)
+
+
+def test_column_geometry_keeps_what_identify_looks_at(rng, monkeypatch):
+    """Past one block of rows, identify sees R of J = QR: the same J^T J, so the same columns kept
+    (a column that is the sum of two others is not); within one block, J itself."""
+    jac = rng.normal(size=(200, 6)) * [1.0, 10.0, 0.1, 1.0, 1.0, 1.0]
+    jac[:, 4] = jac[:, 0] + jac[:, 2]
+    order = np.arange(6)
+    assert column_geometry(jac) is jac
+    monkeypatch.setattr(calibrate_module, "NORMAL_ROWS", 32)
+    r = column_geometry(jac)
+    assert r.shape == (6, 6)
+    np.testing.assert_allclose(r.T @ r, jac.T @ jac, rtol=1e-12, atol=1e-12 * np.abs(jac.T @ jac).max())
+    kept = select_columns(r, order)
+    np.testing.assert_array_equal(kept, select_columns(jac, order))
+    assert not kept[4] and kept[[0, 1, 2, 3, 5]].all()

@@ -165,18 +165,30 @@ def test_normal_equations_in_blocks_are_the_weighted_products(rng, monkeypatch, 
 
 
 def test_the_solvers_products_on_one_block_are_the_whole_arrays_to_the_last_digit(rng, monkeypatch):
-    """The scaled normal equations: on rows that fit one block, exactly the whole-array products
-    (what planning's fits computed before blocks); on several blocks the same to the rounding."""
+    """The scaled normal equations and the predicted reduction: on rows that fit one block, exactly
+    the whole-array products (what planning's fits computed before blocks); on several blocks the
+    same to the rounding."""
     jac, w, wr = rng.normal(size=(50, 5)), rng.uniform(0.1, 1.0, 50), rng.normal(size=50)
-    free, d = np.array([True, False, True, True, False]), rng.uniform(0.5, 2.0, 3)
-    js = jac[:, free] * w[:, None] / d
-    hess, grad = lm._scaled_normal_equations(jac, np.flatnonzero(free), w, wr, d)
-    np.testing.assert_array_equal(hess, js.T @ js)
-    np.testing.assert_array_equal(grad, js.T @ wr)
+    free, step = np.array([True, False, True, True, False]), rng.normal(size=3)
+    wj = jac[:, free] * w[:, None]
+    d = np.linalg.norm(wj, axis=0)
+    js = wj / d
+    predicted = 0.5 * (wr @ wr - np.sum((wr + wj @ step) ** 2))
+    diag, d_one, hess, grad, predict = lm._gauss_newton(jac, free, w, wr, np.zeros(3))
+    for got, expected in (
+        (diag, d),
+        (d_one, d),
+        (hess, js.T @ js),
+        (grad, js.T @ wr),
+        (predict(step), predicted),
+    ):
+        np.testing.assert_array_equal(got, expected)
     monkeypatch.setattr(lm, "NORMAL_ROWS", 7)
-    hess, grad = lm._scaled_normal_equations(jac, np.flatnonzero(free), w, wr, d)
-    np.testing.assert_allclose(hess, js.T @ js, rtol=1e-12)
+    diag, _, hess, grad, predict = lm._gauss_newton(jac, free, w, wr, np.zeros(3))
+    np.testing.assert_allclose(diag, d, rtol=1e-13)
+    np.testing.assert_allclose(hess, js.T @ js, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(grad, js.T @ wr, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(predict(step), predicted, rtol=1e-12)
 
 
 def test_the_fit_is_the_same_whatever_the_block_of_rows(rng, monkeypatch):
