@@ -24,7 +24,9 @@ Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, l
   choice's folds) on ``frame_axes``, one pass over the Jacobian per solver iteration, ``identify``
   on R of its QR: 20,000 rows 5.7 CPU s, 180 MB (19.6 s at load 5.2) against main's 12.8 CPU s,
   311 MB (71.1 s, load 9.6); 100,000 rows 29.9 CPU s, 688 MB (166 s at load 7.2) against main's
-  129.7 CPU s, 1,071 MB (593 s, load 7.9).
+  129.7 CPU s, 1,071 MB (593 s, load 7.9); 1,000,000 rows 344.4 CPU s, 6,393 MB (983 s at load
+  10, beside the guard tier; not profiled): the (3N, n) Jacobian (about 1.2 GB) and its copies
+  (the prior rows appended, the fold subsets) set the memory.
 """
 
 from __future__ import annotations
