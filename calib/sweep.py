@@ -95,7 +95,8 @@ def swept_rows(
     durations = segment_durations(position, rotation, sweep)
     start = np.concatenate([[0.0], np.cumsum(durations)])
     total = float(start[-1])
-    t = np.arange(0.0, total + 1e-9, 1.0 / (hz or sweep.row_hz))
+    t = np.arange(0.0, total, 1.0 / (hz or sweep.row_hz))
+    t = np.append(t, total)  # the pass's end, where the robot stops
     seg = np.clip(np.searchsorted(start, t, side="right") - 1, 0, len(durations) - 1)
     s = np.clip((t - start[seg]) / np.maximum(durations[seg], 1e-12), 0.0, 1.0)
     p = position[seg] + s[:, None] * (position[seg + 1] - position[seg])
