@@ -41,6 +41,15 @@ def register(sub) -> None:
         help="a short verification plan instead (station verify): N poses (default 15) on one gauge line, "
         "those most sensitive to joint zeros and link lengths and twists",
     )
+    p.add_argument(
+        "--sweep",
+        type=_positive,
+        nargs="?",
+        const=1,
+        metavar="N",
+        help="a sweep plan instead: N continuous passes (default 1) along each gauge line, the tool kept on "
+        "the edge and turned as it slides (station program writes them as blended linear moves)",
+    )
     p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -67,6 +76,8 @@ def run(args) -> int:
             f"to see joint zeros and link lengths and twists -> {args.out} (measure, then station verify)"
         )
         return 0
+    if args.sweep:
+        return _sweep(args, robot, setup, where)
     with parameters_as_flags(FLAGS):
         design = planning.design(
             robot,
@@ -89,6 +100,21 @@ def run(args) -> int:
         outputs.append(Output(args.plot, "--plot", lambda tmp: plan_figure(design.report, tmp)))
     write_outputs(outputs)
     print(planning.summary(design))
+    print("wrote " + ", ".join(str(o.path) for o in outputs))
+    return 0
+
+
+def _sweep(args, robot, setup, where) -> int:
+    """``--sweep``: the passes, the plan CSV and (``--report``) its report."""
+    from station.formats.base import Output, write_outputs
+    from station.jobs import sweeping
+
+    design = sweeping.sweep_design(robot, setup, where, passes=args.sweep, seed=args.seed)
+    outputs = [Output.text(args.out, "--out", design.plan.csv_text())]
+    if args.report:
+        outputs.append(Output.text(args.report, "--report", json.dumps(design.report, indent=2) + "\n"))
+    write_outputs(outputs)
+    print(sweeping.sweep_summary(design))
     print("wrote " + ", ".join(str(o.path) for o in outputs))
     return 0
 
