@@ -83,4 +83,3 @@ def test_no_pass_is_drawn_where_the_arm_cannot_reach_the_line(jr680):
     dh, tool, limits = jr680
     far = (np.array([5000.0, 0, 0]), np.array([0, 1.0, 0]), 400.0, np.array([0, 0, -1.0]))
     assert line_passes(dh, tool, limits, far, PassShape(), SweepLimits(), np.random.default_rng(0), 1) == []
-
