@@ -29,9 +29,9 @@ class SweepLimits:
     ``turn_deg_s`` the tool's orientation rate [deg/s] (the dial's contact point moves on its tip
     as the tool turns), ``row_hz`` the rate at which the station records rows [Hz]."""
 
-    tcp_mm_s: float = 25.0
-    turn_deg_s: float = 12.0
-    row_hz: float = 50.0
+    tcp_mm_s: float = 40.0
+    turn_deg_s: float = 20.0
+    row_hz: float = 60.0
 
 
 def rotation_angle(r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
@@ -95,8 +95,7 @@ def swept_rows(
     durations = segment_durations(position, rotation, sweep)
     start = np.concatenate([[0.0], np.cumsum(durations)])
     total = float(start[-1])
-    t = np.arange(0.0, total, 1.0 / (hz or sweep.row_hz))
-    t = np.append(t, total)  # the pass's end, where the robot stops
+    t = np.linspace(0.0, total, int(np.ceil(total * (hz or sweep.row_hz))) + 1)  # both ends
     seg = np.clip(np.searchsorted(start, t, side="right") - 1, 0, len(durations) - 1)
     s = np.clip((t - start[seg]) / np.maximum(durations[seg], 1e-12), 0.0, 1.0)
     p = position[seg] + s[:, None] * (position[seg + 1] - position[seg])
@@ -159,25 +158,41 @@ def draw_pass(
     line,
     start: np.ndarray,
     shape: PassShape,
+    sweep: SweepLimits,
     rng: np.random.Generator,
     reverse: bool = False,
 ) -> np.ndarray | None:
     """A random pass along ``line`` (point [mm], unit direction, length [mm], unit approach): its
-    waypoints (K, 6) [rad] evenly spaced end to end (``reverse``: the other way), orientations drawn
-    within ``shape`` about ``start``'s; None where a waypoint is not valid."""
+    waypoints (K, 6) [rad] evenly spaced end to end (``reverse``: the other way), each orientation
+    drawn within ``shape`` about ``start``'s and turned from the one before by no more than the
+    TCP speed lets the turn rate (``sweep``): the pass runs at one TCP speed. None where no draw of
+    ``DRAWS`` fits a waypoint."""
     point, direction, length, approach = line
     ends = (0.5, -0.5) if reverse else (-0.5, 0.5)
     positions = point + np.linspace(*ends, shape.waypoints)[:, None] * length * direction
-    k = shape.waypoints
-    turns = np.column_stack(
-        [
-            np.radians(shape.max_tilt_deg) * np.sqrt(rng.uniform(0, 1, k)),
-            rng.uniform(-np.pi, np.pi, k),
-            np.radians(shape.max_roll_deg) * rng.uniform(-1, 1, k),
-        ]
-    )
-    q, valid = tool_turned(dh, tool, limits_rad, start, positions, approach, turns)
-    return continuous(q, limits_rad) if valid.all() else None
+    most_turn = np.radians(sweep.turn_deg_s * length / (shape.waypoints - 1) / sweep.tcp_mm_s)
+    found, before = [], None
+    for position in positions:
+        turns = np.column_stack(
+            [
+                np.radians(shape.max_tilt_deg) * np.sqrt(rng.uniform(0, 1, DRAWS)),
+                rng.uniform(-np.pi, np.pi, DRAWS),
+                np.radians(shape.max_roll_deg) * rng.uniform(-1, 1, DRAWS),
+            ]
+        )
+        at = np.repeat(position[None], DRAWS, axis=0)
+        q, valid = tool_turned(dh, tool, limits_rad, start, at, approach, turns)
+        if before is not None:
+            valid &= rotation_angle(before, ik.tool_frames(dh, q, tool)[1]) <= most_turn
+        if not valid.any():
+            return None
+        found.append(q[np.argmax(valid)])
+        before = ik.tool_frames(dh, found[-1][None], tool)[1][0]
+    return continuous(np.array(found), limits_rad)
+
+
+DRAWS = 32
+"""Orientations drawn for each waypoint of a pass, the first that fits taken."""
 
 
 def line_passes(
@@ -196,7 +211,7 @@ def line_passes(
     start = roomiest(*centre_solutions(dh, tool, limits_rad, line, rng), limits_rad)
     found: list[np.ndarray] = []
     for k in range(tries if start is not None else 0):
-        q = draw_pass(dh, tool, limits_rad, line, start, shape, rng, reverse=bool(k % 2))
+        q = draw_pass(dh, tool, limits_rad, line, start, shape, sweep, rng, reverse=bool(k % 2))
         if q is not None and swept_rows(dh, tool, limits_rad, q, sweep, hz=4.0).valid.all():
             found.append(q)
             if len(found) == n:

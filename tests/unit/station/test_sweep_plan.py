@@ -53,12 +53,15 @@ def test_each_line_gets_a_pass_from_one_end_of_its_edge_to_the_other(swept):
 
 
 def test_the_sweep_delivers_its_promise_on_the_simulated_world(swept):
-    # Sweep the passes in three true cells (rows at the stated rate along the blended linear moves,
-    # the tool moved onto each true line, one reading per row), calibrate, compare with the truth:
-    # below the 95 % bound each time, the RMS over the cells within 2x of the expected value. The
-    # promise is the setup's stated noise, which states none on the joints: the cells' joints read
-    # exactly (the simulated world's 0.0005 deg, some 0.01 mm at the TCP a joint, outweighs a
-    # dial's 0.002 mm; averaged over thousands of rows it is what is left).
+    # Sweep the passes in three true cells (rows at the stated rate along the linear moves, the
+    # tool moved onto each true line, one reading per row), calibrate, compare with the truth: below
+    # the 95 % bound each time and the RMS over the cells below the expected value. One-sided: the
+    # promise is from the setup's stated noise, whose line term (line_sigma_mm 0.01, how well the
+    # tool sits on the edge) is five times the simulated dial's 0.002 mm, and thousands of swept
+    # rows let that term weigh (the static plan's test, with few rows, holds the promise within
+    # 2x both ways). The cells' joints read exactly, as the simulated controller's: the setup states
+    # no joint noise (the world's 0.0005 deg, some 0.01 mm at the TCP a joint, would be what is
+    # left once thousands of rows average the instruments').
     plan, report = swept
     robot, promise = load_robot(ROBOT), report["predicted"]["plan"]
     dh, tool = dh_from_degrees(robot.table_deg()), np.asarray(robot.tool_mm, float)
@@ -81,8 +84,7 @@ def test_the_sweep_delivers_its_promise_on_the_simulated_world(swept):
         p = tcp_position(dh_table(out.calibration.x), np.radians(q), np.zeros(3))
         true.append(np.sqrt(np.mean(aligned_errors(p, world.true_tcp_mm(q)) ** 2)))
     assert max(true) < promise["predicted_rmse_95_mm"]
-    pooled = np.sqrt(np.mean(np.square(true)))
-    assert promise["predicted_rmse_mm"] / 2 < pooled < 2 * promise["predicted_rmse_mm"]
+    assert np.sqrt(np.mean(np.square(true))) < promise["predicted_rmse_mm"]
 
 
 def test_a_line_no_pass_can_sweep_is_a_one_line_error(tmp_path, capsys):
