@@ -1,0 +1,151 @@
+"""Sweep sessions (issue 37) against the simulated devices through the real drivers: the robot
+sweeps each pass of a sweep plan, the station streams and aligns every device. The truth is the
+simulated robot program and the sensors' simulated latency, jitter, drops and lift-off.
+
+Each test starts its own simulated station (non-contract addresses, as ``test_session``) at
+simulated time 5x: a sweep of the cell's three lines in six passes takes about 9 s."""
+
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomli_w
+
+from sim_fixtures.station_sim import SimStation
+from sim_fixtures.world import World
+from station.acquire import runner
+from station.acquire.session import State
+from station.commands.sim import publish_plan
+from station.config import StationConfig
+from station.formats.base import read_toml
+from station.formats.plan import Plan
+from station.formats.samples import load_samples
+from tests.system.test_session import _Sink, write_config
+
+TIME_SCALE = 5.0
+
+
+def sweep_plan() -> Plan:
+    """The simulated cell's sweep: 12 waypoints a line, two passes each, orientation turning."""
+    q, lines, passes = World.create(0).sweep_configurations(12, 2, np.random.default_rng(1), 15.0)
+    return Plan(np.arange(len(lines)), lines, q, sweep_pass=passes)
+
+
+def sweep_config(folder: Path, sweep: dict | None = None, sim: dict | None = None, **devices) -> Path:
+    path = write_config(folder, time_scale=TIME_SCALE)
+    raw = read_toml(path)
+    raw["sim"].update(dwell_s=0.5, speed_deg_s=60.0, accel_deg_s2=240.0, **(sim or {}))
+    raw["sweep"] = {"max_gap_s": 0.25, **(sweep or {})}  # the loaded test machine's hiccups
+    for name, values in devices.items():
+        raw[name].update(values)
+    path.write_text(tomli_w.dumps(raw))
+    return path
+
+
+def swept(folder: Path, config: Path, lifted=()) -> tuple[SimStation, State, str]:
+    """Serve the sweep plan, run a session into ``folder / 'sess'``: the simulator, the end state and
+    the session's messages."""
+    cfg = StationConfig.model_validate(read_toml(config))
+    plan = sweep_plan()
+    sim = SimStation(cfg, plan=(plan.q_deg, plan.line, plan.sweep_pass), lifted=lifted)
+    publish_plan(Path(cfg.sim.plan_csv), plan)
+    messages: list[str] = []
+    sim.start()
+    try:
+        inputs = runner.new_session(folder / "sess", config, None)
+        done = runner.run(inputs, stream=_Sink(messages))
+        done.view.close()
+    finally:
+        sim.stop()
+    return sim, done.state, "".join(messages)
+
+
+def rows_of(path: Path) -> list[dict]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def program_s(sim: SimStation, row: dict) -> float:
+    """A row's time on the simulated program's clock [real s since it started]."""
+    return float(row["t_wall_s"]) - (time.time() - time.monotonic()) - sim.clock.start_monotonic
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("sweep")
+    sim, state, said = swept(tmp, sweep_config(tmp))
+    return tmp / "sess", sim, state, said
+
+
+def test_a_sweep_stores_every_pass_with_rows_aligned_to_the_true_joints(session):
+    folder, sim, state, said = session
+    assert state is State.DONE, said
+    rows = rows_of(folder / "samples.csv")
+    plan = sweep_plan()
+    assert {int(r["pass"]) for r in rows} == set(plan.sweep_pass.tolist())
+    assert read_toml(folder / "session.toml")["finished_passes"] == sorted(set(plan.sweep_pass.tolist()))
+    assert len(rows) > 500
+    # the stored joints are the true joints at a time within the reading's round trip (its
+    # timestamp's uncertainty) and half a robot package period (the controller's clock tied to the
+    # station's by the least transit), plus what a linear interpolation between the two robot
+    # packages may miss (a quarter of the joints' step between them)
+    period = 1.0 / StationConfig.model_validate(read_toml(folder.parent / "station.toml")).robot.frequency_hz
+    worst = 0.0
+    for r in rows:
+        t, half = program_s(sim, r), float(r["window_s"]) / 2 + period / 2
+        truth = np.array([sim.robot.state(t + d).q_deg for d in np.linspace(-half, half, 9)])
+        q = np.array([float(r[f"q{i}_deg"]) for i in range(1, 7)])
+        slack = 0.25 * float(r["q_spread_deg"]) + 1e-4
+        worst = max(worst, float(np.max(np.maximum(truth.min(0) - slack - q, q - truth.max(0) - slack))))
+    assert worst <= 0.0
+    assert len(load_samples(folder / "samples.csv")) == len(rows)
+
+
+def test_the_drawstring_latency_as_stated_is_confirmed(session):
+    folder, _, _, said = session
+    assert "as stated (4.0 ms)" in said
+    latency = read_toml(folder / "session.toml")["latency"]["drawstring"]
+    assert not latency["named"]
+
+
+def test_a_latency_stated_5_ms_wrong_is_found_and_named(tmp_path):
+    config = sweep_config(tmp_path, sweep={"drawstring_latency_s": 0.009})
+    _, state, said = swept(tmp_path, config)
+    assert state is State.DONE
+    named = [line for line in said.splitlines() if line.startswith("drawstring: latency stated 9.0 ms")]
+    assert len(named) == 1 and "drawstring_latency_s = 0.00" in named[0]
+    latency = read_toml(tmp_path / "sess" / "session.toml")["latency"]["drawstring"]
+    assert latency["named"] and abs(latency["estimated_s"] - 0.004) < 0.0025
+
+
+def test_a_dial_lifted_mid_pass_is_flagged_and_a_dropping_drawstring_named(tmp_path):
+    config = sweep_config(tmp_path, sim={"drawstring_drop": 0.1}, drawstring={"timeout_s": 0.05})
+    plan = sweep_plan()
+    cfg = StationConfig.model_validate(read_toml(config))
+    probe = SimStation(cfg, plan=(plan.q_deg, plan.line, plan.sweep_pass))
+    sweep = next(p for p in probe.robot._pieces if p.kind == "sweep" and p.p == 1)
+    window = (sweep.start_s + 0.4 * sweep.duration_s, sweep.start_s + 0.6 * sweep.duration_s)
+    sim, state, said = swept(tmp_path, config, lifted=[window])
+    assert state is State.DONE, said
+    folder = tmp_path / "sess"
+    inside = lambda r: window[0] <= (program_s(sim, r) * TIME_SCALE) % sim.robot.cycle_s < window[1]  # noqa: E731
+    flagged = rows_of(folder / "flagged.csv")
+    lifted = [r for r in flagged if r["reason"] == "dial off the edge" and r["pass"] == "1"]
+    assert sum(map(inside, lifted)) >= 5  # the lifted stretch has rows, each flagged
+    rows = rows_of(folder / "samples.csv")
+    assert not any(inside(r) for r in rows)
+    low, high = cfg.session.dial_range_mm
+    assert all(low <= float(r["dial_mm"]) <= high for r in rows)
+    # the drawstring's dropped replies: named, counted as the simulator dropped them, none filled in
+    faults, requests = sim.served["drawstring"]
+    silent = sum(kind == "silence" for _, kind in faults.applied)
+    header = read_toml(folder / "session.toml")
+    assert silent <= header["unanswered"]["drawstring"] <= 1.2 * silent  # a late reply counts too
+    assert any(
+        line.startswith("drawstring: ") and "requests unanswered (" in line for line in said.splitlines()
+    )
+    assert len(rows) + len(flagged) <= requests - silent
