@@ -13,7 +13,8 @@ predict for it (e.g. the drawstring's length from the nominal kinematics) holds 
 smooth along each pass of the sweep, plus ``-rate * lag``: a sensor later than stated by ``lag``
 reads what the prediction held ``lag`` earlier. Per pass a polynomial in the position along the
 pass takes the smooth part; the lag is what remains, fitted by linear least squares and refined
-(the prediction re-taken at the new lag) until it moves less than a microsecond. Its information
+(the prediction re-taken at the new lag; a step that raises the misfit halved) until it moves less
+than a microsecond. Its information
 comes where the sensor's rate changes along the pass: the robot's accelerations and stops at the
 passes' ends.
 """
@@ -24,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-POLY_DEGREE = 3  # the smooth model error along one pass: a cubic in the position along it
+POLY_DEGREE = 5  # the smooth model error along one pass: a quintic in the position along it
+HALVINGS = 8  # a lag step that raises the misfit is halved this often before the search stops
 MIN_RATE_SPREAD = 1e-9  # a rate this flat over every pass carries no information about a lag
 
 
@@ -73,20 +75,25 @@ def estimate_lag(predict, t, measured, groups, position, *, iterations: int = 5)
     t, measured = np.asarray(t, float), np.asarray(measured, float)
     groups, position = np.asarray(groups), np.asarray(position, float)
     design = _pass_polynomials(groups, position)
-    lag, sigma, first_rms = 0.0, np.inf, None
+    lag, sigma = 0.0, np.inf
+    predicted, rate = predict(t)
+    first_rms = rms = _smooth_rms(design, measured - predicted)
+    if np.ptp(rate) < MIN_RATE_SPREAD:
+        return Lag(0.0, np.inf, first_rms, first_rms, len(t))
     for _ in range(iterations):
-        predicted, rate = predict(t - lag)
-        misfit = measured - predicted
-        if first_rms is None:
-            first_rms = _smooth_rms(design, misfit)
-        if np.ptp(rate) < MIN_RATE_SPREAD:
-            return Lag(0.0, np.inf, first_rms, first_rms, len(t))
-        step, sigma = _lag_step(design, -rate, misfit)
-        lag += step
+        step, sigma = _lag_step(design, -rate, measured - predicted)
+        for _ in range(HALVINGS):  # a step that does not lower the misfit is halved
+            trial, trial_rate = predict(t - lag - step)
+            trial_rms = _smooth_rms(design, measured - trial)
+            if trial_rms <= rms:
+                break
+            step /= 2
+        else:
+            break
+        lag, predicted, rate, rms = lag + step, trial, trial_rate, trial_rms
         if abs(step) < 1e-6:
             break
-    predicted, _ = predict(t - lag)
-    return Lag(lag, sigma, _smooth_rms(design, measured - predicted), first_rms, len(t))
+    return Lag(lag, sigma, rms, first_rms, len(t))
 
 
 def _pass_polynomials(groups, position) -> np.ndarray:
