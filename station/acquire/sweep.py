@@ -210,6 +210,7 @@ class SweepSession:
         self._wall_minus_mono = time.time() - self._mono0
         self._t0_wall = float(folder.header["start_wall_s"])
         self._lag_rows: list[tuple] = []  # (t, length, pass, position) of every stored row
+        self._span: list[float] = []  # station times [s] of the stored passes' starts and ends
 
     def request_stop(self) -> None:
         self._stop = True
@@ -277,6 +278,7 @@ class SweepSession:
     def _store(self, run: _Run, robot: dict) -> None:
         rows, flagged, tcp = self._rows(run, robot)
         self.folder.append_rows(rows, flagged)
+        self._span += [run.t0, run.t1]
         pid = self.map.ids[run.p]
         self.finished.add(pid)
         self.pending.remove(run.p)
@@ -398,7 +400,8 @@ class SweepSession:
 
     def report(self) -> list[str]:
         """One line each: the drawstring's latency against the stated one, each sensor's
-        unanswered requests, the rows flagged."""
+        unanswered requests, the rows flagged. ``session.toml`` gets them too, with ``robot_time_s``:
+        the robot's (simulated) seconds from the first stored pass's start to the last one's end."""
         lines = []
         lag = self.latency()
         stated = self.rules.latency_s["drawstring"] * self.rules.time_scale
@@ -432,7 +435,9 @@ class SweepSession:
         if self.flag_counts:
             said = ", ".join(f"{n} {why}" for why, n in self.flag_counts.most_common())
             lines.append(f"flagged (in flagged.csv, not samples): {said}")
+        robot_s = (max(self._span) - min(self._span)) * self.rules.time_scale if self._span else 0.0
         self.folder.update_header(
+            robot_time_s=robot_s,
             flagged=dict(self.flag_counts),
             unanswered={s.name: s.unanswered for s in self.streams.sensors.values()},
         )

@@ -8,6 +8,7 @@ simulated time 5x: a sweep of the cell's three lines in six passes takes about 9
 from __future__ import annotations
 
 import csv
+import shutil
 import time
 from pathlib import Path
 
@@ -149,3 +150,39 @@ def test_a_dial_lifted_mid_pass_is_flagged_and_a_dropping_drawstring_named(tmp_p
         line.startswith("drawstring: ") and "requests unanswered (" in line for line in said.splitlines()
     )
     assert len(rows) + len(flagged) <= requests - silent
+
+
+def test_resume_sweeps_the_pass_a_crash_left_unfinished_again_and_keeps_the_rest(session, tmp_path):
+    done, _, _, _ = session
+    folder = tmp_path / "sess"
+    shutil.copytree(done, folder, ignore=shutil.ignore_patterns("session.lock"))
+    header = read_toml(folder / "session.toml")
+    lost = header["finished_passes"][-1]  # its rows were appended, then the process died
+    header["finished_passes"] = header["finished_passes"][:-1]
+    (folder / "session.toml").write_text(tomli_w.dumps(header))
+    before = rows_of(folder / "samples.csv")
+    kept = [r for r in before if int(r["pass"]) != lost]
+    with (folder / "samples.csv").open("a") as fh:
+        fh.write("9999,0,0,")  # and a torn row
+    config = done.parent / "station.toml"
+    cfg = StationConfig.model_validate(read_toml(config))
+    plan = sweep_plan()
+    sim = SimStation(cfg, plan=(plan.q_deg, plan.line, plan.sweep_pass))
+    messages: list[str] = []
+    sim.start()
+    try:
+        inputs = runner.resume_session(folder, None)
+        resumed = runner.run(inputs, stream=_Sink(messages))
+        resumed.view.close()
+    finally:
+        sim.stop()
+    said = "".join(messages)
+    assert resumed.state is State.DONE, said
+    assert "rows of a pass left unfinished dropped" in said
+    after = rows_of(folder / "samples.csv")
+    assert after[: len(kept)] == kept  # the finished passes' rows as they were
+    again = after[len(kept) :]
+    assert again and {int(r["pass"]) for r in again} == {lost}
+    assert len({r["sample"] for r in after}) == len(after)
+    assert min(float(r["t_s"]) for r in again) > max(float(r["t_s"]) for r in kept)
+    assert read_toml(folder / "session.toml")["finished_passes"] == sorted(set(plan.sweep_pass.tolist()))
