@@ -355,14 +355,20 @@ class World:
         return np.array(q_all), np.array(ids)
 
     def sweep_configurations(
-        self, n_per_line: int, passes_per_line: int, rng: np.random.Generator, max_tilt_deg: float = 25.0
+        self,
+        n_per_line: int,
+        passes_per_line: int,
+        rng: np.random.Generator,
+        max_tilt_deg: float = 25.0,
+        rounds: int = 1,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A sweep plan of true configurations [deg] (N, 6) whose TRUE TCPs touch the lines, with
         line ids (N,) and pass ids (N,): ``n_per_line`` waypoints evenly along each edge, split into
         ``passes_per_line`` passes, the tool's tilt and roll turning steadily from a random one at a
-        pass's start to another at its end (a sweep that keeps contact, orientation varying)."""
+        pass's start to another at its end (a sweep that keeps contact, orientation varying); every
+        line swept ``rounds`` times, each with orientations of its own."""
         q_all, ids, passes = [], [], []
-        for ln in self.lines:
+        for ln in [ln for _ in range(rounds) for ln in self.lines]:
             seed = self._seed_for(ln)
             spots = np.array_split(np.linspace(-0.5, 0.5, n_per_line) * ln.length_mm, passes_per_line)
             for chunk in spots:

@@ -146,7 +146,7 @@ class SweepConfig(Section):
     max_speed_mm_s: float = Field(150.0, gt=0, le=1e5)
     max_gap_s: float = Field(0.1, gt=0, le=10)
     rows_per_s: float = Field(60.0, gt=0, le=1e4)
-    latency_tolerance_s: float = Field(0.002, gt=0, le=1)
+    latency_tolerance_s: float = Field(0.0025, gt=0, le=1)
 
 
 class StationConfig(Section):
