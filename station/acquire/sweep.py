@@ -454,9 +454,9 @@ def _flag(reason: np.ndarray, where: np.ndarray, why: str) -> None:
 
 
 def _decimated(t: np.ndarray, spacing_s: float) -> np.ndarray:
-    """Indices of the first reading in each ``spacing_s`` [s] of ``t`` (increasing times)."""
-    if len(t) == 0:
-        return np.zeros(0, int)
+    """Indices of the first reading in each ``spacing_s`` [s] of ``t`` (increasing times; 0: all)."""
+    if len(t) == 0 or spacing_s <= 0:
+        return np.arange(len(t))
     _, first = np.unique(np.floor((t - t[0]) / spacing_s), return_index=True)
     return first
 
