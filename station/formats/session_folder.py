@@ -477,20 +477,10 @@ class SessionFolder:
         """Store a sweep's pass at once: its ``flagged`` rows (``flagged.csv``), then its sample
         ``rows`` (each file's lines in one fsynced append); a failed write takes back what it wrote
         of both (:class:`errors.OutputError`)."""
-        flagged_size = self.flagged_csv.stat().st_size
-        try:
-            _append(self.flagged_csv, [_csv_line(FLAGGED_COLUMNS, r) for r in flagged])
-            try:
-                _append(self.samples_csv, [_csv_line(self.columns, r) for r in rows])
-            except OSError:
-                os.truncate(self.flagged_csv, flagged_size)
-                raise
-        except OSError as exc:
-            raise OutputError(
-                f"{self.path}: cannot store {len(rows)} rows of a sweep ({exc.strerror or exc}); the "
-                f"{len(self.rows)} samples before them are kept: make room, then continue with "
-                f"--resume {self.path}"
-            ) from None
+        beside = (self.flagged_csv, [_csv_line(FLAGGED_COLUMNS, r) for r in flagged])
+        self._store(
+            beside, [_csv_line(self.columns, r) for r in rows], f"{len(rows)} rows of a sweep", "them"
+        )
         self.rows += [{k: _cell(v) for k, v in row.items()} for row in rows]
 
     def keep_rows(self, keep) -> int:
@@ -507,21 +497,27 @@ class SessionFolder:
     def append(self, row: dict, raw: list[dict]) -> None:
         """Store one capture: its raw readings, then its sample row (each fsynced). If either
         write fails, neither file keeps any of it (:class:`errors.OutputError`)."""
-        raw_size = self.raw_csv.stat().st_size
+        beside = (self.raw_csv, [_csv_line(RAW_COLUMNS, r) for r in raw])
+        self._store(beside, [_csv_line(SAMPLE_COLUMNS, row)], f"sample {row['sample']}", "it")
+        self.rows.append({k: _cell(v) for k, v in row.items()})
+
+    def _store(self, beside: tuple[Path, list[str]], lines: list[str], what: str, it: str) -> None:
+        """Append ``beside`` (a file and its lines), then ``lines`` to ``samples.csv``; a failed
+        write takes back what it wrote of both and raises :class:`errors.OutputError` about ``what``."""
+        path, beside_lines = beside
+        size = path.stat().st_size
         try:
-            _append(self.raw_csv, [_csv_line(RAW_COLUMNS, r) for r in raw])
+            _append(path, beside_lines)
             try:
-                _append(self.samples_csv, [_csv_line(SAMPLE_COLUMNS, row)])
+                _append(self.samples_csv, lines)
             except OSError:
-                os.truncate(self.raw_csv, raw_size)
+                os.truncate(path, size)
                 raise
         except OSError as exc:
             raise OutputError(
-                f"{self.path}: cannot store sample {row['sample']} ({exc.strerror or exc}); the "
-                f"{len(self.rows)} samples before it are kept: make room, then continue with "
-                f"--resume {self.path}"
+                f"{self.path}: cannot store {what} ({exc.strerror or exc}); the {len(self.rows)} samples "
+                f"before {it} are kept: make room, then continue with --resume {self.path}"
             ) from None
-        self.rows.append({k: _cell(v) for k, v in row.items()})
 
     def update_header(self, **changes) -> None:
         """Rewrite ``session.toml`` with ``changes`` (atomically: on failure the old file stays); a
