@@ -260,7 +260,7 @@ def _run_sweep(inputs: SessionInputs, viewer: bool, web: str | None, stream) -> 
         robot_hz = float(getattr(inputs.cfg.robot, "frequency_hz", 100.0))
         rules = SweepRules.from_config(inputs.cfg)
         streams = Streams(devices.drivers, robot_hz, rules.row_spacing_s / 2)
-        session = SweepSession(folder, plan, streams, rules, kin, tell, view.sweep)
+        session = SweepSession(folder, plan, streams, rules, kin, tell, view.sweep, view.sweeping)
         with _stops_on_signal(session.request_stop):
             state = session.run()
         for line in session.report():

@@ -184,7 +184,8 @@ class _Run:
 class SweepSession:
     """Run a sweep ``plan`` against ``drivers`` into ``folder`` under ``rules``; ``robot``, ``setup``:
     the nominal model and the setup (for speeds, positions and the latency check); ``tell(text)``
-    says what happens, ``show(pass_id, line, tcp_good, tcp_flagged, t_s)`` draws a stored pass."""
+    says what happens, ``show(pass_id, line, tcp_good, tcp_flagged, t_s)`` draws a stored pass and
+    ``trail(tcp, t_s)`` where the tool slid on a pass since the last look (nominal TCPs (N, 3))."""
 
     def __init__(
         self,
@@ -195,9 +196,10 @@ class SweepSession:
         kin: Kinematics,
         tell: Callable[[str], None] = lambda text: None,
         show: Callable[..., None] = lambda *a: None,
+        trail: Callable[[np.ndarray, float], None] = lambda tcp, t_s: None,
     ):
         self.folder, self.plan, self.streams, self.rules, self.kin = folder, plan, streams, rules, kin
-        self.tell, self.show = tell, show
+        self.tell, self.show, self.trail = tell, show, trail
         self.map = PassMap(plan, rules.match_deg, kin)
         self.finished = {int(p) for p in folder.header.get("finished_passes", [])}
         self.pending = [p for p, pid in enumerate(self.map.ids) if pid not in self.finished]
@@ -255,6 +257,11 @@ class SweepSession:
         t = robot["stamp"][new] + self.offset
         where, pos = self.map.locate(robot["q_deg"][new])
         where[robot["mode"][new] != RUNNING] = -1
+        if np.any(where >= 0):
+            self.trail(
+                self.kin.tcp(robot["q_deg"][new][where >= 0]),
+                float(t[-1] + self._wall_minus_mono - self._t0_wall),
+            )
         stored = False
         for ti, p, u in zip(t, where, pos, strict=True):
             run = self._run

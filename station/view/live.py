@@ -14,8 +14,9 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
   before the running calibration is judged, green within its limit, red when suspect),
   ``cell/cable`` (anchor -> TCP) and the nominal robot as it stands: ``cell/robot/links``,
   ``cell/robot/joints``, ``cell/robot/tool`` (the tool's approach onto the TCP);
-- a sweep session's ``cell/sweep/<pass>/rows`` (the nominal TCPs of a stored pass's rows, green)
-  and ``cell/sweep/<pass>/flagged`` (its flagged rows, red), each as its pass is stored;
+- a sweep session's ``cell/sweep/now`` (where the tool slides on a pass, as the robot's packages
+  come: grey), ``cell/sweep/<pass>/rows`` (the nominal TCPs of a stored pass's rows, green) and
+  ``cell/sweep/<pass>/flagged`` (its flagged rows, red), each as its pass is stored;
 - ``progress``: samples taken of the plan's;
 - ``live/error`` (reading - the running calibration's prediction, made before the sample joins a
   fit), ``live/error/limit/upper|lower`` (what the prediction's uncertainty and the noise explain)
@@ -280,6 +281,13 @@ class LiveView:
         self.rec.log("live/error/limit/lower", rr.Scalars(-live.limit_mm))
         if live.suspect:
             self.rec.log("live/error/suspect", rr.Scalars(live.error_mm))
+
+    def sweeping(self, tcp_mm, t_s: float) -> None:
+        """Where the tool slid on a pass since the last call: nominal TCPs (N, 3) [mm]."""
+        self.rec.set_time("session_time", duration=t_s)
+        self.rec.log(
+            "cell/sweep/now", rr.Points3D(np.asarray(tcp_mm, float).reshape(-1, 3), radii=2.0, colors=[GREY])
+        )
 
     def sweep(self, pass_id: int, line: int, tcp_mm, flagged_mm, t_s: float) -> None:
         """A sweep's stored pass on gauge ``line``: the nominal TCPs (N, 3) [mm] of its rows and

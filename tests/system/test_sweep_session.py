@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tomli_w
+from rerun.chunk import RrdReader
 
 from sim_fixtures.station_sim import SimStation
 from sim_fixtures.world import World
@@ -104,6 +105,14 @@ def test_a_sweep_stores_every_pass_with_rows_aligned_to_the_true_joints(session)
         worst = max(worst, float(np.max(np.maximum(truth.min(0) - slack - q, q - truth.max(0) - slack))))
     assert worst <= 0.0
     assert len(load_samples(folder / "samples.csv")) == len(rows)
+
+
+def test_the_live_view_shows_the_tool_sliding_and_each_pass_stored(session):
+    folder, _, _, _ = session
+    entities = {c.entity_path for c in RrdReader(folder / "session.rrd").stream().to_chunks()}
+    passes = sorted(set(sweep_plan().sweep_pass.tolist()))
+    assert {"/cell/sweep/now", "/cell/anchor", "/log"} <= entities
+    assert {f"/cell/sweep/{p}/rows" for p in passes} <= entities
 
 
 def test_the_drawstring_latency_as_stated_is_confirmed(session):
