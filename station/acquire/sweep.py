@@ -148,9 +148,10 @@ class PassMap:
         self.owner, self.k = np.array(owner), np.array(k, float)
         self.segments = [max(len(r) - 1, 0) for r in self.rows]
 
-    def locate(self, q_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def locate(self, q_deg: np.ndarray, prefer: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The pass (index into :attr:`rows`; -1: none) of joints (N, 6) [deg] and the position
-        along it (segments from its first waypoint)."""
+        along it (segments from its first waypoint); where pass ``prefer`` (the one the robot is on)
+        matches too, that one (two passes along one edge may both match where they cross)."""
         q = np.atleast_2d(q_deg)
         p = self.kin.tcp(q)[:, None, :]
         way = self.b - self.a
@@ -159,6 +160,8 @@ class PassMap:
         dist = np.linalg.norm(p - self.a - u[..., None] * way, axis=2)
         inside = np.all((q[:, None] >= self.q_low) & (q[:, None] <= self.q_high), axis=2)
         dist = np.where(inside, dist, np.inf)
+        if prefer is not None and prefer >= 0:
+            dist = np.where((self.owner == prefer) & (dist <= MATCH_MM), dist - 2 * MATCH_MM, dist)
         best = np.argmin(dist, axis=1)
         n = np.arange(len(best))
         found = dist[n, best] <= MATCH_MM
@@ -255,7 +258,7 @@ class SweepSession:
         else:
             self.offset = 0.0
         t = robot["stamp"][new] + self.offset
-        where, pos = self.map.locate(robot["q_deg"][new])
+        where, pos = self.map.locate(robot["q_deg"][new], None if self._run is None else self._run.p)
         where[robot["mode"][new] != RUNNING] = -1
         if np.any(where >= 0):
             self.trail(
