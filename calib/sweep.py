@@ -70,12 +70,14 @@ def segment_durations(position: np.ndarray, rotation: np.ndarray, limits: SweepL
 class SweptRows:
     """The rows a pass records: configurations ``q`` (N, 6) [rad] at times ``t_s`` (N,) [s] from
     the pass's start, and whether each is ``valid`` (reached, inside the joint limits, away from
-    singularities); ``duration_s`` the pass's length in time."""
+    singularities); ``duration_s`` the pass's length in time; ``stray`` (N,) [rad] how far each
+    row's joints leave the range its segment's two waypoints span (0: within it)."""
 
     q: np.ndarray
     t_s: np.ndarray
     valid: np.ndarray
     duration_s: float
+    stray: np.ndarray
 
 
 def swept_rows(
@@ -107,7 +109,10 @@ def swept_rows(
     q, err = ik.solve(dh, tool, p, rot, seed, iterations=30, damping=1e-6, tol=1e-6)
     inside = np.all((q >= limits_rad[:, 0]) & (q <= limits_rad[:, 1]), axis=1)
     valid = (err < 1e-3) & inside & (ik.conditioning(dh, q, tool) > MIN_CONDITIONING)
-    return SweptRows(q, t, valid, total)
+    low = np.minimum(waypoints[seg], waypoints[seg + 1])
+    high = np.maximum(waypoints[seg], waypoints[seg + 1])
+    stray = np.maximum(np.maximum(low - q, q - high), 0.0).max(axis=1)
+    return SweptRows(q, t, valid, total, stray)
 
 
 def continuous(waypoints: np.ndarray, limits_rad: np.ndarray) -> np.ndarray:
@@ -191,6 +196,8 @@ def draw_pass(
     return continuous(np.array(found), limits_rad)
 
 
+STRAY_DEG = 1.0
+"""How far a pass's joints may leave the range of its segment's waypoints [deg]."""
 DRAWS = 32
 """Orientations drawn for each waypoint of a pass, the first that fits taken."""
 
@@ -206,13 +213,16 @@ def line_passes(
     n: int,
     tries: int = 200,
 ) -> list[np.ndarray]:
-    """Up to ``n`` random passes along ``line`` whose every swept row (at 4 rows a second) is valid,
-    from the roomiest configuration at its centre, alternating in direction."""
+    """Up to ``n`` random passes along ``line`` whose every swept row (at 4 rows a second) is valid
+    and keeps its joints within ``STRAY_DEG`` of the range its segment's waypoints span (each joint
+    turning one way between waypoints: a station locates the robot on a pass by that range), from
+    the roomiest configuration at its centre, alternating in direction."""
     start = roomiest(*centre_solutions(dh, tool, limits_rad, line, rng), limits_rad)
     found: list[np.ndarray] = []
     for k in range(tries if start is not None else 0):
         q = draw_pass(dh, tool, limits_rad, line, start, shape, sweep, rng, reverse=bool(k % 2))
-        if q is not None and swept_rows(dh, tool, limits_rad, q, sweep, hz=4.0).valid.all():
+        rows = None if q is None else swept_rows(dh, tool, limits_rad, q, sweep, hz=4.0)
+        if rows is not None and rows.valid.all() and np.degrees(rows.stray.max()) <= STRAY_DEG:
             found.append(q)
             if len(found) == n:
                 break

@@ -7,7 +7,8 @@ tilted and rolled at random at each (as ``station plan``'s candidates), kept whe
 is reachable, inside the limits and away from singularities. Choice: greedily, a pass per line at a
 time, the one whose rows (sampled at ``SCORE_HZ``, each weighing ``row_hz / SCORE_HZ`` rows) lower
 the predicted workspace error of everything chosen most (``calib.experiment.expected_modes``, the
-static planner's promise). The plan's rows are the waypoints; ``pass`` numbers the passes.
+static planner's promise). The plan's rows are the waypoints; ``pass`` numbers the passes, in the
+order chosen: a pass on each line, then a second on each, ... (no two consecutive passes on one line).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ SWEEP = SweepLimits()
 tool turn, rows recorded at 60 Hz."""
 SCORE_HZ = 5.0
 """Rows a second the choice scores a pass by (each weighing ``row_hz / SCORE_HZ`` recorded rows)."""
-CANDIDATES = 12
+CANDIDATES = 8
 """Random passes drawn per line to choose from."""
 
 
@@ -73,7 +74,6 @@ def sweep_design(
             scored = [promised([*chosen, (lid, q, rows)])["predicted_rmse_mm"] for q, rows in candidates]
             q, rows = candidates.pop(int(np.argmin(scored)))
             chosen.append((lid, q, rows))
-    chosen.sort(key=lambda c: list(pool).index(c[0]))
     return Design(_plan(robot, lines, chosen), _report(dh, tool, limits, chosen, sweep, promised(chosen)))
 
 
