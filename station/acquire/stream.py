@@ -4,8 +4,9 @@
 - The robot: its driver polled twice per package period; each new package is kept with the
   controller's timestamp (RTDE: ``controller_time_s``, the controller's clock) and its arrival on
   the station's clock (``time.monotonic``), so the two clocks can be tied
-  (``calib.alignment.clock_offset``). A source without a controller timestamp (OPC UA, ROS
-  through this driver, Modbus) is stamped on arrival: its own transit then counts as latency.
+  (``calib.alignment.clock_offset``). A source without a controller timestamp (OPC UA and Modbus
+  polled, ROS through this driver) is stamped at the middle of its read, as a sensor is, and kept
+  when its joints change.
 - A sensor (drawstring, dial): asked again as soon as it answers, but not sooner than
   ``min_interval_s`` after its last request (twice the rows a sweep keeps: more would only load
   the station); a reading is stamped at the
@@ -106,6 +107,7 @@ class Streams:
     def _read_robot(self) -> None:
         driver, out, last = self.drivers["robot"], self.robot, None
         while not self._stop.is_set():
+            before = time.monotonic()
             try:
                 reading = driver.read()
             except DriverError as exc:
@@ -119,7 +121,7 @@ class Streams:
             key = stamp if stamp is not None else tuple(v["q_deg"])
             if key != last:
                 last = key
-                out.stamp.append(float(stamp if stamp is not None else reading.t_monotonic))
+                out.stamp.append(float(stamp if stamp is not None else (before + reading.t_monotonic) / 2))
                 out.q_deg.append(tuple(v["q_deg"]))
                 out.qd_deg_s.append(tuple(v["qd_deg_s"]))
                 out.mode.append(int(v["robot_mode"]))

@@ -26,7 +26,7 @@ from station.config import StationConfig
 from station.formats.base import read_toml
 from station.formats.plan import Plan
 from station.formats.samples import load_samples
-from tests.system.test_session import _Sink, write_config
+from tests.system.test_session import _free_port, _Sink, write_config
 
 TIME_SCALE = 5.0
 
@@ -43,7 +43,7 @@ def sweep_config(folder: Path, sweep: dict | None = None, sim: dict | None = Non
     raw["sim"].update(dwell_s=0.5, speed_deg_s=60.0, accel_deg_s2=240.0, **(sim or {}))
     raw["sweep"] = {"max_gap_s": 0.25, **(sweep or {})}  # the loaded test machine's hiccups
     for name, values in devices.items():
-        raw[name].update(values)
+        raw[name] = values if "kind" in values else {**raw[name], **values}
     path.write_text(tomli_w.dumps(raw))
     return path
 
@@ -195,3 +195,12 @@ def test_resume_sweeps_the_pass_a_crash_left_unfinished_again_and_keeps_the_rest
     assert len({r["sample"] for r in after}) == len(after)
     assert min(float(r["t_s"]) for r in again) > max(float(r["t_s"]) for r in kept)
     assert read_toml(folder / "session.toml")["finished_passes"] == sorted(set(plan.sweep_pass.tolist()))
+
+
+def test_an_opcua_robot_without_a_controller_clock_is_streamed_too(tmp_path):
+    # polled, each reading stamped at the middle of its read (no controller timestamp to tie)
+    config = sweep_config(tmp_path, robot={"kind": "opcua", "url": f"opc.tcp://127.0.0.1:{_free_port()}"})
+    _, state, said = swept(tmp_path, config)
+    assert state is State.DONE, said
+    rows = rows_of(tmp_path / "sess" / "samples.csv")
+    assert {int(r["pass"]) for r in rows} == set(sweep_plan().sweep_pass.tolist()) and len(rows) > 300
