@@ -5,8 +5,8 @@
   controller's timestamp (RTDE: ``controller_time_s``, the controller's clock) and its arrival on
   the station's clock (``time.monotonic``), so the two clocks can be tied
   (``calib.alignment.clock_offset``). A source without a controller timestamp (OPC UA and Modbus
-  polled, ROS through this driver) is stamped at the middle of its read, as a sensor is, and kept
-  when its joints change.
+  polled), or whose clock stands still while its joints move (a ROS stamp of 0), is stamped at the
+  middle of its read, as a sensor is, and kept when its joints change.
 - A sensor (drawstring, dial): asked again as soon as it answers, but not sooner than
   ``min_interval_s`` after its last request (twice the rows a sweep keeps: more would only load
   the station); a reading is stamped at the
@@ -28,6 +28,7 @@ from drivers.base import DeviceReplyError, Driver, DriverError
 
 RECONNECT_AFTER = 20  # unanswered requests in a row before a sensor is reopened
 ROBOT_POLLS_PER_PACKAGE = 2
+STILL_CLOCK = 5  # packages in a row with new joints and the same stamp: the source's clock stands still
 
 
 @dataclass
@@ -62,6 +63,11 @@ class RobotStream:
     stamped: bool = True
     failures: int = 0
     last_failure: str = ""
+
+    def clear(self) -> None:
+        """Forget the packages so far (their stamps were the controller's: no longer the base)."""
+        for name in ("arrival", "stamp", "q_deg", "qd_deg_s", "mode"):
+            getattr(self, name).clear()
 
     def arrays(self) -> dict[str, np.ndarray]:
         n = len(self.arrival)  # appended last
@@ -105,7 +111,7 @@ class Streams:
             thread.join(timeout=2.0)
 
     def _read_robot(self) -> None:
-        driver, out, last = self.drivers["robot"], self.robot, None
+        driver, out, last, still = self.drivers["robot"], self.robot, (None, None), 0
         while not self._stop.is_set():
             before = time.monotonic()
             try:
@@ -116,13 +122,15 @@ class Streams:
                 self._stop.wait(self._poll_s * 10)
                 continue
             v = reading.values
-            stamp = v.get("controller_time_s")
-            out.stamped = stamp is not None
-            key = stamp if stamp is not None else tuple(v["q_deg"])
-            if key != last:
-                last = key
-                out.stamp.append(float(stamp if stamp is not None else (before + reading.t_monotonic) / 2))
-                out.q_deg.append(tuple(v["q_deg"]))
+            stamp, q = v.get("controller_time_s"), tuple(v["q_deg"])
+            still = still + 1 if stamp is not None and stamp == last[0] and q != last[1] else 0
+            if out.stamped and (stamp is None or still >= STILL_CLOCK):
+                out.stamped = False  # no clock, or one standing still on moving joints
+                out.clear()
+            if (stamp, q) != last and (not out.stamped or still == 0):
+                last = (stamp, q)
+                out.stamp.append(float(stamp if out.stamped else (before + reading.t_monotonic) / 2))
+                out.q_deg.append(q)
                 out.qd_deg_s.append(tuple(v["qd_deg_s"]))
                 out.mode.append(int(v["robot_mode"]))
                 out.arrival.append(reading.t_monotonic)

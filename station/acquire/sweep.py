@@ -249,6 +249,8 @@ class SweepSession:
     def _tick(self) -> bool:
         """Look at the robot's new packages: True if a pass was stored."""
         robot = self.streams.robot.arrays()
+        if len(robot["arrival"]) < self._seen:  # the stream started again on the station's clock
+            self._seen, self.offset, self._run = 0, np.inf, None
         new = slice(self._seen, len(robot["arrival"]))
         if new.start == new.stop:
             return False
