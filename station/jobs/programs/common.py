@@ -51,6 +51,15 @@ class Program:
             yield int(plan.sweep_pass[rows[0]]), int(plan.line[rows[0]]), rows, bool(ends.any())
 
 
+def each_pass(p: Program, left_out: str, moves) -> list[str]:
+    """The lines of every pass of a sweep plan, in order: ``moves(number, line, rows)`` (its id,
+    gauge line and plan rows), or for a pass left out ``left_out`` with ``{number}`` its id."""
+    lines: list[str] = []
+    for number, line, rows, skipped in p.passes():
+        lines += [left_out.format(number=number)] if skipped else moves(number, line, rows)
+    return lines
+
+
 def header(p: Program, pose_words: str, frame: str = "base frame", units: str = "deg") -> list[str]:
     """The header comment's lines (no comment marker, not yet escaped): what the program does, the
     joints' ``units`` and convention, the contact poses' convention ``pose_words`` and the

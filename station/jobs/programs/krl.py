@@ -29,8 +29,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from errors import InputError
-from station.jobs.programs.common import Program, check_name, comment_text, header, kuka_abc
+from station.jobs.programs.common import Program, check_name, comment_text, each_pass, header, kuka_abc
 
+LEFT_OUT = "; pass {number} left out: no stand-off within the joint limits at an end"
 NAME = r"[A-Za-z_][A-Za-z0-9_]{0,23}"
 """A KRL name: a module's (its file's) and a point's."""
 
@@ -109,13 +110,10 @@ def _moves(p: Program) -> list[str]:
 def _sweep_moves(p: Program) -> list[str]:
     """The ``.src`` moves of a sweep plan (module notes)."""
     mo, target = p.motion, p.m.plan.target
-    lines = [f"$APO.CDIS = {mo.blend_mm:g}  ; mm: the blend at a pass's waypoints"]
-    for number, line, rows, skipped in p.passes():
-        if skipped:
-            lines.append(f"; pass {number} left out: no stand-off within the joint limits at an end")
-            continue
+
+    def moves(number, line, rows) -> list[str]:
         first, last = target[rows[0]], target[rows[-1]]
-        lines += [
+        return [
             f"; pass {number}, line {line}: {len(rows)} waypoints, targets {first}..{last}",
             f"PTP XT{first}_OFF",
             f"$VEL.CP = {mo.approach_mm_s / 1000.0:.4f}  ; m/s onto the contact",
@@ -130,7 +128,9 @@ def _sweep_moves(p: Program) -> list[str]:
             f"$VEL.CP = {mo.retreat_mm_s / 1000.0:.4f}",
             f"LIN XT{last}_OFF",
         ]
-    return lines
+
+    blend = f"$APO.CDIS = {mo.blend_mm:g}  ; mm: the blend at a pass's waypoints"
+    return [blend, *each_pass(p, LEFT_OUT, moves)]
 
 
 def _sweep_points(p: Program) -> list[str]:

@@ -28,7 +28,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from station.jobs.measurement import program_text
-from station.jobs.programs.common import Program, comment_text, header, numbers, quaternion_wxyz
+from station.jobs.programs.common import Program, comment_text, each_pass, header, numbers, quaternion_wxyz
 
 BALL = "station_ball"
 """A sweep's tool: the ball (``_sweep_tool``)."""
@@ -115,14 +115,12 @@ def _sweep_points(p: Program) -> list[str]:
 
 def _sweep_calls(p: Program) -> list[str]:
     """A sweep plan's moves, pass by pass (module notes)."""
-    mo, target, lines = p.motion, p.m.plan.target, []
+    mo, target = p.motion, p.m.plan.target
     zone = f"z{mo.blend_mm:g}"
-    for number, line, rows, skipped in p.passes():
-        if skipped:
-            lines.append(f"    ! pass {number} left out: no stand-off within the joint limits at an end")
-            continue
+
+    def moves(number, line, rows) -> list[str]:
         first, last = target[rows[0]], target[rows[-1]]
-        lines += [
+        return [
             f"    ! pass {number}, line {line}: {len(rows)} waypoints, targets {first}..{last}",
             f"    MoveAbsJ t{first}_off, station_joint, fine, {BALL};",
             f"    MoveL CalcRobT(t{first}_on, {BALL}), station_approach, fine, {BALL};",
@@ -135,7 +133,8 @@ def _sweep_calls(p: Program) -> list[str]:
             f"    WaitTime \\InPos, {mo.dwell_s:g};",
             f"    MoveL CalcRobT(t{last}_off, {BALL}), station_retreat, fine, {BALL};",
         ]
-    return lines
+
+    return each_pass(p, "    ! pass {number} left out: no stand-off within the joint limits at an end", moves)
 
 
 def _calls(p: Program) -> list[str]:
