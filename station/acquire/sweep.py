@@ -29,7 +29,8 @@ finished once the robot has been on it from its first waypoint to its last witho
 its rows are aligned and appended at once (``SessionFolder.append_rows``) and ``session.toml``'s
 ``finished_passes`` updated. ``--resume`` drops the rows of a pass not in that list (a crash
 mid-append) and waits for the first unfinished pass. A pass the robot leaves half-way is not
-stored; the program's next round sweeps it again.
+stored; the program's next round sweeps it again; so is one where more than ``MISSED_SHARE`` of
+the readings fell in the station's own gaps (no robot data, no dial reading: a busy station).
 
 Latency: at the end the drawstring's latency is estimated from the stored rows
 (``calib.alignment.estimate_lag`` against the nominal kinematics and the setup's anchor) and checked
@@ -63,7 +64,8 @@ MATCH_MM = 5.0  # nominal TCP to a pass's polyline: on the pass (nominal and pla
 END_TOL = 0.25  # of a segment: how close to a pass's first and last waypoint the robot must come
 SPEED_STEP_S = 1e-3  # simulated s: the finite step of the TCP speed
 DROP_NOTE = 0.01  # a sensor leaving more of its requests unanswered is named
-FLAGS = ("no robot data", "drawstring error", "drawstring outside its gate", "too fast")
+MISSED = ("no robot data", "no dial reading")  # the station's gaps, not the tool's
+MISSED_SHARE = 0.5  # a pass the station missed more of is swept again
 
 
 @dataclass(frozen=True)
@@ -284,11 +286,21 @@ class SweepSession:
             return False
         if not run.covers(self.map.segments[run.p], 0.5 / self.rules.time_scale):
             return False
-        self._store(run, robot)
-        return True
+        return self._store(run, robot)
 
-    def _store(self, run: _Run, robot: dict) -> None:
+    def _store(self, run: _Run, robot: dict) -> bool:
+        """Store a swept pass (True), unless the station missed most of it (``MISSED``): then it
+        is left for the program's next round."""
         rows, flagged, tcp = self._rows(run, robot)
+        missed = sum(r["reason"] in MISSED for r in flagged)
+        line = int(self.plan.line[self.map.rows[run.p][0]])
+        if missed > MISSED_SHARE * (len(rows) + len(flagged)):
+            self.tell(
+                f"pass {self.map.ids[run.p]} (line {line}): the station missed {missed} of its "
+                f"{len(rows) + len(flagged)} readings (no robot data or no dial reading around them): "
+                "nothing stored, it is taken when the robot sweeps it again"
+            )
+            return False
         self.folder.append_rows(rows, flagged)
         self._span += [run.t0, run.t1]
         pid = self.map.ids[run.p]
@@ -298,13 +310,13 @@ class SweepSession:
         reasons = Counter(r["reason"] for r in flagged)
         self.flag_counts.update(reasons)
         said = "; ".join(f"{n} {why}" for why, n in reasons.most_common())
-        line = int(self.plan.line[self.map.rows[run.p][0]])
         self.tell(
             f"pass {pid} (line {line}): {len(rows)} rows stored"
             + (f", {len(flagged)} flagged ({said})" if flagged else "")
             + f" ({len(self.finished)}/{len(self.map.ids)} passes)"
         )
         self.show(pid, line, tcp[: len(rows)], tcp[len(rows) :], rows[-1]["t_s"] if rows else 0.0)
+        return True
 
     def _rows(self, run: _Run, robot: dict) -> tuple[list[dict], list[dict], np.ndarray]:
         """The pass's rows and flagged rows (module notes), and the nominal TCP of each (rows

@@ -94,16 +94,19 @@ def test_a_sweep_stores_every_pass_with_rows_aligned_to_the_true_joints(session)
     # the stored joints are the true joints at a time within the reading's round trip (its
     # timestamp's uncertainty) and half a robot package period (the controller's clock tied to the
     # station's by the least transit), plus what a linear interpolation between the two robot
-    # packages may miss (a quarter of the joints' step between them)
+    # packages may miss (a quarter of the joints' step between them): for all but 1 % of the rows
+    # (a busy machine's scheduling), and none farther off than 2 package periods at full speed
     period = 1.0 / StationConfig.model_validate(read_toml(folder.parent / "station.toml")).robot.frequency_hz
-    worst = 0.0
+    beyond = []
     for r in rows:
         t, half = program_s(sim, r), float(r["window_s"]) / 2 + period / 2
         truth = np.array([sim.robot.state(t + d).q_deg for d in np.linspace(-half, half, 9)])
         q = np.array([float(r[f"q{i}_deg"]) for i in range(1, 7)])
         slack = 0.25 * float(r["q_spread_deg"]) + 1e-4
-        worst = max(worst, float(np.max(np.maximum(truth.min(0) - slack - q, q - truth.max(0) - slack))))
-    assert worst <= 0.0
+        beyond.append(float(np.max(np.maximum(truth.min(0) - slack - q, q - truth.max(0) - slack))))
+    fastest = max(float(np.max(np.abs(sim.robot.state(program_s(sim, r)).qd_deg_s))) for r in rows)
+    assert np.mean(np.array(beyond) > 0) <= 0.01
+    assert max(beyond) <= fastest * TIME_SCALE * 2 * period
     assert len(load_samples(folder / "samples.csv")) == len(rows)
 
 
@@ -132,8 +135,8 @@ def test_a_latency_stated_5_ms_wrong_is_found_and_named(tmp_path):
     assert latency["named"] and abs(latency["estimated_s"] - 0.004) < 0.0025
 
 
-def test_a_dial_lifted_mid_pass_is_flagged_and_a_dropping_drawstring_named(tmp_path):
-    config = sweep_config(tmp_path, sim={"drawstring_drop": 0.1}, drawstring={"timeout_s": 0.05})
+def test_a_dial_lifted_mid_pass_is_flagged_and_nothing_of_it_stored(tmp_path):
+    config = sweep_config(tmp_path)
     plan = sweep_plan()
     cfg = StationConfig.model_validate(read_toml(config))
     probe = SimStation(cfg, plan=(plan.q_deg, plan.line, plan.sweep_pass))
@@ -143,22 +146,29 @@ def test_a_dial_lifted_mid_pass_is_flagged_and_a_dropping_drawstring_named(tmp_p
     assert state is State.DONE, said
     folder = tmp_path / "sess"
     inside = lambda r: window[0] <= (program_s(sim, r) * TIME_SCALE) % sim.robot.cycle_s < window[1]  # noqa: E731
-    flagged = rows_of(folder / "flagged.csv")
-    lifted = [r for r in flagged if r["reason"] == "dial off the edge" and r["pass"] == "1"]
-    assert sum(map(inside, lifted)) >= 5  # the lifted stretch has rows, each flagged
+    flagged = [r for r in rows_of(folder / "flagged.csv") if inside(r)]
+    assert len(flagged) >= 5 and {r["pass"] for r in flagged} == {"1"}  # the lifted stretch has rows
+    assert sum(r["reason"] == "dial off the edge" for r in flagged) >= 0.8 * len(flagged)
     rows = rows_of(folder / "samples.csv")
-    assert not any(inside(r) for r in rows)
+    assert not any(inside(r) for r in rows)  # none of them stored
     low, high = cfg.session.dial_range_mm
     assert all(low <= float(r["dial_mm"]) <= high for r in rows)
-    # the drawstring's dropped replies: named, counted as the simulator dropped them, none filled in
+
+
+def test_a_drawstring_dropping_a_tenth_of_its_replies_is_named_and_no_row_invented(tmp_path):
+    config = sweep_config(tmp_path, sim={"drawstring_drop": 0.1}, drawstring={"timeout_s": 0.05})
+    sim, state, said = swept(tmp_path, config)
+    assert state is State.DONE, said
+    folder = tmp_path / "sess"
     faults, requests = sim.served["drawstring"]
     silent = sum(kind == "silence" for _, kind in faults.applied)
+    assert 0.07 * requests < silent < 0.13 * requests
     header = read_toml(folder / "session.toml")
     assert silent <= header["unanswered"]["drawstring"] <= 1.2 * silent  # a late reply counts too
-    assert any(
-        line.startswith("drawstring: ") and "requests unanswered (" in line for line in said.splitlines()
-    )
-    assert len(rows) + len(flagged) <= requests - silent
+    named = [line for line in said.splitlines() if line.startswith("drawstring: ") and "unanswered (" in line]
+    assert len(named) == 1 and "none filled in" in named[0]
+    rows, flagged = rows_of(folder / "samples.csv"), rows_of(folder / "flagged.csv")
+    assert len(rows) + len(flagged) <= requests - silent  # every row a reading the sensor gave
 
 
 def test_resume_sweeps_the_pass_a_crash_left_unfinished_again_and_keeps_the_rest(session, tmp_path):
