@@ -60,7 +60,8 @@ from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
 TICK_S = 0.05  # real s between looks at the streams
-MATCH_MM = 5.0  # nominal TCP to a pass's polyline: on the pass (nominal and plan share the model)
+MATCH_MM = 20.0  # nominal TCP to a pass's polyline: on the pass (the nominal TCP of the true joints lies off
+# the plan's by the robot's own error, up to about 10 mm on the demo's cells; the joint ranges tell passes apart)
 END_TOL = 0.25  # of a segment: how close to a pass's first and last waypoint the robot must come
 SPEED_STEP_S = 1e-3  # simulated s: the finite step of the TCP speed
 DROP_NOTE = 0.01  # a sensor leaving more of its requests unanswered is named
