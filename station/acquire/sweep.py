@@ -34,8 +34,9 @@ the readings fell in the station's own gaps (no robot data, no dial reading: a b
 
 Latency: at the end the drawstring's latency is estimated from the stored rows
 (``calib.alignment.estimate_lag`` against the nominal kinematics and the setup's anchor) and checked
-against the stated one; a difference beyond ``latency_tolerance_s`` and four standard errors is
-named in one line. A sensor that leaves over ``DROP_NOTE`` of its requests unanswered is named; its
+against the stated one; a difference beyond ``latency_tolerance_s`` and three standard errors is
+named in one line (an estimate whose three standard errors exceed the tolerance is said to be too
+uncertain to check). A sensor that leaves over ``DROP_NOTE`` of its requests unanswered is named; its
 missing readings are missing rows, never filled in.
 """
 
@@ -60,10 +61,12 @@ from station.formats.plan import Plan
 from station.formats.session_folder import SessionFolder
 
 TICK_S = 0.05  # real s between looks at the streams
-MATCH_MM = 20.0  # nominal TCP to a pass's polyline: on the pass (the nominal TCP of the true joints lies off
-# the plan's by the robot's own error, up to about 10 mm on the demo's cells; the joint ranges tell passes apart)
+MATCH_MM = 20.0  # nominal TCP to a pass's polyline: on the pass (the nominal TCP of the true joints lies
+# off the plan's by the robot's own error, up to about 10 mm on the demo's cells; the joint ranges tell
+# passes apart)
 END_TOL = 0.25  # of a segment: how close to a pass's first and last waypoint the robot must come
 SPEED_STEP_S = 1e-3  # simulated s: the finite step of the TCP speed
+SIGMAS = 3  # an estimated latency this many standard errors (and the tolerance) off is named
 DROP_NOTE = 0.01  # a sensor leaving more of its requests unanswered is named
 MISSED = ("no robot data", "no dial reading")  # the station's gaps, not the tool's
 MISSED_SHARE = 0.5  # a pass the station missed more of is swept again
@@ -433,12 +436,17 @@ class SweepSession:
         if lag is not None:
             k = self.rules.time_scale
             est, sigma = stated + lag.lag_s * k, lag.sigma_s * k
-            off = abs(lag.lag_s * k) > max(self.rules.tolerance_s, 4 * sigma)
+            off = abs(lag.lag_s * k) > max(self.rules.tolerance_s, SIGMAS * sigma)
             if off:
                 lines.append(
                     f"drawstring: latency stated {stated * 1e3:.1f} ms but the stream says "
                     f"{est * 1e3:.1f} +- {sigma * 1e3:.1f} ms ({lag.n} rows): the rows were aligned with the "
                     f"stated one; set [sweep] drawstring_latency_s = {est:.4f} and sweep again"
+                )
+            elif SIGMAS * sigma > self.rules.tolerance_s:
+                lines.append(
+                    f"drawstring: latency {est * 1e3:.1f} +- {sigma * 1e3:.1f} ms from {lag.n} rows: too "
+                    f"uncertain to check the stated {stated * 1e3:.1f} ms (a busy station's timing)"
                 )
             else:
                 lines.append(
