@@ -138,8 +138,12 @@ class SweepConfig(Section):
     """A sweep session (a plan with passes, ``station.acquire.sweep``): each sensor's stated
     latency (how long before its reply the value it reports was true), the TCP speed along the edge
     above which a row is not trusted, the longest gap bridged by interpolation, the rows kept per
-    second (decimation) and how far an estimated latency may lie from the stated one before the
-    session names it. Times in simulated seconds, as the session's."""
+    second (decimation), how far an estimated latency may lie from the stated one before the
+    session names it, and ``timing_share``: a row whose length is uncertain by more than this share
+    of the drawstring's stated noise (the setup's ``sigma_mm``) from its timing alone (half the
+    reading's round trip, where in it the device measured, and the joints' linear interpolation
+    between two robot packages, times the length's rate) is flagged, not stored. Times in simulated
+    seconds, as the session's."""
 
     drawstring_latency_s: float = Field(0.004, ge=0, le=1)
     dial_latency_s: float = Field(0.010, ge=0, le=1)
@@ -147,6 +151,7 @@ class SweepConfig(Section):
     max_gap_s: float = Field(0.1, gt=0, le=10)
     rows_per_s: float = Field(60.0, gt=0, le=1e4)
     latency_tolerance_s: float = Field(0.0025, gt=0, le=1)
+    timing_share: float = Field(0.5, gt=0, le=100)
 
 
 class StationConfig(Section):

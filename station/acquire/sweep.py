@@ -21,7 +21,13 @@ Flags: a row is stored in ``flagged.csv`` with its reason, never in ``samples.cs
 - the TCP moved faster along the edge than ``[sweep] max_speed_mm_s`` (``too fast``: the nominal
   model's TCP speed from the joints and joint speeds);
 - the robot's packages around it lie farther apart than ``max_gap_s`` or its mode is not RUNNING
-  (``no robot data``), or the drawstring read outside ``length_range_mm`` or answered with an error.
+  (``no robot data``), or the drawstring read outside ``length_range_mm`` or answered with an error;
+- its length is uncertain from its timing alone by more than ``[sweep] timing_share`` of the
+  drawstring's stated noise (``timing uncertain``): the device measured somewhere in the reading's
+  round trip (half of it, times the nominal length's rate there) and the joints are interpolated
+  linearly between two packages (``h/8`` times the change of that rate across them, ``h`` the
+  packages' gap: linear interpolation's bound). A busy station's late replies and stalled robot
+  packages make these rows (issue 37: their lengths off by up to 0.5 mm at 0.02 mm noise).
 
 Passes. The robot is on a pass while it is where :class:`PassMap` says (its nominal TCP near the
 pass's polyline, its joints within ``[session] match_deg`` of the waypoints' range); a pass is
@@ -83,6 +89,7 @@ class SweepRules:
     max_gap_s: float
     row_spacing_s: float
     tolerance_s: float  # simulated
+    timing_limit_mm: float  # a row's length uncertain from its timing by more is flagged
     dial_range_mm: tuple[float, float]
     length_range_mm: tuple[float, float]
     match_deg: float
@@ -90,7 +97,8 @@ class SweepRules:
     unreachable_s: float
 
     @classmethod
-    def from_config(cls, cfg: StationConfig) -> SweepRules:
+    def from_config(cls, cfg: StationConfig, sigma_mm: float) -> SweepRules:
+        """The rules of ``cfg``, for a drawstring of noise ``sigma_mm`` [mm, 1 sigma]."""
         sw, se, k = cfg.sweep, cfg.session, cfg.time_scale
         return cls(
             time_scale=k,
@@ -99,6 +107,7 @@ class SweepRules:
             max_gap_s=sw.max_gap_s / k,
             row_spacing_s=1.0 / (sw.rows_per_s * k),
             tolerance_s=sw.latency_tolerance_s,
+            timing_limit_mm=sw.timing_share * sigma_mm,
             dial_range_mm=tuple(se.dial_range_mm),
             length_range_mm=tuple(se.length_range_mm),
             match_deg=se.match_deg,
@@ -126,6 +135,10 @@ class Kinematics:
 
     def length(self, q_deg) -> np.ndarray:
         return np.linalg.norm(self.tcp(q_deg) - self.anchor, axis=1)
+
+    def length_rate(self, q_deg, qd_deg_s) -> np.ndarray:
+        """The drawstring's length rate [mm per the joint speeds' second]."""
+        return (self.length(q_deg + qd_deg_s * SPEED_STEP_S) - self.length(q_deg)) / SPEED_STEP_S
 
 
 class PassMap:
@@ -345,6 +358,7 @@ class SweepSession:
         _flag(reason, np.isfinite(length) & ((length < low) | (length > high)), "drawstring outside its gate")
         _flag(reason, speed > r.max_speed_mm_s, "too fast")
         dial = self._dial(t, reason)
+        _flag(reason, self._timing_mm(times, robot, t, trip) > r.timing_limit_mm, "timing uncertain")
         rows_p = self.map.rows[run.p]
         nearest = rows_p[np.argmin(np.max(np.abs(q_safe[:, None] - self.plan.q_deg[rows_p]), axis=2), axis=1)]
         wall = t + self._wall_minus_mono
@@ -381,6 +395,15 @@ class SweepSession:
         self._lag_rows += list(zip(t[good], length[good], [pid] * len(good), along, strict=True))
         bad = np.setdiff1d(np.arange(len(t)), good)
         return rows, flagged, np.vstack([tcp[good], tcp[bad]]) if len(t) else np.zeros((0, 3))
+
+    def _timing_mm(self, times: np.ndarray, robot: dict, t: np.ndarray, trip: np.ndarray) -> np.ndarray:
+        """How uncertain [mm] the length of readings at ``t`` [real s, robot packages at ``times``]
+        with round trips ``trip`` [real s] is from their timing (module notes)."""
+        left, right = _bracket(times, t)
+        k = self.rules.time_scale
+        rate = [self.kin.length_rate(robot["q_deg"][i], robot["qd_deg_s"][i]) for i in (left, right)]
+        gap = (times[right] - times[left]) * k
+        return np.maximum(*np.abs(rate)) * trip * k / 2 + np.abs(rate[1] - rate[0]) * gap / 8
 
     def _dial(self, t: np.ndarray, reason: np.ndarray) -> np.ndarray:
         """The dial at times ``t`` [s] (NaN without one), flagging ``reason`` (module notes)."""
@@ -494,12 +517,16 @@ def _decimated(t: np.ndarray, spacing_s: float) -> np.ndarray:
     return first
 
 
+def _bracket(times, t) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the robot packages before and after each time ``t`` (the same one, without two)."""
+    right = np.clip(np.searchsorted(times, t, side="right"), 1, max(len(times) - 1, 1))
+    return np.minimum(right - 1, len(times) - 1), right if len(times) > 1 else right - 1
+
+
 def _bracket_spread(times, q_deg, t) -> np.ndarray:
     """Max |dq| [deg] between the two robot packages around each time ``t``."""
-    right = np.clip(np.searchsorted(times, t), 1, max(len(times) - 1, 1))
-    if len(times) < 2:
-        return np.zeros(len(t))
-    return np.max(np.abs(q_deg[right] - q_deg[right - 1]), axis=1)
+    left, right = _bracket(times, t)
+    return np.max(np.abs(q_deg[right] - q_deg[left]), axis=1)
 
 
 def _along(tcp: np.ndarray) -> np.ndarray:

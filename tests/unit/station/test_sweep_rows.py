@@ -1,6 +1,7 @@
 """A sweep pass's rows from synthetic streams (``station.acquire.sweep``): joints interpolated at
 each reading's time less the stated latency, and the rows the calibration must never use (too
-fast, dial off the edge, no dial reading, no robot data) kept apart with their reason."""
+fast, dial off the edge, no dial reading, no robot data, timing uncertain) kept apart with their
+reason."""
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ RULES = dict(
     max_gap_s=0.05,
     row_spacing_s=0.0,
     tolerance_s=0.002,
+    timing_limit_mm=0.01,  # half the drawstring's 0.02 mm
     dial_range_mm=(-2.0, 2.0),
     length_range_mm=(50.0, 5000.0),
     match_deg=2.0,
@@ -33,14 +35,20 @@ class _Folder:
     rows: list = []
 
 
-class _Streams:
-    """The robot moving A -> B over [0, 2] s, slowly then (from 1 s) three times as fast."""
+def _path(t):
+    """The robot's joints [deg] and their speeds [deg/s] at times ``t`` [s] (:class:`_Streams`)."""
+    s = np.where(t < 1.0, 0.25 * t, 0.25 + 0.75 * (t - 1.0))
+    rate = np.where(t < 1.0, 0.25, 0.75)
+    return A + s[:, None] * (B - A), rate[:, None] * (B - A)
 
-    def __init__(self, t_dial, dial):
+
+class _Streams:
+    """The robot moving A -> B over [0, 2] s, slowly then (from 1 s) three times as fast; the
+    drawstring read every 10 ms with round trips ``trip`` [s] (cycled)."""
+
+    def __init__(self, t_dial, dial, trip=(1e-5,)):
         self.t = np.arange(0.0, 2.0005, 0.002)
-        s = np.where(self.t < 1.0, 0.25 * self.t, 0.25 + 0.75 * (self.t - 1.0))
-        rate = np.where(self.t < 1.0, 0.25, 0.75)
-        q, qd = A + s[:, None] * (B - A), rate[:, None] * (B - A)
+        q, qd = _path(self.t)
         self.robot_arrays = {
             "stamp": self.t,
             "arrival": self.t,
@@ -49,10 +57,9 @@ class _Streams:
             "mode": np.full(len(self.t), 7),
         }
         t_ds = np.arange(0.01, 1.99, 0.01)
+        trips = list(np.resize(trip, len(t_ds)))
         self.sensors = {
-            "drawstring": SensorStream(
-                "drawstring", "length_mm", list(t_ds), [900.0] * len(t_ds), [0.001] * len(t_ds)
-            ),
+            "drawstring": SensorStream("drawstring", "length_mm", list(t_ds), [900.0] * len(t_ds), trips),
             "dial": SensorStream("dial", "dial_mm", list(t_dial), list(dial), [0.001] * len(t_dial)),
         }
 
@@ -112,3 +119,33 @@ def test_rows_are_decimated_to_the_configured_rate(spacing):
     rows, flagged, _ = session._rows(_Run(0, 0.0, 2.0, 0.0, 1.0), streams.robot_arrays)
     assert 39 <= len(rows) + len(flagged) <= 40  # the first reading of each 50 ms, of 1.97 s
     assert np.all(np.diff([r["t_s"] for r in rows]) > spacing - 0.01 - 1e-9)  # readings come every 10 ms
+
+
+def test_a_reading_whose_timing_leaves_its_length_uncertain_is_flagged():
+    """Against the true path: a row is flagged ``timing uncertain`` where the true length moves by
+    more than the limit (half the drawstring's noise) within half the reading's round trip, or lies
+    that far from the length of the joints interpolated over a gap in the robot's packages (two
+    packages around the speed change at 1 s); rows far within the limit are stored."""
+    t_dial = np.arange(0.0, 2.0, 0.005)
+    streams = _Streams(t_dial, np.full(len(t_dial), 0.1), trip=(1e-4, 2e-4, 1e-3, 4e-3))
+    keep = (streams.t < 0.981) | (streams.t > 1.019)  # packages 0.98 and 1.02 s around the change
+    gap = (streams.t > 0.5) & (streams.t < 0.54)  # at constant speed: interpolation is exact
+    streams.robot_arrays = {k: v[keep & ~gap] for k, v in streams.robot_arrays.items()}
+    session = _session(streams, max_speed=1e5)
+    rows, flagged, _ = session._rows(_Run(0, 0.0, 2.0, 0.0, 1.0), streams.robot_arrays)
+    every = rows + [f for f in flagged if f["reason"] == "timing uncertain"]
+    assert {f["reason"] for f in flagged} <= {"timing uncertain"}
+    t = np.array([r["t_s"] for r in every])
+    trip = np.resize((1e-4, 2e-4, 1e-3, 4e-3), len(streams.sensors["drawstring"].t))
+    trip = trip[np.searchsorted(streams.sensors["drawstring"].t, t + 0.004 - 1e-9)]
+    q_row = np.array([[r[f"q{i}_deg"] for i in range(1, 7)] for r in every])
+    length = session.kin.length
+    true_off = np.abs(length(_path(t + trip / 2)[0]) - length(_path(t)[0])) + np.abs(
+        length(_path(t)[0]) - length(q_row)
+    )
+    is_flagged = np.arange(len(every)) >= len(rows)
+    limit = RULES["timing_limit_mm"]
+    assert np.all(is_flagged[true_off > 1.5 * limit]) and np.all(~is_flagged[true_off < 0.5 * limit])
+    assert np.sum(true_off > 1.5 * limit) > 40 and np.sum(true_off < 0.5 * limit) > 20  # both met
+    assert not np.any(is_flagged[(t > 0.5) & (t < 0.54) & (trip < 1e-3)])
+    assert np.all(is_flagged[(t > 0.98) & (t < 1.02)]) and np.any((t > 0.98) & (t < 1.02) & (trip < 1e-3))
