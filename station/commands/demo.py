@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from station.formats.plan import Plan
 
 TIME_SCALE = 40.0
-SWEEP_TIME_SCALE = 2.0  # a stream's 60 rows a simulated second: 120 a real one at 2x
+SWEEP_TIME_SCALE = 1.0  # real time, as a cell sweeps: faster, a reading's round trip spans more of the sweep
 START_S = 4.0  # the simulated robot waits at its first target while the session starts
 HOLDOUT_PER_LINE = 12
 SWEEP_PASSES = 2  # per gauge line: about 85 s of robot time on the demo's cell
