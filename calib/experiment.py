@@ -71,27 +71,54 @@ def line_candidates(
         Reached (IK error < 1e-3 mm), inside the limits and conditioning > ``MIN_CONDITIONING``.
     """
     point, direction, length, approach = line
-    centre_rot = _orientation(approach, _perpendiculars(approach)[0])
-    seeds = rng.uniform(limits[:, 0], limits[:, 1], (restarts, 6))
-    q, err = ik.solve(
-        dh, tool, np.repeat(point[None], restarts, 0), np.repeat(centre_rot[None], restarts, 0), seeds
-    )
-    q = _wrap_into(q, limits)
-    valid = _valid(dh, tool, limits, q, err)
+    q, valid = centre_solutions(dh, tool, limits, line, rng, restarts)
     if not valid.any():
         return np.zeros((n, 6)), np.zeros(n, bool)
     start = q[np.argmax(np.where(valid, ik.conditioning(dh, q, tool), -1.0))]
     positions = point + np.linspace(-0.5, 0.5, n)[:, None] * length * direction
     tilt = np.radians(max_tilt_deg) * np.sqrt(rng.uniform(0, 1, n))
     azimuth = rng.uniform(-np.pi, np.pi, n)
+    roll = np.radians(max_roll_deg) * rng.uniform(-1, 1, n)
+    return tool_turned(dh, tool, limits, start, positions, approach, np.column_stack([tilt, azimuth, roll]))
+
+
+def centre_solutions(
+    dh: np.ndarray, tool: np.ndarray, limits: np.ndarray, line, rng: np.random.Generator, restarts: int = 64
+) -> tuple[np.ndarray, np.ndarray]:
+    """Configurations (restarts, 6) [rad] putting the TCP on ``line``'s centre with the tool along
+    its approach, from ``restarts`` random starts, wrapped towards the limits' middle, and which
+    (restarts,) are valid (as :func:`line_candidates`'s)."""
+    point, _, _, approach = line
+    centre_rot = _orientation(approach, _perpendiculars(approach)[0])
+    seeds = rng.uniform(limits[:, 0], limits[:, 1], (restarts, 6))
+    q, err = ik.solve(
+        dh, tool, np.repeat(point[None], restarts, 0), np.repeat(centre_rot[None], restarts, 0), seeds
+    )
+    q = _wrap_into(q, limits)
+    return q, _valid(dh, tool, limits, q, err)
+
+
+def tool_turned(
+    dh: np.ndarray,
+    tool: np.ndarray,
+    limits: np.ndarray,
+    start: np.ndarray,
+    positions: np.ndarray,
+    approach: np.ndarray,
+    turns: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Configurations (n, 6) [rad] with the TCP at ``positions`` (n, 3) [mm], the tool tilted from
+    ``approach`` and rolled from ``start``'s (6,) [rad] orientation by ``turns`` (n, 3): tilt,
+    its azimuth about the approach, roll [rad]; solved from ``start``, wrapped, and which are
+    valid."""
+    tilt, azimuth, roll = turns.T
     u, v = _perpendiculars(approach)
     z = np.cos(tilt)[:, None] * approach + np.sin(tilt)[:, None] * (
         np.cos(azimuth)[:, None] * u + np.sin(azimuth)[:, None] * v
     )
     x_start = ik.tool_frames(dh, start[None], tool)[1][0, :, 0]
-    roll = np.radians(max_roll_deg) * rng.uniform(-1, 1, n)
     rotations = np.stack([_rolled(_orientation(zi, x_start), r) for zi, r in zip(z, roll, strict=True)])
-    q, err = ik.solve(dh, tool, positions, rotations, np.repeat(start[None], n, 0))
+    q, err = ik.solve(dh, tool, positions, rotations, np.repeat(start[None], len(positions), 0))
     q = _wrap_into(q, limits)
     return q, _valid(dh, tool, limits, q, err)
 

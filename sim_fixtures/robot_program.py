@@ -83,13 +83,15 @@ class RobotFault:
 @dataclass(frozen=True)
 class RobotState:
     """The robot at one instant: joints (deg), joint velocities (deg per simulated s), UR robot
-    mode, the target it is at or moving to, and whether it is dwelling there."""
+    mode, the target it is at or moving to, whether it is dwelling there, and the TCP's speed along
+    a gauge edge it sweeps (mm per simulated s; 0 off the edge: ``sim_fixtures.sweep_program``)."""
 
     q_deg: np.ndarray
     qd_deg_s: np.ndarray
     robot_mode: int
     target_index: int
     dwelling: bool
+    speed_mm_s: float = 0.0
 
 
 @dataclass(frozen=True)

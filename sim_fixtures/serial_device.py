@@ -43,6 +43,7 @@ class FaultPlan:
         self.applied: list[tuple[float, str]] = []
         self._every: dict[str, int] = {}
         self._requests = 0
+        self._drop: tuple[float, object] | None = None  # (fraction, generator) of requests left silent
 
     def inject(self, kind: str, count: int = 1) -> None:
         """Apply fault ``kind`` (one of :data:`FAULTS`) to the next ``count`` requests."""
@@ -57,6 +58,12 @@ class FaultPlan:
             raise ValueError(f"every: n must be >= 1, got {n}")
         with self._lock:
             self._every[kind] = n
+
+    def drop(self, fraction: float, rng) -> None:
+        """Leave a random ``fraction`` of the requests unanswered ("silence"), drawn from ``rng``
+        (a seeded ``numpy.random.Generator``), after any queued or periodic fault."""
+        with self._lock:
+            self._drop = (fraction, rng)
 
     @staticmethod
     def _known(kind: str) -> None:
@@ -77,6 +84,8 @@ class FaultPlan:
                 kind = self._queue.popleft()
             else:
                 kind = next((k for k, n in self._every.items() if self._requests % n == 0), None)
+            if kind is None and self._drop is not None and self._drop[1].random() < self._drop[0]:
+                kind = "silence"
             if kind is not None:
                 self.applied.append((time.monotonic(), kind))
             return kind

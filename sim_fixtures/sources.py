@@ -84,22 +84,36 @@ class Cell(Protocol):
     def true_dial_mm(self, q_deg, line_ids) -> np.ndarray: ...
 
 
+LIFTED_MM = 13.0
+"""What a dial lifted off the edge reads: its plunger at the end of its travel (outside the range
+of ``station_sim.DIAL_RANGE_MM``: the indicator answers with its error code)."""
+
+
 @dataclass(frozen=True)
 class CellSource:
     """The true state from a robot program (``SimRobot.state(t_s)``: joints, mode, target) and
-    the cell (length, and dial against the line of the target the robot is at or moving to)."""
+    the cell (length, and dial against the line of the target the robot is at or moving to). A
+    sweeping tool faster along the edge than ``liftoff_mm_s`` (simulated mm/s) lifts the dial off
+    it, as it does inside the windows ``lifted`` ((start, end) simulated s into the program's
+    cycle, ``cycle_s``, of every cycle: a bump on the edge mid-pass)."""
 
-    robot: object  # sim_fixtures.robot_program.SimRobot
+    robot: object  # sim_fixtures.robot_program.SimRobot or sim_fixtures.sweep_program.SweepRobot
     cell: Cell
+    liftoff_mm_s: float = float("inf")
+    lifted: tuple[tuple[float, float], ...] = ()
 
     def state(self, t_s: float) -> TrueState:
         robot = self.robot.state(t_s)
         q = robot.q_deg[None, :]
         line = self.cell.plan_lines[robot.target_index : robot.target_index + 1]
+        sim_s = t_s * getattr(self.robot, "time_scale", 1.0)
+        if self.lifted:
+            sim_s %= self.robot.cycle_s
+        off = robot.speed_mm_s > self.liftoff_mm_s or any(a <= sim_s < b for a, b in self.lifted)
         return TrueState(
             q_deg=tuple(robot.q_deg.tolist()),
             qd_deg_s=tuple(robot.qd_deg_s.tolist()),
             robot_mode=robot.robot_mode,
             length_mm=float(self.cell.true_length_mm(q)[0]),
-            dial_mm=float(self.cell.true_dial_mm(q, line)[0]),
+            dial_mm=LIFTED_MM if off else float(self.cell.true_dial_mm(q, line)[0]),
         )

@@ -10,7 +10,12 @@ the simulated true robot's pose implies at the instant they are asked:
 - instrument noise: the world's (:class:`~sim_fixtures.world.Noise`: drawstring 0.02 mm, dial
   0.002 mm, 1 um resolution), each from its own generator seeded by ``[sim] seed``;
 - a slack cable (:meth:`SimStation.slacken`): the cable off the tool, the drawstring reading
-  ``SLACK_MM`` (uniform) instead of the distance.
+  ``SLACK_MM`` (uniform) instead of the distance;
+- a sweep plan (``plan`` with pass ids): the robot sweeps each pass along its true line
+  (:mod:`sim_fixtures.sweep_program`); each sensor reports the world as it was its
+  ``[sim] *_latency_s`` before it answers (plus Gaussian ``*_jitter_s``), leaves a fraction
+  ``*_drop`` of requests unanswered (drawn from its own generator), and the dial lifts off the edge
+  above ``liftoff_speed_mm_s`` or inside the ``lifted`` windows.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import contextlib
 import dataclasses
 import fcntl
 import functools
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -38,6 +44,7 @@ from sim_fixtures.rosbridge_server import JOINT_NAMES, RosbridgeServer
 from sim_fixtures.rtde_server import RtdeServerProcess, start_on_free_loopback
 from sim_fixtures.serial_device import SerialAsciiDevice
 from sim_fixtures.sources import CellSource, SimClock
+from sim_fixtures.sweep_program import SweepRobot, pass_path
 from sim_fixtures.target_channel import TargetChannel, TargetInbox
 from sim_fixtures.unmodelled import KINDS, Unmodelled
 from sim_fixtures.world import Placement, Robot, World
@@ -113,6 +120,26 @@ def rehearsal_cell(
     q, reached = world.landing(np.asarray(plan[0], float).reshape(-1, 6), lines)
     ids = np.arange(len(lines)) if targets is None else np.asarray(targets, int)
     return WorldCell(world, q[reached], lines[reached], ids[reached])
+
+
+def sweep_cell(
+    seed: int, plan_deg, plan_lines, passes, unmodelled: Unmodelled | None = None
+) -> tuple[WorldCell, list]:
+    """The cell of ``[sim] seed`` (carrying ``unmodelled``) sweeping a sweep plan: each waypoint
+    moved onto its true line as :func:`planned_cell` does (all rows kept, in plan order: a row the
+    true robot cannot reach keeps its planned joints and is left out of its pass's path), and the
+    dense path of every pass."""
+    world = dataclasses.replace(World.create(seed), unmodelled=unmodelled)
+    lines, passes = np.asarray(plan_lines, int), np.asarray(passes, int)
+    rng = np.random.default_rng([seed, 5])
+    q, reached = world.touch_lines(plan_deg, lines, rng, every=True)
+    q = np.where(reached[:, None], q, np.asarray(plan_deg, float))
+    paths = []
+    for p in dict.fromkeys(passes.tolist()):
+        rows = np.flatnonzero((passes == p) & reached)
+        if len(rows):
+            paths.append(pass_path(world.true, q[rows], rows))
+    return WorldCell(world, q, lines), paths
 
 
 @dataclass(frozen=True)
@@ -256,18 +283,23 @@ class SimStation:
     when a session polls an OPC UA robot (:class:`PlayOnPoll`; an RTDE robot's starts at once). ``convention``
     (joint_sign (6,), joint_offset_deg (6,) [deg]; None: the identity): the controller's, in which
     the robot's joints are published and its target channel's writes taken
-    (:mod:`sim_fixtures.controller`); the truth walks the model's."""
+    (:mod:`sim_fixtures.controller`); the truth walks the model's. ``plan`` with a third member,
+    the pass id of each row (``station.formats.plan``'s ``sweep_pass``): the robot sweeps
+    (:func:`sweep_cell`); ``lifted``: (start, end) windows [simulated s into every cycle of the
+    program] in which the dial is off the edge. ``served`` keeps each sensor's fault plan and
+    request count from :meth:`stop` on (what the simulator dropped, for tests)."""
 
     def __init__(
         self,
         cfg,
         hold: bool = False,
         faults: Sequence[RobotFault] = (),
-        plan: tuple[np.ndarray, np.ndarray] | None = None,
+        plan: tuple[np.ndarray, ...] | None = None,
         start_delay_s: float = 0.0,
         cell: WorldCell | None = None,
         once: bool = False,
         convention: tuple[Sequence[float], Sequence[float]] | None = None,
+        lifted: Sequence[tuple[float, float]] = (),
     ):
         if not isinstance(cfg.robot, RobotRtde | RobotOpcUa | RobotRos):
             raise InputError(
@@ -278,36 +310,73 @@ class SimStation:
         self.once = once
         self.clock = SimClock(time.monotonic() + (PLAY_WAIT_S if once else start_delay_s))
         unmodelled = KINDS[cfg.sim.unmodelled]
+        paths = None
         if cell is None and plan is None:
             cell = make_cell(cfg.sim.seed, cfg.sim.targets_per_line, unmodelled)
+        elif cell is None and len(plan) > 2 and plan[2] is not None:
+            cell, paths = sweep_cell(cfg.sim.seed, *plan, unmodelled)
         elif cell is None:
-            cell = planned_cell(cfg.sim.seed, *plan, unmodelled)
+            cell = planned_cell(cfg.sim.seed, *plan[:2], unmodelled)
         if cfg.sim.change:  # the robot changed after the plan was taught (a bent link)
             cell = dataclasses.replace(cell, world=cell.world.changed(cfg.sim.change))
         # a program that takes corrected targets reads them from this channel (the JR680's walks its own)
         self.channel = None if cell.plan_targets is None else TargetChannel()
-        self.robot = SimRobot(
-            cell.plan_deg,
-            speed_deg_s=cfg.sim.speed_deg_s,
-            accel_deg_s2=cfg.sim.accel_deg_s2,
-            dwell_s=cfg.sim.dwell_s,
-            hold=hold,
-            time_scale=cfg.time_scale,
-            faults=faults,
-            rng=np.random.default_rng([cfg.sim.seed, 3]),
-            once=once,
-            retarget=None if self.channel is None else Retarget(self.channel, cell),
+        self.robot = (
+            self._sweeper(paths, hold)
+            if paths is not None
+            else SimRobot(
+                cell.plan_deg,
+                speed_deg_s=cfg.sim.speed_deg_s,
+                accel_deg_s2=cfg.sim.accel_deg_s2,
+                dwell_s=cfg.sim.dwell_s,
+                hold=hold,
+                time_scale=cfg.time_scale,
+                faults=faults,
+                rng=np.random.default_rng([cfg.sim.seed, 3]),
+                once=once,
+                retarget=None if self.channel is None else Retarget(self.channel, cell),
+            )
         )
         self.inbox = None if self.channel is None else TargetInbox(self.channel, self.robot, self.clock)
         # what the controller publishes and takes: its own joint convention
         self.published, self.published_inbox = presented(self.robot, self.inbox, *(convention or ()))
         self.plan_deg, self.plan_lines = cell.plan_deg, cell.plan_lines
-        self.source = CellSource(self.robot, cell)
-        rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in (0, 1, 6)]
+        self.source = CellSource(self.robot, cell, cfg.sim.liftoff_speed_mm_s, tuple(lifted))
+        rngs = [np.random.default_rng([cfg.sim.seed, k]) for k in (0, 1, 6, 7, 8, 9)]
         self._length = cell.world.noise.drawstring(rngs[0])
         self._dial = cell.world.noise.dial(rngs[1])
         self._slack_rng, self._slack_until, self.slack_read = rngs[2], 0.0, 0
+        self._lag_rng, self._drop_rngs = rngs[3], {"drawstring": rngs[4], "dial": rngs[5]}
+        self._lag_lock = threading.Lock()
         self.devices: dict[str, object] = {}
+        self.served: dict[str, tuple] = {}
+
+    def _sweeper(self, paths, hold: bool) -> SweepRobot:
+        sim = self.cfg.sim
+        return SweepRobot(
+            paths,
+            speed_mm_s=sim.sweep_speed_mm_s,
+            accel_mm_s2=sim.sweep_accel_mm_s2,
+            speed_deg_s=sim.speed_deg_s,
+            accel_deg_s2=sim.accel_deg_s2,
+            dwell_s=sim.dwell_s,
+            time_scale=self.cfg.time_scale,
+            hold=hold,
+        )
+
+    def _measured_at(self, latency_s: float, jitter_s: float) -> float:
+        """The real time [s since start] whose world a sensor of that latency and jitter
+        (simulated s) reports now."""
+        with self._lag_lock:  # the devices' threads share the generator
+            lag = latency_s + (self._lag_rng.normal(0.0, jitter_s) if jitter_s > 0 else 0.0)
+        return self.clock.now() - max(lag, 0.0) / self.cfg.time_scale
+
+    def _drops(self, name: str, device) -> object:
+        """``device`` with its fault plan leaving ``[sim] <name>_drop`` of the requests unanswered."""
+        fraction = getattr(self.cfg.sim, f"{name}_drop")
+        if fraction > 0:
+            device.faults.drop(fraction, self._drop_rngs[name])
+        return device
 
     def slacken(self, seconds: float) -> None:
         """The cable comes off the tool for ``seconds`` (real): the drawstring reads ``SLACK_MM``;
@@ -319,23 +388,32 @@ class SimStation:
         if time.monotonic() < self._slack_until:
             self.slack_read += 1
             return self._length.measure(self._slack_rng.uniform(*SLACK_MM))
-        return self._length.measure(self.source.state(self.clock.now()).length_mm)
+        at = self._measured_at(self.cfg.sim.drawstring_latency_s, self.cfg.sim.drawstring_jitter_s)
+        return self._length.measure(self.source.state(at).length_mm)
 
     def measure_dial(self) -> float:
-        return self._dial.measure(self.source.state(self.clock.now()).dial_mm)
+        at = self._measured_at(self.cfg.sim.dial_latency_s, self.cfg.sim.dial_jitter_s)
+        return self._dial.measure(self.source.state(at).dial_mm)
 
     def _drawstring(self, elsewhere: Path | None = None, tcp_port: int | None = None):
         ds = self.cfg.drawstring
         if isinstance(ds, DrawstringAscii):
             link = _pty_link(ds.port, "drawstring", elsewhere)
-            return SerialAsciiDevice(link, DIALECTS["drawstring"], self.measure_length)
+            return self._drops(
+                "drawstring", SerialAsciiDevice(link, DIALECTS["drawstring"], self.measure_length)
+            )
         regs = ds.registers.register_map(ds.device_id)
         if isinstance(ds, DrawstringModbusTcp):
-            return ModbusDevice(
-                regs, self.measure_length, tcp=(ds.host, ds.port if tcp_port is None else tcp_port)
+            return self._drops(
+                "drawstring",
+                ModbusDevice(
+                    regs, self.measure_length, tcp=(ds.host, ds.port if tcp_port is None else tcp_port)
+                ),
             )
         link = _pty_link(ds.port, "drawstring", elsewhere)
-        return ModbusDevice(regs, self.measure_length, rtu_link=link, baudrate=ds.baudrate)
+        return self._drops(
+            "drawstring", ModbusDevice(regs, self.measure_length, rtu_link=link, baudrate=ds.baudrate)
+        )
 
     def start(self, elsewhere: Path | None = None) -> list[dict]:
         """Serve every device; the addresses served, one dict each. With ``elsewhere`` (a folder),
@@ -365,8 +443,11 @@ class SimStation:
                     self.devices["drawstring"].start()
                 if self.cfg.dial:
                     link = _pty_link(self.cfg.dial.port, "dial", elsewhere)
-                    self.devices["dial"] = SerialAsciiDevice(
-                        link, DIALECTS[self.cfg.dial.dialect], self.measure_dial, DIAL_RANGE_MM
+                    self.devices["dial"] = self._drops(
+                        "dial",
+                        SerialAsciiDevice(
+                            link, DIALECTS[self.cfg.dial.dialect], self.measure_dial, DIAL_RANGE_MM
+                        ),
                     )
                     self.devices["dial"].start()
         except BaseException:
@@ -414,6 +495,8 @@ class SimStation:
         }
 
     def stop(self) -> None:
+        sensors = {n: d for n, d in self.devices.items() if n != "robot"}
+        self.served.update({n: (d.faults, d.requests) for n, d in sensors.items()})
         for dev in reversed(list(self.devices.values())):
             dev.stop()
         self.devices.clear()

@@ -366,16 +366,51 @@ class World:
                 seed = q
         return np.array(q_all), np.array(ids)
 
-    def touch_lines(self, q_plan_deg, line_ids, rng: np.random.Generator):
+    def sweep_configurations(
+        self,
+        n_per_line: int,
+        passes_per_line: int,
+        rng: np.random.Generator,
+        max_tilt_deg: float = 25.0,
+        rounds: int = 1,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A sweep plan of true configurations [deg] (N, 6) whose TRUE TCPs touch the lines, with
+        line ids (N,) and pass ids (N,): ``n_per_line`` waypoints evenly along each edge, split into
+        ``passes_per_line`` passes, the tool's tilt and roll turning steadily from a random one at a
+        pass's start to another at its end (a sweep that keeps contact, orientation varying); every
+        line swept ``rounds`` times, each with orientations of its own."""
+        q_all, ids, passes = [], [], []
+        for ln in [ln for _ in range(rounds) for ln in self.lines]:
+            seed = self._seed_for(ln)
+            spots = np.array_split(np.linspace(-0.5, 0.5, n_per_line) * ln.length_mm, passes_per_line)
+            for chunk in spots:
+                pid = max(passes, default=-1) + 1
+                ends = [tilted(ln.approach, max_tilt_deg, rng) for _ in range(2)]
+                rolls = rng.uniform(-0.3, 0.3, 2)
+                for k, w in enumerate(np.linspace(0.0, 1.0, len(chunk))):
+                    pos = ln.centre + chunk[k] * ln.direction
+                    pos = pos + rng.uniform(-1, 1) * self.noise.placement_mm * ln.dial_axis
+                    approach = _unit((1 - w) * ends[0] + w * ends[1])
+                    pose = tool_pose(pos, approach, (1 - w) * rolls[0] + w * rolls[1])
+                    (q,), (reached,) = self.true.ik(pose[None], seed[None])
+                    if reached:
+                        q_all.append(q)
+                        ids.append(ln.id)
+                        passes.append(pid)
+                        seed = q
+        return np.array(q_all), np.array(ids), np.array(passes)
+
+    def touch_lines(self, q_plan_deg, line_ids, rng: np.random.Generator, every: bool = False):
         """Where the tool really goes for planned configurations (N, 6) [deg]: the pose the true
         robot reaches there, moved (orientation kept) onto its true line, off it along the dial axis
         by the operator's placement. Returns true configurations [deg] and the line ids of those
-        reached (a target pushed out of the joint limits is skipped, as an operator would)."""
+        reached (a target pushed out of the joint limits is skipped, as an operator would; ``every``:
+        all configurations, and which (N,) the true robot reaches)."""
 
         def placed(ln: GaugeLine, rel: np.ndarray) -> np.ndarray:
             return rng.uniform(-1, 1) * self.noise.placement_mm * ln.dial_axis
 
-        return self._onto_lines(q_plan_deg, line_ids, placed)
+        return self._onto_lines(q_plan_deg, line_ids, placed, every)
 
     def land(self, q_plan_deg, line_ids) -> tuple[np.ndarray, np.ndarray]:
         """Where a program commanding configurations (N, 6) [deg] really touches: the pose the true

@@ -75,6 +75,18 @@ class SimConfig(Section):
         list[Annotated[float, Field(ge=-3600, le=3600)]], AfterValidator(_six_or_none)
     ] = []
     unmodelled: Literal["none", "ur10-like"] = "none"
+    # a sweep plan (issue 37): the tool's speed and acceleration along a pass, the speed above which
+    # the dial lifts off the edge, and each sensor's own latency, its jitter (1 sigma) and the
+    # fraction of requests it leaves unanswered (simulated s, mm)
+    sweep_speed_mm_s: float = Field(40.0, gt=0, le=2000)
+    sweep_accel_mm_s2: float = Field(400.0, gt=0, le=1e5)
+    liftoff_speed_mm_s: float = Field(1000.0, gt=0, le=1e5)
+    drawstring_latency_s: float = Field(0.004, ge=0, le=1)
+    dial_latency_s: float = Field(0.010, ge=0, le=1)
+    drawstring_jitter_s: float = Field(0.0002, ge=0, le=0.1)
+    dial_jitter_s: float = Field(0.0005, ge=0, le=0.1)
+    drawstring_drop: float = Field(0.0, ge=0, le=0.5)
+    dial_drop: float = Field(0.0, ge=0, le=0.5)
 
     def convention(self, controller=None) -> tuple[list[float], list[float]]:
         """The simulated controller's ``joint_sign`` and ``joint_offset_deg`` [deg] (6 each): this
@@ -124,11 +136,34 @@ class SessionConfig(Section):
         return self
 
 
+class SweepConfig(Section):
+    """A sweep session (a plan with passes, ``station.acquire.sweep``): each sensor's stated
+    latency (how long before its reply the value it reports was true), the TCP speed along the edge
+    above which a row is not trusted, the longest gap bridged by interpolation, the rows kept per
+    second (decimation), how far an estimated latency may lie from the stated one before the
+    session names it, and ``timing_share``: a row whose length is uncertain by more than this share
+    of the drawstring's stated noise (the setup's ``sigma_mm``) from its timing alone (half the
+    reading's round trip, where in it the device measured, and the joints' linear interpolation
+    between two robot packages, times the length's rate) is flagged, not stored (1: an error spread
+    evenly within that bound adds at most sigma/sqrt(3), 15 % in quadrature; 0.5 flags about every row
+    moving along the string at 40 mm/s, where half a fast 0.5 ms round trip is 0.01 mm already).
+    Times in simulated seconds, as the session's."""
+
+    drawstring_latency_s: float = Field(0.004, ge=0, le=1)
+    dial_latency_s: float = Field(0.010, ge=0, le=1)
+    max_speed_mm_s: float = Field(150.0, gt=0, le=1e5)
+    max_gap_s: float = Field(0.1, gt=0, le=10)
+    rows_per_s: float = Field(60.0, gt=0, le=1e4)
+    latency_tolerance_s: float = Field(0.0025, gt=0, le=1)
+    timing_share: float = Field(1.0, gt=0, le=100)
+
+
 class StationConfig(Section):
     """``configs/station.toml``: one section per device, plus the shared ``time_scale``."""
 
     time_scale: TimeScale = 1.0
     session: SessionConfig = SessionConfig()
+    sweep: SweepConfig = SweepConfig()
     robot: RobotConfig
     drawstring: DrawstringConfig
     dial: DialConfig | None = None

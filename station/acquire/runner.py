@@ -3,6 +3,7 @@ with its live view and progress, and close everything whatever happens."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import threading
@@ -20,6 +21,8 @@ from station.acquire.ending import gate_advice, offline_pass
 from station.acquire.livefit import FitWorker, LiveListener, RunningCalibration, line_segments
 from station.acquire.progress import Progress
 from station.acquire.session import Listener, Session, State
+from station.acquire.stream import Streams
+from station.acquire.sweep import Kinematics, SweepRules, SweepSession
 from station.acquire.targets import TargetFeed
 from station.config import StationConfig, load_station_config, resolve, station_config, unreachable_hint
 from station.formats.announcement import announcement_path, running_simulator
@@ -200,6 +203,8 @@ def run(
     calibration's 95 % workspace bound reaches it; ``every_sample`` False keeps a plain (non-tty)
     progress to the messages. Devices are opened first: an unreachable one fails before anything
     else, and a new session's folder is made only once they all answered."""
+    if inputs.plan.is_sweep:
+        return _run_sweep(inputs, viewer, web, stream)
     plan_rows = (inputs.plan.q_deg, inputs.plan.line)  # corrected with each judged refit
     worker = FitWorker.start(inputs.robot, inputs.setup, plan_rows)  # starts while the devices open
     view = None
@@ -225,6 +230,64 @@ def run(
         last_state=state.value, samples=len(inputs.folder.rows), corrected_targets=corrected
     )
     return SessionRun(state, view, live.running.latest, live.worst_mm)
+
+
+def _run_sweep(inputs: SessionInputs, viewer: bool, web: str | None, stream) -> SessionRun:
+    """A sweep session (``station.acquire.sweep``): the devices streamed, each finished pass stored
+    whole, the latency check and the faults said at the end; no running calibration (the rows of a
+    pass come at once, thousands of them: ``station calibrate`` fits them after)."""
+    devices = open_devices(inputs.cfg, inputs.robot.controller)
+    view = None
+    folder, plan = inputs.folder, inputs.plan
+    try:
+        if not folder.made:
+            folder.make()
+        view = LiveView(folder.rrd, viewer=viewer, web=web, resume=bool(folder.rows))
+        finished = {int(p) for p in folder.header.get("finished_passes", [])}
+        progress = Progress(len(plan.passes()), len(finished), stream, every_sample=False)
+
+        def tell(text: str) -> None:
+            progress.message(text)
+            view.message(text)
+
+        kin = Kinematics(inputs.robot, inputs.setup)
+        tcp = kin.tcp(plan.q_deg)
+        view.cell(inputs.setup.drawstring.anchor_mm, line_segments(tcp, plan.line), tcp)
+        for note in (*view.notes, *inputs.notes):
+            tell(note)
+        if dropped := folder.keep_rows(lambda row: int(row["pass"]) in finished):
+            tell(f"{dropped} rows of a pass left unfinished dropped: it is swept again")
+        robot_hz = float(getattr(inputs.cfg.robot, "frequency_hz", 100.0))
+        rules = SweepRules.from_config(inputs.cfg, inputs.setup.drawstring.sigma_mm)
+        streams = Streams(devices.drivers, robot_hz, rules.row_spacing_s / 2)
+        session = SweepSession(folder, plan, streams, rules, kin, tell, view.sweep, view.sweeping)
+        with _stops_on_signal(session.request_stop):
+            state = session.run()
+        for line in session.report():
+            tell(line)
+        progress.close()
+    except BaseException:
+        if view is not None:
+            view.close()
+        raise
+    finally:
+        devices.close()
+    folder.update_header(last_state=state.value, samples=len(folder.rows))
+    return SessionRun(state, view, None, None)
+
+
+@contextlib.contextmanager
+def _stops_on_signal(stop: Callable[[], None]):
+    """While held, Ctrl-C and the SIGTERM of a service manager or `kill` call ``stop`` (in the main
+    thread: signals reach no other), as the operator would stop the session."""
+    in_main = threading.current_thread() is threading.main_thread()
+    stops = (signal.SIGINT, signal.SIGTERM) if in_main else ()
+    previous = {s: signal.signal(s, lambda *_: stop()) for s in stops}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 class Live:
@@ -390,10 +453,12 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
     session.away = AwaySettles(plan.q_deg, plan.target, rules.match_deg, controller, where)
     if live.running.goal_met:
         session.finish("accuracy reached")
-    in_main = threading.current_thread() is threading.main_thread()
-    # Ctrl-C, and the SIGTERM of a service manager or `kill`, stop the session as the operator would
-    stops = (signal.SIGINT, signal.SIGTERM) if in_main else ()
-    previous = {s: signal.signal(s, lambda *_: session.request_stop()) for s in stops}
+    with _stops_on_signal(session.request_stop):
+        return _finish(session, live, inputs, progress)
+
+
+def _finish(session: Session, live: Live, inputs: SessionInputs, progress: Progress) -> State:
+    """Run ``session`` to its end, wait for the final refit, say what the corrected targets did."""
     try:
         state = session.run()
         if state is not State.STOPPED:
@@ -406,6 +471,4 @@ def _run_session(inputs: SessionInputs, devices: Devices, live: Live) -> State:
             )
         return state
     finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
         progress.close()

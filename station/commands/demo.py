@@ -14,6 +14,13 @@ The steps a user takes at a real station, each with a one-line summary:
 6. verify: a second, short simulated session (``station plan --verify``'s poses) judged with the
    table just written (holds) and with the nominal table (drifted) -> ``verify.csv``,
    ``verify.json``, ``verify-nominal.json``.
+
+``--sweep``: the same cell measured by sweeps: ``station plan --sweep`` (``SWEEP_PASSES`` passes per
+line), the simulated robot sweeping each pass at the plan's TCP speed, ``station sample`` streaming
+rows along it; LMLC alone calibrates (MCS chooses among static poses, not among a stream's rows);
+steps 1-5 (the verification is a static session's).
+Either way the demo prints its robot time: the simulated seconds the robot program takes to walk
+the plan once (every move, dwell and sweep, back to its start).
 """
 
 from __future__ import annotations
@@ -36,8 +43,11 @@ if TYPE_CHECKING:
     from station.formats.plan import Plan
 
 TIME_SCALE = 40.0
+SWEEP_TIME_SCALE = 1.0  # real time, as a cell sweeps: faster, a reading's round trip spans more of the sweep
 START_S = 4.0  # the simulated robot waits at its first target while the session starts
 HOLDOUT_PER_LINE = 12
+SWEEP_PASSES = 2  # per gauge line: about 85 s of robot time on the demo's cell
+SWEEP_DWELL_S = 1.0  # the simulated robot's stop at each end of a pass
 CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial": "/tmp/station-sim/dial"}
 
 
@@ -52,6 +62,11 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--seed", type=seed, default=0, help="the simulated cell: true robot, gauge lines, noise (default 0)"
+    )
+    p.add_argument(
+        "--sweep",
+        action="store_true",
+        help="measure by sweeps: continuous passes along each gauge line, the station streaming",
     )
     p.add_argument(
         "--plan-size",
@@ -75,11 +90,20 @@ def run(args) -> int:
         raise InputError(f"{out / 'session'}: exists already; choose another --out or remove it")
     out.mkdir(parents=True, exist_ok=True)
     check_writable(out / "report.json", "--out")
-    raw = demo_config(args.seed)
+    raw = demo_config(args.seed, sweep=args.sweep)
     config_path = out / "station.toml"
     atomic_write(config_path, tomli_w.dumps(raw))
-    plan = _plan(out, config_path, args.plan_size)
-    sim = SimStation(StationConfig.model_validate(raw), plan=(plan.q_deg, plan.line), start_delay_s=START_S)
+    plan = _sweep_plan(out, config_path) if args.sweep else _plan(out, config_path, args.plan_size)
+    sim = SimStation(
+        StationConfig.model_validate(raw),
+        plan=(plan.q_deg, plan.line, plan.sweep_pass),
+        start_delay_s=START_S,
+    )
+    print(
+        f"robot:     {sim.robot.cycle_s:.1f} s of robot time (simulated: the program walks the plan once, "
+        "every move, dwell and sweep)",
+        flush=True,
+    )
     try:  # bound first (where the contract's addresses are taken: free ones), then announced
         served = sim.start(elsewhere=out.resolve())
     except (OSError, RuntimeError) as exc:
@@ -93,11 +117,13 @@ def run(args) -> int:
     finally:
         sim.stop()
     try:
-        outcome = _calibrate(out, inputs, session.view, args.seed)
+        methods = ("lmlc",) if args.sweep else ("lmlc", "mcs-lmlc")
+        outcome = _calibrate(out, inputs, session.view, args.seed, methods)
     finally:
         session.view.close()
     _export(out)
-    _verify(out, inputs, args.seed)
+    if not args.sweep:
+        _verify(out, inputs, args.seed)
     return outcome
 
 
@@ -132,18 +158,45 @@ def _plan(out: Path, config_path: Path, plan_size: int | None) -> Plan:
     return design.plan
 
 
+def _sweep_plan(out: Path, config_path: Path) -> Plan:
+    """Step 1 of ``--sweep``: ``station plan --sweep`` on the session's robot and setup."""
+    from station.acquire import runner
+    from station.config import load_station_config
+    from station.formats.base import atomic_write
+    from station.formats.tables import load_robot, load_setup
+    from station.jobs import sweeping
+
+    t0 = time.perf_counter()
+    cfg = load_station_config(config_path)
+    robot = load_robot(runner.resolve(cfg.session.robot_model, config_path))
+    setup_path = runner.resolve(cfg.session.setup, config_path)
+    design = sweeping.sweep_design(robot, load_setup(setup_path), str(setup_path), passes=SWEEP_PASSES)
+    atomic_write(out / "plan.csv", design.plan.csv_text())
+    r = design.report
+    print(
+        f"plan:      {len(r['passes'])} passes on {len(set(design.plan.line.tolist()))} gauge lines, "
+        f"{r['swept_s']:.1f} s swept at {r['limits']['tcp_mm_s']:g} mm/s, about {r['rows']} rows, promising "
+        f"{r['predicted']['plan']['predicted_rmse_mm']:.3f} mm workspace error at the stated noise "
+        f"-> {out / 'plan.csv'} ({time.perf_counter() - t0:.1f} s)",
+        flush=True,
+    )
+    return design.plan
+
+
 def _session(inputs, viewer: bool) -> SessionRun:
     """Step 3: the session with its running calibration."""
     from station.acquire import runner
 
     t0 = time.perf_counter()
     print(
-        f"session:   the simulated robot walks the plan (simulated time x{TIME_SCALE:g}); "
+        f"session:   the simulated robot walks the plan (simulated time x{inputs.cfg.time_scale:g}); "
         "live errors and predicted workspace error in the live view",
         flush=True,
     )
     done = runner.run(inputs, viewer=viewer, every_sample=False)
     n = len(inputs.folder.rows)
+    plan = inputs.plan
+    of = f"{n} rows on {len(plan.passes())} passes" if plan.is_sweep else f"{n}/{len(plan)} samples"
     fit = done.refit
     running = (
         "no running calibration"
@@ -153,17 +206,20 @@ def _session(inputs, viewer: bool) -> SessionRun:
     )
     worst = "" if done.worst_error_mm is None else f", worst live error {done.worst_error_mm:.2f} mm"
     print(
-        f"session:   {n}/{len(inputs.plan)} samples in {time.perf_counter() - t0:.1f} s, "
-        f"{running}{worst} -> {inputs.folder.path}",
+        f"session:   {of} in {time.perf_counter() - t0:.1f} s, {running}{worst} -> {inputs.folder.path}",
         flush=True,
     )
     return done
 
 
-def demo_config(seed: int) -> dict:
+def demo_config(seed: int, sweep: bool = False) -> dict:
     """The demo's station config, on the contract's addresses (:func:`serve_at` moves a device
-    to where the simulator bound it)."""
-    return {
+    to where the simulator bound it); ``sweep``: simulated time ``SWEEP_TIME_SCALE`` times faster,
+    the robot sweeping at the sweep plan's TCP speed, stopping ``SWEEP_DWELL_S`` at a pass's ends,
+    the station keeping the plan's rows per second."""
+    from station.jobs.sweeping import SWEEP
+
+    raw = {
         "time_scale": TIME_SCALE,
         "robot": {"kind": "rtde", "host": CONTRACT["rtde"][0]},
         "drawstring": {"kind": "modbus_tcp", "host": "127.0.0.1", "port": CONTRACT["modbus"][1]},
@@ -176,6 +232,11 @@ def demo_config(seed: int) -> dict:
             "dwell_s": 2.5,
         },
     }
+    if sweep:
+        raw["time_scale"] = SWEEP_TIME_SCALE
+        raw["sim"].update(sweep_speed_mm_s=SWEEP.tcp_mm_s, dwell_s=SWEEP_DWELL_S)
+        raw["sweep"] = {"rows_per_s": SWEEP.row_hz}
+    return raw
 
 
 def serve_at(raw: dict, served: list[dict]) -> list[str]:
@@ -195,8 +256,9 @@ def serve_at(raw: dict, served: list[dict]) -> list[str]:
     return notes
 
 
-def _calibrate(out: Path, inputs, view, seed: int) -> int:
-    """Step 4: LMLC and MCS-LMLC on the session, a simulated hold-out set, the truth beside each."""
+def _calibrate(out: Path, inputs, view, seed: int, methods=("lmlc", "mcs-lmlc")) -> int:
+    """Step 4: ``methods`` (LMLC first) on the session, a simulated hold-out set, the truth beside
+    each."""
     import numpy as np
 
     from sim_fixtures.world import World
@@ -211,7 +273,7 @@ def _calibrate(out: Path, inputs, view, seed: int) -> int:
     samples, holdout = load_samples(inputs.folder.samples_csv), load_samples(holdout_path)
     where = str(inputs.folder.path / "session.toml")
     outcomes = {}
-    for method in ("lmlc", "mcs-lmlc"):
+    for method in methods:
         outcome = calibration.calibrate_samples(
             samples,
             inputs.robot,
@@ -324,4 +386,3 @@ def _verify(out: Path, inputs, seed: int) -> None:
             flush=True,
         )
     print(f"verify:    ({time.perf_counter() - t0:.1f} s)", flush=True)
-

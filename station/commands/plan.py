@@ -49,6 +49,15 @@ def register(sub) -> None:
         "controller's joints, as station compensate's), so the residual map is learnt where it works",
     )
     p.add_argument("--near-poses", type=_positive, metavar="N", help="contacts --near adds (default 60)")
+    p.add_argument(
+        "--sweep",
+        type=_positive,
+        nargs="?",
+        const=1,
+        metavar="N",
+        help="a sweep plan instead: N continuous passes (default 1) along each gauge line, the tool kept on "
+        "the edge and turned as it slides (station program writes them as blended linear moves)",
+    )
     p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -60,6 +69,8 @@ def run(args) -> int:
     from station.formats.base import Output, check_writable, write_outputs
     from station.jobs import planning
 
+    if args.sweep and args.near is not None:
+        raise InputError("--near and --sweep: choose one (a sweep's passes run the whole edge)")
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
         if path:
             check_writable(path, flag)
@@ -75,6 +86,8 @@ def run(args) -> int:
             f"to see joint zeros and link lengths and twists -> {args.out} (measure, then station verify)"
         )
         return 0
+    if args.sweep:
+        return _sweep(args, robot, setup, where)
     with parameters_as_flags(FLAGS):
         design = _design(args, robot, setup, where)(
             per_line=args.per_line,
@@ -115,6 +128,21 @@ def _design(args, robot, setup, where):
     return functools.partial(
         near_planning.near_design, robot, setup, q_model, where, program_where=str(args.near), **given
     )
+
+
+def _sweep(args, robot, setup, where) -> int:
+    """``--sweep``: the passes, the plan CSV and (``--report``) its report."""
+    from station.formats.base import Output, write_outputs
+    from station.jobs import sweeping
+
+    design = sweeping.sweep_design(robot, setup, where, passes=args.sweep, seed=args.seed)
+    outputs = [Output.text(args.out, "--out", design.plan.csv_text())]
+    if args.report:
+        outputs.append(Output.text(args.report, "--report", json.dumps(design.report, indent=2) + "\n"))
+    write_outputs(outputs)
+    print(sweeping.sweep_summary(design))
+    print("wrote " + ", ".join(str(o.path) for o in outputs))
+    return 0
 
 
 def _inputs(args):

@@ -5,6 +5,8 @@ Without ``--robot`` it simulates the shipped HSR-JR680 cell, whose robot program
 target onto its true line; with ``--robot R --setup S`` it rehearses your own cell
 (``station.jobs.rehearsal``): that robot with random errors, that setup's drawstring and lines, the
 program commanding the plan's nominal joints, so the tool lands off the edge by the robot's error;
+a sweep plan (``--plan`` with a ``pass`` column) is swept pass by pass
+(``sim_fixtures.sweep_program``), on the JR680 cell only;
 joints over OPC UA: the program runs the plan once, from when a session polls the robot (a
 ``station read`` does not start it). ``--program``: the simulated controller runs a program
 ``station program`` wrote (any format), its joints read in the controller's convention; over OPC UA
@@ -98,6 +100,12 @@ def run(args) -> int:
         plan = program_plan(args.program, cfg.sim.convention(_controller(args)))
     joints = None if plan is None else (plan.q_deg, plan.line)
     model, cell, controller = _rehearsal(args, cfg, joints, None if plan is None else plan.target)
+    if plan is not None and plan.is_sweep:
+        if cell is not None:
+            raise InputError(
+                "--plan: a sweep plan (with passes) plays on the simulated JR680 cell, not with --robot"
+            )
+        joints = (plan.q_deg, plan.line, plan.sweep_pass)  # the simulated robot sweeps its passes
     # a program run once, started when a session polls the robot: OPC UA's, and a written program over ROS
     once = cell is not None and (
         cfg.robot.kind == "opcua" or (args.program is not None and cfg.robot.kind == "ros")

@@ -3,6 +3,12 @@
 ``station plan`` designs one; ``station sim serve`` publishes the plan its simulated robot walks
 (``[sim] plan_csv``), which is where ``station sample`` looks when given no ``--plan``
 (``[session] plan``).
+
+A sweep plan (issue 37) adds an integer column ``pass``: rows sharing a pass id are consecutive
+waypoints on one gauge line, swept through continuously in their order (the robot stops only at a
+pass's two ends). The column is optional; a plan without it is a static plan (one capture per target
+after the robot settles). Where it is present every row has a pass id, a pass's rows lie on one line
+and are contiguous, and each pass is one waypoint or more.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg")
 UR's poses), base frame."""
 APPROACH_COLUMNS = ("ax", "ay", "az")
 """The unit direction in which the tool moves onto the edge, base frame."""
+PASS_COLUMN = "pass"
+"""A sweep plan's pass id per row (optional; see the module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +56,19 @@ class Plan:
     q_deg: np.ndarray
     pose: np.ndarray | None = None
     approach: np.ndarray | None = None
+    sweep_pass: np.ndarray | None = None
+
+    @property
+    def is_sweep(self) -> bool:
+        return self.sweep_pass is not None
+
+    def passes(self) -> list[np.ndarray]:
+        """A sweep plan's passes in order of first appearance: each the row positions of its
+        waypoints (contiguous, in sweep order)."""
+        if self.sweep_pass is None:
+            raise ValueError("a static plan has no passes")
+        _, first = np.unique(self.sweep_pass, return_index=True)
+        return [np.flatnonzero(self.sweep_pass == self.sweep_pass[i]) for i in np.sort(first)]
 
     def __len__(self) -> int:
         return len(self.target)
@@ -56,13 +77,16 @@ class Plan:
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
         contact = self.pose is not None and self.approach is not None
-        writer.writerow(PLAN_COLUMNS + (POSE_COLUMNS + APPROACH_COLUMNS if contact else ()))
+        sweep = self.sweep_pass is not None
+        header = PLAN_COLUMNS + (POSE_COLUMNS + APPROACH_COLUMNS if contact else ())
+        writer.writerow(header + ((PASS_COLUMN,) if sweep else ()))
         for k, (t, ln, q) in enumerate(zip(self.target, self.line, self.q_deg, strict=True)):
             extra = (
                 [*(f"{v:.4f}" for v in self.pose[k]), *(f"{v:.6f}" for v in self.approach[k])]
                 if contact
                 else []
             )
+            extra += [int(self.sweep_pass[k])] if sweep else []
             writer.writerow([int(t), int(ln), *(f"{v:.6f}" for v in q), *extra])
         return out.getvalue()
 
@@ -74,14 +98,19 @@ class Plan:
             self.q_deg[index],
             None if self.pose is None else self.pose[index],
             None if self.approach is None else self.approach[index],
+            None if self.sweep_pass is None else self.sweep_pass[index],
         )
 
     def rows(self) -> list[dict]:
         """As TOML-ready rows (embedded in ``session.toml``)."""
-        return [
+        rows = [
             {"target": int(t), "line": int(ln), "q_deg": [float(v) for v in q]}
             for t, ln, q in zip(self.target, self.line, self.q_deg, strict=True)
         ]
+        if self.sweep_pass is not None:
+            for row, p in zip(rows, self.sweep_pass, strict=True):
+                row["pass"] = int(p)
+        return rows
 
     @classmethod
     def of(cls, q_deg, line) -> Plan:
@@ -95,18 +124,23 @@ class Plan:
         table = validate(_PlanTable, {"plan": rows}, where)
         if not table.plan:
             raise InputError(f"{where}: plan: no targets")
+        passes = [r.sweep_pass for r in table.plan]
+        if any(p is None for p in passes) and any(p is not None for p in passes):
+            raise InputError(f"{where}: plan: some targets have a pass and some not")
         plan = cls(
             np.array([r.target for r in table.plan], int),
             np.array([r.line for r in table.plan], int),
             np.array([r.q_deg for r in table.plan], float).reshape(-1, 6),
+            sweep_pass=None if passes[0] is None else np.array(passes, int),
         )
-        return _unique_targets(plan, where)
+        return _check_passes(_unique_targets(plan, where), where)
 
 
 class _PlanRow(Strict):
     target: Id
     line: Id
     q_deg: Annotated[list[JointAngle], Field(min_length=6, max_length=6)]
+    sweep_pass: Id | None = Field(None, alias="pass")
 
 
 class _PlanTable(Strict):
@@ -117,6 +151,30 @@ def _unique_targets(plan: Plan, where) -> Plan:
     ids, counts = np.unique(plan.target, return_counts=True)
     if np.any(counts > 1):
         raise InputError(f"{where}: target id {ids[counts > 1][0]} appears twice; target ids must be unique")
+    return plan
+
+
+def _check_passes(plan: Plan, where) -> Plan:
+    """A sweep plan's passes each on one gauge line and contiguous (an ``InputError`` naming the
+    first row that breaks either)."""
+    if plan.sweep_pass is None:
+        return plan
+    p, line = plan.sweep_pass, plan.line
+    seen: dict[int, int] = {}
+    for i in range(len(p)):
+        if i and p[i] == p[i - 1]:
+            if line[i] != line[i - 1]:
+                raise InputError(
+                    f"{where}: row {i} (line {i + 2}): line: pass {p[i]} is on line {line[i - 1]} "
+                    f"and line {line[i]}; a pass sweeps one gauge line"
+                )
+            continue
+        if int(p[i]) in seen:
+            raise InputError(
+                f"{where}: row {i} (line {i + 2}): pass: pass {p[i]} resumes after other rows "
+                f"(it began at row {seen[int(p[i])]}); a pass's rows must be contiguous"
+            )
+        seen[int(p[i])] = i
     return plan
 
 
@@ -139,8 +197,13 @@ def load_plan(path) -> Plan:
         raise InputError(f"{path}: missing column {missing[0]}")
     values = np.array([[_cell(path, i, row, col) for col in PLAN_COLUMNS] for i, row in enumerate(rows)])
     pose, approach = _contacts(path, rows)
-    plan = Plan(values[:, 0].astype(int), values[:, 1].astype(int), values[:, 2:], pose, approach)
-    return _unique_targets(plan, path)
+    sweep = (
+        np.array([_cell(path, i, row, PASS_COLUMN) for i, row in enumerate(rows)]).astype(int)
+        if PASS_COLUMN in rows[0]
+        else None
+    )
+    plan = Plan(values[:, 0].astype(int), values[:, 1].astype(int), values[:, 2:], pose, approach, sweep)
+    return _check_passes(_unique_targets(plan, path), path)
 
 
 def _contacts(path: Path, rows: list[dict]) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -170,7 +233,7 @@ def _cell(path: Path, i: int, row: dict, col: str) -> float:
     [mm] or a direction's component."""
     cell = (row[col] or "").strip()  # None: the row is shorter than the header
     try:
-        if col in ("target", "line"):
+        if col in ("target", "line", PASS_COLUMN):
             return id_cell(cell, f"a {col} id")
         if col.endswith("_mm"):
             return number_cell(cell, MAX_LENGTH_MM, "mm")

@@ -18,6 +18,11 @@ One writer: a session that writes a folder holds an exclusive lock (``flock``) o
 ``session.lock``, which holds the writer's process id, from before anything in it is read or
 repaired to its end (the system releases it when the process ends, however). A second one is
 refused: "folder in use by PID ...", nothing touched.
+
+A sweep session (its plan has passes: ``station.acquire.sweep``) writes ``samples.csv`` with
+``SWEEP_COLUMNS`` (the static columns and ``pass``; a target holds many rows, each of one pass),
+appends each finished pass's rows at once, and keeps the rows it flagged (never samples) in
+``flagged.csv`` with their reason.
 """
 
 from __future__ import annotations
@@ -56,9 +61,31 @@ SAMPLE_COLUMNS = (
     "sample", "target", "line", *Q_COLUMNS, "length_mm", "dial_mm", "t_s",
     "q_spread_deg", "length_spread_mm", "dial_spread_mm", "window_s", "t_wall_s",
 )  # fmt: skip
+SWEEP_COLUMNS = (
+    "sample", "target", "line", "pass", *Q_COLUMNS, "length_mm", "dial_mm", "t_s",
+    "q_spread_deg", "length_spread_mm", "dial_spread_mm", "window_s", "t_wall_s",
+)  # fmt: skip
+FLAGGED_COLUMNS = (
+    "reason",
+    "target",
+    "line",
+    "pass",
+    *Q_COLUMNS,
+    "length_mm",
+    "dial_mm",
+    "speed_mm_s",
+    "t_s",
+    "t_wall_s",
+)
 RAW_COLUMNS = (
     "sample", "k", "t_robot_s", *Q_COLUMNS, "qd_max_deg_s", "t_length_s", "length_mm", "t_dial_s", "dial_mm",
 )  # fmt: skip
+
+
+def sample_columns(header: dict) -> tuple[str, ...]:
+    """The columns of a session's ``samples.csv``: a sweep plan's (rows with a pass) or the static."""
+    plan = header.get("plan") or [{}]
+    return SWEEP_COLUMNS if isinstance(plan[0], dict) and "pass" in plan[0] else SAMPLE_COLUMNS
 
 
 class SessionHeader(BaseModel):
@@ -262,8 +289,14 @@ def _holder(folder: Path, tries: int = 10) -> str:
 
 def check_rows(rows: list[dict], plan: Plan, where: Path) -> None:
     """Every row (validated cells) names a target of the embedded ``plan`` and the line that
-    target is on, each sample id and target once; InputError naming the row."""
+    target is on, each sample id and target once (a sweep plan's rows: the target's pass, and a
+    target as often as it was swept past); InputError naming the row."""
     lines = dict(zip(plan.target.tolist(), plan.line.tolist(), strict=True))
+    passes = (
+        {}
+        if plan.sweep_pass is None
+        else dict(zip(plan.target.tolist(), plan.sweep_pass.tolist(), strict=True))
+    )
     samples: dict[int, int] = {}
     targets: dict[int, int] = {}
     for i, row in enumerate(rows):
@@ -275,7 +308,11 @@ def check_rows(rows: list[dict], plan: Plan, where: Path) -> None:
             raise InputError(f"{at}: line {line}, but target {target} is on line {lines[target]} in the plan")
         if sample in samples:
             raise InputError(f"{at}: sample id {sample} again (row {samples[sample]})")
-        if target in targets:
+        if passes and row.get("pass", "").strip() != str(passes[target]):
+            raise InputError(
+                f"{at}: pass {row.get('pass')}, but target {target} is in pass {passes[target]} in the plan"
+            )
+        if target in targets and not passes:
             raise InputError(f"{at}: target {target} measured again (row {targets[target]})")
         samples[sample], targets[target] = i, i
 
@@ -286,7 +323,7 @@ def check_session_rows(folder: Path) -> None:
     header = read_toml(folder / "session.toml")
     if "plan" not in header:  # a folder made without one (by hand) has nothing to check against
         return
-    found = _whole_rows(folder / "samples.csv", SAMPLE_COLUMNS)
+    found = _whole_rows(folder / "samples.csv", sample_columns(header))
     _check_cells(folder / "samples.csv", found.rows, SAMPLE_CHECKS)
     check_rows(found.rows, _plan_of(header, folder), folder / "samples.csv")
 
@@ -314,6 +351,14 @@ class SessionFolder:
     @property
     def raw_csv(self) -> Path:
         return self.path / "raw.csv"
+
+    @property
+    def flagged_csv(self) -> Path:
+        return self.path / "flagged.csv"
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return sample_columns(self.header)
 
     @property
     def rrd(self) -> Path:
@@ -358,7 +403,9 @@ class SessionFolder:
         self.lock = FolderLock.take(self.path)
         try:
             _no_session_in(self.path)
-            for name, columns in (("samples.csv", SAMPLE_COLUMNS), ("raw.csv", RAW_COLUMNS)):
+            files = [("samples.csv", self.columns), ("raw.csv", RAW_COLUMNS)]
+            files += [("flagged.csv", FLAGGED_COLUMNS)] if self.columns == SWEEP_COLUMNS else []
+            for name, columns in files:
                 atomic_write(self.path / name, ",".join(columns) + "\n")
             atomic_write(self.path / "session.toml", toml_text(self.header))
         except OSError as exc:
@@ -411,7 +458,7 @@ class SessionFolder:
     def _open(cls, path: Path, lock: FolderLock) -> SessionFolder:
         header = read_toml(path / "session.toml")
         folder = cls(path, header, lock=lock)
-        samples = _whole_rows(folder.samples_csv, SAMPLE_COLUMNS)
+        samples = _whole_rows(folder.samples_csv, folder.columns)
         _check_cells(folder.samples_csv, samples.rows, SAMPLE_CHECKS)
         if "plan" in header:  # resume_session has checked that it does
             check_rows(samples.rows, _plan_of(header, path), folder.samples_csv)
@@ -426,24 +473,51 @@ class SessionFolder:
             atomic_write(folder.raw_csv, "".join(lines))
         return folder
 
+    def append_rows(self, rows: list[dict], flagged: list[dict]) -> None:
+        """Store a sweep's pass at once: its ``flagged`` rows (``flagged.csv``), then its sample
+        ``rows`` (each file's lines in one fsynced append); a failed write takes back what it wrote
+        of both (:class:`errors.OutputError`)."""
+        beside = (self.flagged_csv, [_csv_line(FLAGGED_COLUMNS, r) for r in flagged])
+        self._store(
+            beside, [_csv_line(self.columns, r) for r in rows], f"{len(rows)} rows of a sweep", "them"
+        )
+        self.rows += [{k: _cell(v) for k, v in row.items()} for row in rows]
+
+    def keep_rows(self, keep) -> int:
+        """Rewrite ``samples.csv`` (atomically) with only the rows for which ``keep(row)`` holds
+        (a sweep's unfinished pass, cut on resume); the number of rows dropped."""
+        kept = [r for r in self.rows if keep(r)]
+        dropped = len(self.rows) - len(kept)
+        if dropped:
+            lines = [",".join(self.columns) + "\n"] + [_csv_line(self.columns, r) for r in kept]
+            atomic_write(self.samples_csv, "".join(lines))
+            self.rows = kept
+        return dropped
+
     def append(self, row: dict, raw: list[dict]) -> None:
         """Store one capture: its raw readings, then its sample row (each fsynced). If either
         write fails, neither file keeps any of it (:class:`errors.OutputError`)."""
-        raw_size = self.raw_csv.stat().st_size
+        beside = (self.raw_csv, [_csv_line(RAW_COLUMNS, r) for r in raw])
+        self._store(beside, [_csv_line(SAMPLE_COLUMNS, row)], f"sample {row['sample']}", "it")
+        self.rows.append({k: _cell(v) for k, v in row.items()})
+
+    def _store(self, beside: tuple[Path, list[str]], lines: list[str], what: str, it: str) -> None:
+        """Append ``beside`` (a file and its lines), then ``lines`` to ``samples.csv``; a failed
+        write takes back what it wrote of both and raises :class:`errors.OutputError` about ``what``."""
+        path, beside_lines = beside
+        size = path.stat().st_size
         try:
-            _append(self.raw_csv, [_csv_line(RAW_COLUMNS, r) for r in raw])
+            _append(path, beside_lines)
             try:
-                _append(self.samples_csv, [_csv_line(SAMPLE_COLUMNS, row)])
+                _append(self.samples_csv, lines)
             except OSError:
-                os.truncate(self.raw_csv, raw_size)
+                os.truncate(path, size)
                 raise
         except OSError as exc:
             raise OutputError(
-                f"{self.path}: cannot store sample {row['sample']} ({exc.strerror or exc}); the "
-                f"{len(self.rows)} samples before it are kept: make room, then continue with "
-                f"--resume {self.path}"
+                f"{self.path}: cannot store {what} ({exc.strerror or exc}); the {len(self.rows)} samples "
+                f"before {it} are kept: make room, then continue with --resume {self.path}"
             ) from None
-        self.rows.append({k: _cell(v) for k, v in row.items()})
 
     def update_header(self, **changes) -> None:
         """Rewrite ``session.toml`` with ``changes`` (atomically: on failure the old file stays); a
@@ -541,7 +615,7 @@ def measured_targets(folder: Path) -> set[int]:
     """The target ids a session folder's ``samples.csv`` holds a whole row for (read only: a
     running session may hold the folder)."""
     folder = check_session_folder(folder)
-    found = _whole_rows(folder / "samples.csv", SAMPLE_COLUMNS)
+    found = _whole_rows(folder / "samples.csv", sample_columns(read_toml(folder / "session.toml")))
     _check_cells(folder / "samples.csv", found.rows, SAMPLE_CHECKS)
     return {int(r["target"]) for r in found.rows}
 

@@ -18,11 +18,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from calib import ik
+from calib.sweep import SweepLimits
 from errors import InputError
 from station.formats.plan import Plan
 from station.formats.tables import RobotFile
 from station.jobs.planning import contact_poses, robot_arrays
 
+SWEPT = SweepLimits()
 MIN_STANDOFF_MM = 2.0
 """A target near a joint limit gets a shorter stand-off (halved until it fits), not below this."""
 POSE_AGREES_MM = 10.0
@@ -39,7 +41,9 @@ class Motion:
     """How the program moves: stand-off distance [mm], dwell at the contact [s], the approach and
     retreat speeds [mm/s], the joint moves' speed [deg/s] and acceleration [deg/s^2], as a share
     of each axis' top speed where a controller sets it so (KRL, Fanuc) [%], and their TCP speed
-    where a controller limits them by it (RAPID's speeddata) [mm/s]."""
+    where a controller limits them by it (RAPID's speeddata) [mm/s]; along a sweep plan's pass, the
+    TCP speed [mm/s] and tool turn rate [deg/s] it was designed for (``calib.sweep.SweepLimits``)
+    and the blend radius at its waypoints [mm]."""
 
     standoff_mm: float = 20.0
     dwell_s: float = 3.0
@@ -49,6 +53,9 @@ class Motion:
     joint_deg_s2: float = 60.0
     joint_percent: float = 10.0
     joint_mm_s: float = 250.0
+    sweep_mm_s: float = SWEPT.tcp_mm_s
+    sweep_deg_s: float = SWEPT.turn_deg_s
+    blend_mm: float = 10.0
 
 
 @dataclass(frozen=True)

@@ -143,11 +143,11 @@ def design(
             "value": float(mcs.selection.value),
             "curve": {"n": mcs.sizes.tolist(), "O1": mcs.curve.tolist()},
         },
-        "predicted": {"plan": _promise(plan_modes), "all_candidates": _promise(all_modes)},
+        "predicted": {"plan": promise(plan_modes), "all_candidates": promise(all_modes)},
         "placements": [
             {
                 "lines": [int(i) for i in subset],
-                **_promise(expected_modes(_on(model, line_all, subset), workspace_q, readings)),
+                **promise(expected_modes(_on(model, line_all, subset), workspace_q, readings)),
             }
             for subset in _subsets(list(q_line))
         ],
@@ -276,7 +276,7 @@ def next_placement(
     )
     if not found:
         return None
-    present = _promise(expected_modes(design_model(dh, tool, ds_setup, q, line), workspace_q))
+    present = promise(expected_modes(design_model(dh, tool, ds_setup, q, line), workspace_q))
     best = found[0]
     return NextPlacement(
         *(np.array(best[k]) for k in ("point_mm", "direction", "approach")),
@@ -338,7 +338,7 @@ def _readings(k: int) -> str:
     return "single readings" if k == 1 else f"{k} readings averaged per capture"
 
 
-def _promise(modes: np.ndarray) -> dict:
+def promise(modes: np.ndarray) -> dict:
     return {
         "predicted_rmse_mm": predicted_workspace_rmse(modes),
         "predicted_rmse_95_mm": workspace_rmse_bound(modes, 0.95),
@@ -423,7 +423,7 @@ def _next_placements(
                     "direction": direction.tolist(),
                     "approach": approach.tolist(),
                     "length_mm": 400.0,
-                    **_promise(expected_modes(model, workspace_q, readings)),
+                    **promise(expected_modes(model, workspace_q, readings)),
                 }
             )
     return sorted(found, key=lambda f: f["predicted_rmse_mm"])[:keep]

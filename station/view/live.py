@@ -14,6 +14,9 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
   before the running calibration is judged, green within its limit, red when suspect),
   ``cell/cable`` (anchor -> TCP) and the nominal robot as it stands: ``cell/robot/links``,
   ``cell/robot/joints``, ``cell/robot/tool`` (the tool's approach onto the TCP);
+- a sweep session's ``cell/sweep/now`` (where the tool slides on a pass, as the robot's packages
+  come: grey), ``cell/sweep/<pass>/rows`` (the nominal TCPs of a stored pass's rows, green) and
+  ``cell/sweep/<pass>/flagged`` (its flagged rows, red), each as its pass is stored;
 - ``progress``: samples taken of the plan's;
 - ``live/error`` (reading - the running calibration's prediction, made before the sample joins a
   fit), ``live/error/limit/upper|lower`` (what the prediction's uncertainty and the noise explain)
@@ -213,7 +216,8 @@ class LiveView:
         scene += [] if robot_mm is None else [np.asarray(robot_mm, float).reshape(-1, 3)]
         self.rec.send_blueprint(blueprint(framing(np.vstack(scene))))
         self.rec.log(
-            "cell/base", rr.Points3D([[0.0, 0.0, 0.0]], radii=25.0, colors=[ROBOT], labels=["robot base"]),
+            "cell/base",
+            rr.Points3D([[0.0, 0.0, 0.0]], radii=25.0, colors=[ROBOT], labels=["robot base"]),
             static=True,
         )
         self.rec.log(
@@ -278,6 +282,28 @@ class LiveView:
         if live.suspect:
             self.rec.log("live/error/suspect", rr.Scalars(live.error_mm))
 
+    def sweeping(self, tcp_mm, t_s: float) -> None:
+        """Where the tool slid on a pass since the last call: nominal TCPs (N, 3) [mm]."""
+        self.rec.set_time("session_time", duration=t_s)
+        self.rec.log(
+            "cell/sweep/now", rr.Points3D(np.asarray(tcp_mm, float).reshape(-1, 3), radii=2.0, colors=[GREY])
+        )
+
+    def sweep(self, pass_id: int, line: int, tcp_mm, flagged_mm, t_s: float) -> None:
+        """A sweep's stored pass on gauge ``line``: the nominal TCPs (N, 3) [mm] of its rows and
+        (K, 3) of its flagged rows, at session time ``t_s`` [s]."""
+        self.rec.set_time("session_time", duration=t_s)
+        label = f"pass {pass_id} (line {line})"
+        self.rec.log(
+            f"cell/sweep/{pass_id}/rows",
+            rr.Points3D(np.asarray(tcp_mm, float).reshape(-1, 3), radii=1.5, colors=[GREEN], labels=[label]),
+        )
+        if len(flagged_mm):
+            self.rec.log(
+                f"cell/sweep/{pass_id}/flagged",
+                rr.Points3D(np.asarray(flagged_mm, float).reshape(-1, 3), radii=3.0, colors=[RED]),
+            )
+
     def _robot(self, chain: np.ndarray, tcp: np.ndarray, approach) -> None:
         """The robot as it stands: links through its joints, the joints, and the tool pointing
         along ``approach`` onto the TCP."""
@@ -313,7 +339,7 @@ class LiveView:
         """A session-log line; a long one in rows of ``LOG_WIDTH`` characters (the view cuts a row
         at its right edge), the rows after the first indented."""
         level = log_level(text)
-        for row in (textwrap.wrap(text, LOG_WIDTH, subsequent_indent="    ") or [""]):
+        for row in textwrap.wrap(text, LOG_WIDTH, subsequent_indent="    ") or [""]:
             self.rec.log("log", rr.TextLog(row, level=level))
 
     def calibration(self, method: str, before_mm, after_mm, cost_per_iteration) -> None:

@@ -42,25 +42,66 @@ class Program:
         for k in range(len(self.m.plan)):
             yield k, int(self.m.plan.target[k]), int(self.m.plan.line[k]), bool(self.m.skipped[k])
 
+    def passes(self) -> Iterator[tuple[int, int, np.ndarray, bool]]:
+        """Per pass of a sweep plan, in order: its id, gauge line, plan rows (the waypoints in sweep
+        order) and whether it is left out (no stand-off at its first or last waypoint)."""
+        plan = self.m.plan
+        for rows in plan.passes():
+            ends = self.m.skipped[[rows[0], rows[-1]]]
+            yield int(plan.sweep_pass[rows[0]]), int(plan.line[rows[0]]), rows, bool(ends.any())
+
+
+def each_pass(p: Program, left_out: str, moves) -> list[str]:
+    """The lines of every pass of a sweep plan, in order: ``moves(number, line, rows)`` (its id,
+    gauge line and plan rows), or for a pass left out ``left_out`` with ``{number}`` its id."""
+    lines: list[str] = []
+    for number, line, rows, skipped in p.passes():
+        lines += [left_out.format(number=number)] if skipped else moves(number, line, rows)
+    return lines
+
 
 def header(p: Program, pose_words: str, frame: str = "base frame", units: str = "deg") -> list[str]:
     """The header comment's lines (no comment marker, not yet escaped): what the program does, the
     joints' ``units`` and convention, the contact poses' convention ``pose_words`` and the
     controller's ``frame`` their base frame may differ from."""
-    mo = p.motion
     convention = "" if p.robot.controller.identity else f" (robot file [controller]: {_convention(p.robot)})"
+    moves = _sweep_moves(p) if p.m.plan.is_sweep else _target_moves(p)
     return [
-        f"Measurement program for {p.robot.name}: {len(p.m.plan)} targets from {p.source} (station program).",
-        f"Per target: a joint move to a stand-off {mo.standoff_mm:g} mm back along the approach, a linear "
-        f"move at {mo.approach_mm_s:g} mm/s onto the contact,",
-        f"a {mo.dwell_s:g} s dwell (station sample captures there), a linear move back at "
-        f"{mo.retreat_mm_s:g} mm/s.",
+        *moves,
         f"Joints in {units}, in the controller's convention: reading = joint_sign * (model - "
         f"joint_offset_deg){convention}.",
         f"Contact poses (comments): the nominal model's TCP in its base frame ({pose_words}),",
         f"which may differ from the controller's {frame}: the moves use joints only.",
         "The contact poses are the nominal model's: the dial reads how far the real tool lands off them.",
         "No real controller has checked this program: run it first at low override, step by step.",
+    ]
+
+
+def _target_moves(p: Program) -> list[str]:
+    """The header's words for a static plan's moves."""
+    mo = p.motion
+    return [
+        f"Measurement program for {p.robot.name}: {len(p.m.plan)} targets from {p.source} (station program).",
+        f"Per target: a joint move to a stand-off {mo.standoff_mm:g} mm back along the approach, a linear "
+        f"move at {mo.approach_mm_s:g} mm/s onto the contact,",
+        f"a {mo.dwell_s:g} s dwell (station sample captures there), a linear move back at "
+        f"{mo.retreat_mm_s:g} mm/s.",
+    ]
+
+
+def _sweep_moves(p: Program) -> list[str]:
+    """The header's words for a sweep plan's moves."""
+    mo, n = p.motion, len(p.m.plan.passes())
+    return [
+        f"Sweep program for {p.robot.name}: {n} passes, {len(p.m.plan)} waypoints from {p.source} (station "
+        "program).",
+        f"Per pass: a joint move to a stand-off {mo.standoff_mm:g} mm back along the approach from its first "
+        f"waypoint, a linear move at {mo.approach_mm_s:g} mm/s onto it, a {mo.dwell_s:g} s dwell,",
+        f"linear moves through its waypoints at {mo.sweep_mm_s:g} mm/s (the tool turning at most "
+        f"{mo.sweep_deg_s:g} deg/s), blended {mo.blend_mm:g} mm at each but the last: the waypoints lie",
+        "on one gauge edge, so the blends keep the tool on it (station sample streams meanwhile);",
+        f"a {mo.dwell_s:g} s dwell at the last, a linear move back to its stand-off at "
+        f"{mo.retreat_mm_s:g} mm/s.",
     ]
 
 

@@ -12,6 +12,14 @@ y, z axes), in the nominal model's base frame (not necessarily the controller's 
 frame). A TP comment holds 32 characters: the header is wrapped, ``;`` (which ends a line of
 ``/MN``) escaped. The program's name is the file's, in upper case: a letter, then letters,
 digits or ``_``, 36 at most (R-30iB; older controllers take 8). No real controller has checked it.
+
+A sweep plan (a ``pass`` column) numbers, per pass, its first waypoint's stand-off, its waypoints
+and its last's stand-off (``"T<target> off"``, ``"T<target> on"``); ``/MN`` does ``J`` to the
+stand-off, ``L`` onto the first waypoint at the approach speed ``FINE``, the dwell, ``L`` through
+the waypoints at the sweep speed [mm/sec] with ``CNT100`` (continuous: the controller blends
+through the point) at each but the last, ``FINE`` there, the dwell, ``L`` back to its stand-off.
+The tool turns along a pass, so tool 1 must be the ball (the robot file's ``tool_mm``, said in a
+comment): the controller then moves the ball, not the flange, on the edge.
 """
 
 from __future__ import annotations
@@ -48,7 +56,10 @@ def write(p: Program) -> tuple[str]:
     """The ``.ls`` program of ``p``."""
     notes = header(p, "X Y Z mm, W P R deg: turns about the fixed x, y, z", "world frame")
     body = [f"! {n} ;" for n in wrapped([comment_text(n, ";") for n in notes], COMMENT_MAX)]
-    body += ["UFRAME_NUM=0 ;", "UTOOL_NUM=1 ;", *_moves(p)]
+    sweep = p.m.plan.is_sweep
+    ball = "! UTOOL 1: X {:g} Y {:g} Z {:g} ;".format(*p.robot.tool_mm)
+    body += ["UFRAME_NUM=0 ;", "UTOOL_NUM=1 ;", *([ball] if sweep else [])]
+    body += _sweep_moves(p) if sweep else _moves(p)
     lines = [
         f"/PROG  {p.out.stem.upper()}",
         "/ATTR",
@@ -71,7 +82,7 @@ def write(p: Program) -> tuple[str]:
         "/MN",
         *(f"{n:4d}:  {line}" for n, line in enumerate(body, start=1)),
         "/POS",
-        *_positions(p),
+        *(_sweep_positions(p) if sweep else _positions(p)),
         "/END",
         "",
     ]
@@ -94,6 +105,48 @@ def _moves(p: Program) -> list[str]:
             f"WAIT {mo.dwell_s:.2f}(sec) ;",
             f"L P[{n}] {_mm_s(mo.retreat_mm_s)}mm/sec FINE ;",
         ]
+    return lines
+
+
+def _sweep_numbered(p: Program):
+    """``p.passes()``, each led by its first stand-off's position number (the waypoints follow, then
+    the last stand-off; the numbers run over the passes measured)."""
+    n = 1
+    for number, line, rows, skipped in p.passes():
+        yield n, number, line, rows, skipped
+        n += 0 if skipped else len(rows) + 2
+
+
+def _sweep_moves(p: Program) -> list[str]:
+    mo, target, lines = p.motion, p.m.plan.target, []
+    for n, number, line, rows, skipped in _sweep_numbered(p):
+        if skipped:
+            lines.append(f"! pass {number} left out ;")
+            continue
+        last = n + len(rows) + 1
+        lines += [
+            f"! pass {number} line {line} ;",
+            f"! tgt {target[rows[0]]}..{target[rows[-1]]} ;",
+            f"J P[{n}] {mo.joint_percent:.0f}% FINE ;",
+            f"L P[{n + 1}] {_mm_s(mo.approach_mm_s)}mm/sec FINE ;",
+            f"WAIT {mo.dwell_s:.2f}(sec) ;",
+            *(f"L P[{n + 1 + j}] {_mm_s(mo.sweep_mm_s)}mm/sec CNT100 ;" for j in range(1, len(rows) - 1)),
+            f"L P[{last - 1}] {_mm_s(mo.sweep_mm_s)}mm/sec FINE ;",
+            f"WAIT {mo.dwell_s:.2f}(sec) ;",
+            f"L P[{last}] {_mm_s(mo.retreat_mm_s)}mm/sec FINE ;",
+        ]
+    return lines
+
+
+def _sweep_positions(p: Program) -> list[str]:
+    contact, standoff, target, lines = p.contact_deg(), p.standoff_deg(), p.m.plan.target, []
+    for n, _, _, rows, skipped in _sweep_numbered(p):
+        if skipped:
+            continue
+        lines += _position(n, f"T{target[rows[0]]} off", standoff[rows[0]])
+        for j, k in enumerate(rows, start=1):
+            lines += _position(n + j, f"T{target[k]} on", contact[k])
+        lines += _position(n + len(rows) + 1, f"T{target[rows[-1]]} off", standoff[rows[-1]])
     return lines
 
 

@@ -12,6 +12,15 @@ ball moves on the same straight line. The contact pose stands in a comment befor
 ABB's convention ``[[x, y, z], [q1, q2, q3, q4]]`` (mm; quaternion w, x, y, z) in the nominal
 model's base frame (not necessarily the controller's ``wobj0``). Speeds are ``speeddata``
 ``[v_tcp mm/s, v_ori deg/s, v_leax mm/s, v_reax deg/s]``. No real controller has checked it.
+
+A sweep plan (a ``pass`` column) has a ``CONST jointtarget t<target>_on`` per waypoint and
+``t<target>_off`` for the first and last of each pass; per pass ``MoveAbsJ`` to the first's
+stand-off, ``MoveL`` onto it at the approach speed, ``fine``, ``WaitTime \\InPos`` the dwell, then
+``MoveL`` through the waypoints at ``station_sweep`` (the sweep speed [mm/s] and turn rate
+[deg/s]) with zone ``z<blend>`` (``zonedata``: the path's corner radius [mm]) at each but the last,
+``fine`` there, the dwell, ``MoveL`` back to its stand-off; those moves with the tool
+``station_ball`` (the robot file's ``tool_mm``, no turn: the tool turns along a pass, so the ball,
+not the flange, must move on the edge).
 """
 
 from __future__ import annotations
@@ -19,8 +28,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from station.jobs.measurement import program_text
-from station.jobs.programs.common import Program, comment_text, header, numbers, quaternion_wxyz
+from station.jobs.programs.common import Program, comment_text, each_pass, header, numbers, quaternion_wxyz
 
+BALL = "station_ball"
+"""A sweep's tool: the ball (``_sweep_tool``)."""
 STRING_MAX = 80
 """The most characters a RAPID string holds."""
 
@@ -40,24 +51,32 @@ def write(p: Program) -> tuple[str]:
         f"  CONST speeddata station_joint := [{mo.joint_mm_s:g}, {mo.joint_deg_s:g}, 5000, 1000];",
         f"  CONST speeddata station_approach := [{mo.approach_mm_s:g}, 500, 5000, 1000];",
         f"  CONST speeddata station_retreat := [{mo.retreat_mm_s:g}, 500, 5000, 1000];",
-        *_points(p),
+        *(_sweep_tool(p) if p.m.plan.is_sweep else []),
+        *(_sweep_points(p) if p.m.plan.is_sweep else _points(p)),
         "",
         "  PROC station_measurement()",
         "    TPWrite station_robot;",
-        *_calls(p),
+        *(_sweep_calls(p) if p.m.plan.is_sweep else _calls(p)),
         "  ENDPROC",
         "",
-        "  PROC station_target(jointtarget standoff, jointtarget contact)",
-        "    ! a joint move to the stand-off, linear onto the contact, the dwell, linear back",
-        "    MoveAbsJ standoff, station_joint, fine, tool0;",
-        "    MoveL CalcRobT(contact, tool0), station_approach, fine, tool0;",
-        f"    WaitTime \\InPos, {mo.dwell_s:g};",
-        "    MoveL CalcRobT(standoff, tool0), station_retreat, fine, tool0;",
-        "  ENDPROC",
+        *([] if p.m.plan.is_sweep else _target_proc(p)),
         "ENDMODULE",
         "",
     ]
     return ("\n".join(lines),)
+
+
+def _target_proc(p: Program) -> list[str]:
+    """The procedure a static plan's targets call."""
+    return [
+        "  PROC station_target(jointtarget standoff, jointtarget contact)",
+        "    ! a joint move to the stand-off, linear onto the contact, the dwell, linear back",
+        "    MoveAbsJ standoff, station_joint, fine, tool0;",
+        "    MoveL CalcRobT(contact, tool0), station_approach, fine, tool0;",
+        f"    WaitTime \\InPos, {p.motion.dwell_s:g};",
+        "    MoveL CalcRobT(standoff, tool0), station_retreat, fine, tool0;",
+        "  ENDPROC",
+    ]
 
 
 def _points(p: Program) -> list[str]:
@@ -69,6 +88,53 @@ def _points(p: Program) -> list[str]:
                 f"  CONST jointtarget t{target}_on := {_joints(contact[k])};",
             ]
     return lines
+
+
+def _sweep_tool(p: Program) -> list[str]:
+    """A sweep plan's speed along the edge and its tool, the ball (``tooldata``: held by the robot,
+    its TCP [mm] and orientation, then a nominal 1 kg load at the flange)."""
+    mo = p.motion
+    return [
+        f"  CONST speeddata station_sweep := [{mo.sweep_mm_s:g}, {mo.sweep_deg_s:g}, 5000, 1000];",
+        f"  PERS tooldata {BALL} := [TRUE, [[{numbers(p.robot.tool_mm, 3)}], [1, 0, 0, 0]], "
+        "[1, [0, 0, 1], [1, 0, 0, 0], 0, 0, 0]];",
+    ]
+
+
+def _sweep_points(p: Program) -> list[str]:
+    """A sweep plan's jointtargets: every waypoint's contact, each pass's two stand-offs."""
+    contact, standoff, lines = p.contact_deg(), p.standoff_deg(), []
+    for _, _, rows, skipped in p.passes():
+        if skipped:
+            continue
+        for k in (rows[0], rows[-1]):
+            lines.append(f"  CONST jointtarget t{p.m.plan.target[k]}_off := {_joints(standoff[k])};")
+        lines += [f"  CONST jointtarget t{p.m.plan.target[k]}_on := {_joints(contact[k])};" for k in rows]
+    return lines
+
+
+def _sweep_calls(p: Program) -> list[str]:
+    """A sweep plan's moves, pass by pass (module notes)."""
+    mo, target = p.motion, p.m.plan.target
+    zone = f"z{mo.blend_mm:g}"
+
+    def moves(number, line, rows) -> list[str]:
+        first, last = target[rows[0]], target[rows[-1]]
+        return [
+            f"    ! pass {number}, line {line}: {len(rows)} waypoints, targets {first}..{last}",
+            f"    MoveAbsJ t{first}_off, station_joint, fine, {BALL};",
+            f"    MoveL CalcRobT(t{first}_on, {BALL}), station_approach, fine, {BALL};",
+            f"    WaitTime \\InPos, {mo.dwell_s:g};",
+            *(
+                f"    MoveL CalcRobT(t{t}_on, {BALL}), station_sweep, {zone}, {BALL};"
+                for t in target[rows[1:-1]]
+            ),
+            f"    MoveL CalcRobT(t{last}_on, {BALL}), station_sweep, fine, {BALL};",
+            f"    WaitTime \\InPos, {mo.dwell_s:g};",
+            f"    MoveL CalcRobT(t{last}_off, {BALL}), station_retreat, fine, {BALL};",
+        ]
+
+    return each_pass(p, "    ! pass {number} left out: no stand-off within the joint limits at an end", moves)
 
 
 def _calls(p: Program) -> list[str]:

@@ -10,6 +10,12 @@ before it moves to target k it reads the RTDE input registers ur_rtde's ``RTDEIO
 in ``input_double_register_42..46``, joint 6 [urad] in ``input_int_register_43``); if the index
 names k (read before and after the joints, so a target being rewritten is not taken half), the
 contact is those joints and the stand-off moves by the same joint change, else the planned joints.
+
+A sweep plan (a ``pass`` column) is written per pass: ``movej`` to the stand-off of its first
+waypoint, ``movel`` onto it at the approach speed, ``sleep`` the dwell, ``movel`` through its
+waypoints at the sweep speed (``v`` [m/s]) with blend radius ``r`` [m] at each but the last (which
+stops), ``sleep`` the dwell, ``movel`` back to the last waypoint's stand-off. Its waypoints are the
+planned joints (no corrected targets: the session streams, it does not stop at each).
 """
 
 from __future__ import annotations
@@ -19,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.robot import TARGET_INDEX_INPUT, TARGET_JOINT6_INPUT, TARGET_JOINT_INPUTS, URAD
-from station.jobs.programs.common import Program, comment_text, header, numbers
+from station.jobs.programs.common import Program, comment_text, each_pass, header, numbers
 
 
 def paths(out: Path) -> tuple[Path]:
@@ -28,6 +34,8 @@ def paths(out: Path) -> tuple[Path]:
 
 def write(p: Program) -> tuple[str]:
     """The URScript program of ``p``."""
+    if p.m.plan.is_sweep:
+        return (_sweep(p),)
     mo = p.motion
     joint_v, joint_a = np.radians(mo.joint_deg_s), np.radians(mo.joint_deg_s2)
     contact, standoff = np.radians(p.contact_deg()), np.radians(p.standoff_deg())
@@ -63,6 +71,46 @@ def write(p: Program) -> tuple[str]:
         ]
     lines += ["end", "station_measurement()", ""]
     return ("\n".join(lines),)
+
+
+def _sweep(p: Program) -> str:
+    """The URScript program of a sweep plan (module notes)."""
+    mo = p.motion
+    joint_v, joint_a = np.radians(mo.joint_deg_s), np.radians(mo.joint_deg_s2)
+    contact, standoff = np.radians(p.contact_deg()), np.radians(p.standoff_deg())
+    sweep_v, blend = mo.sweep_mm_s / 1000.0, mo.blend_mm / 1000.0
+
+    def moves(number, line, rows) -> list[str]:
+        first, last = rows[0], rows[-1]
+        return [
+            f"  # pass {number}, line {line}: {len(rows)} waypoints, targets {p.m.plan.target[first]}.."
+            f"{p.m.plan.target[last]}, from [{numbers(p.m.pose[first], 3)}]",
+            f"  #   to [{numbers(p.m.pose[last], 3)}]",
+            f"  movej([{numbers(standoff[first], 6)}], a={joint_a:.4f}, v={joint_v:.4f})",
+            f"  movel([{numbers(contact[first], 6)}], a=0.1, v={mo.approach_mm_s / 1000.0:.4f})",
+            f"  sleep({mo.dwell_s:g})",
+            *(
+                f"  movel([{numbers(contact[k], 6)}], a=0.5, v={sweep_v:.4f}"
+                + (f", r={blend:.4f})" if k != last else ")")
+                for k in rows[1:]
+            ),
+            f"  sleep({mo.dwell_s:g})",
+            f"  movel([{numbers(standoff[last], 6)}], a=0.5, v={mo.retreat_mm_s / 1000.0:.4f})",
+        ]
+
+    return "\n".join(
+        [
+            *(f"# {comment_text(n)}" for n in header(p, "mm and rotation vector in deg", units="rad")),
+            "def station_sweep():",
+            "  set_tcp(p[{:.6f}, {:.6f}, {:.6f}, 0, 0, 0])".format(*(np.asarray(p.robot.tool_mm) / 1000.0)),
+            *each_pass(
+                p, "  # pass {number} left out: no stand-off within the joint limits at an end", moves
+            ),
+            "end",
+            "station_sweep()",
+            "",
+        ]
+    )
 
 
 _INDEX = f"read_input_integer_register({TARGET_INDEX_INPUT})"

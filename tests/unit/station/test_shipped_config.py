@@ -71,7 +71,7 @@ def test_every_key_of_every_section_is_in_the_shipped_file_and_nothing_else():
     assert set(shipped) == set(expected)
     for block, fields in expected.items():
         assert set(shipped[block]) == set(fields), block
-    assert len(expected) == 13  # top level, session, 4 robots, 3 drawstrings, registers, dial, reconnect, sim
+    assert len(expected) == 14  # top, session, sweep, 4 robots, 3 drawstr., registers, dial, reconnect, sim
 
 
 def test_every_key_is_at_its_default_and_explained():

@@ -1,0 +1,66 @@
+"""The demo's cell measured statically and by sweeps (issue 37): robot time and true workspace error.
+
+    python benchmarks/demo_sweep.py [--seeds 0 1 2 3] [--only static|sweep]
+
+Per seed, ``station demo --seed S`` and ``station demo --sweep --seed S`` in subprocesses (each
+its own simulated devices, one after the other), and from their output the robot time (the
+simulated seconds the program takes to walk the plan once) and the true workspace error after
+LMLC (1,000 random poses, rigid base re-fit). The target: each sweep demo within 120 s of robot
+time, its error no worse than the static demo's on the same seed. Takes about 10 minutes a seed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROBOT = re.compile(r"^robot: +([\d.]+) s of robot time", re.M)
+TRUE = re.compile(
+    r"calibrate: lmlc .*true workspace error \(simulation, 1000 random poses\) [\d.]+ -> ([\d.]+) mm"
+)
+
+
+def demo(seed: int, sweep: bool, folder: Path) -> tuple[float, float, int]:
+    """Robot time [s], true workspace error after LMLC [mm] and exit code of one demo run."""
+    out = folder / f"{'sweep' if sweep else 'static'}-{seed}"
+    argv = [
+        sys.executable,
+        "-m",
+        "station.cli",
+        "demo",
+        "--no-viewer",
+        "--seed",
+        str(seed),
+        "--out",
+        str(out),
+    ]
+    done = subprocess.run(argv + (["--sweep"] if sweep else []), capture_output=True, text=True)
+    robot, true = ROBOT.search(done.stdout), TRUE.search(done.stdout)
+    if done.returncode != 0 or not robot or not true:
+        print(done.stdout[-3000:], done.stderr[-3000:], file=sys.stderr)
+    nan = float("nan")
+    return (float(robot[1]) if robot else nan), (float(true[1]) if true else nan), done.returncode
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    parser.add_argument("--only", choices=("static", "sweep"))
+    args = parser.parse_args()
+    kinds = [k for k in ("static", "sweep") if args.only in (None, k)]
+    folder = Path(tempfile.mkdtemp(prefix="demo-sweep-"))
+    print("seed | " + " | ".join(f"{k} robot time [s] | {k} true error [mm] | {k} exit" for k in kinds))
+    for seed in args.seeds:
+        cells = []
+        for kind in kinds:
+            robot, true, code = demo(seed, kind == "sweep", folder)
+            cells += [f"{robot:.1f}", f"{true:.3f}", str(code)]
+        print(f"{seed} | " + " | ".join(cells), flush=True)
+
+
+if __name__ == "__main__":
+    main()
