@@ -12,7 +12,7 @@ from errors import InputError
 from station.formats.plan import Plan
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.calibration import WORKSPACE_POSES, drawstring_setup
-from station.jobs.planning import Design, _promise, contact_poses, design, placements, robot_arrays
+from station.jobs.planning import Design, contact_poses, design, placements, promise, robot_arrays
 
 
 def near_design(
@@ -43,8 +43,8 @@ def near_design(
     model = design_model(dh, tool, drawstring_setup(setup, where), q_plan, line_plan)
     workspace_q = rng.uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))
     report = dict(base.report)
-    promise = _promise(expected_modes(model, workspace_q, report["readings"]))
-    report["predicted"] = {**report["predicted"], "plan": promise}
+    promised = promise(expected_modes(model, workspace_q, report["readings"]))
+    report["predicted"] = {**report["predicted"], "plan": promised}
     report["near"] = {
         "program": program_where,
         "program_poses": len(program_q),
