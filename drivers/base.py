@@ -148,6 +148,11 @@ class Driver(abc.ABC):
     def read(self) -> Reading:
         """One reading of every field, or a :class:`DriverError`."""
 
+    def received(self) -> list[Reading] | None:
+        """Every reading the device pushed since the last call (a subscription), oldest first, each
+        stamped at its arrival; None where the device is polled (:meth:`read` it instead)."""
+        return None
+
     def describe(self) -> dict[str, Field]:
         """What :meth:`read` returns: field name -> units, shape, meaning."""
         return dict(self.fields)

@@ -1,7 +1,9 @@
 """Robot joint angles from a ROS ``sensor_msgs/JointState`` topic through rosbridge (``roslibpy``).
 
 ``roslibpy`` keeps the WebSocket to the bridge and calls back with every message; the driver keeps
-the latest and its arrival time. ``read()`` gives the latest message's joints in ``joint_names``'
+the latest and its arrival time, and the last ``KEPT`` of them for :meth:`RosJointSource.received`
+(a sweep streams every message, not the one that happens to be latest when polled). ``read()``
+gives the latest message's joints in ``joint_names``'
 order (a name the message lacks: :class:`~drivers.base.DeviceReplyError` naming it), in degrees
 (ROS: rad, rad/s); a message older than ``stale_s`` (the publisher stopped) raises
 :class:`~drivers.base.DeviceTimeout`, a closed bridge :class:`~drivers.base.DeviceUnreachable`.
@@ -24,6 +26,7 @@ import logging
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Sequence
 
 import roslibpy
@@ -44,6 +47,7 @@ logging.getLogger("roslibpy").setLevel(logging.CRITICAL)  # its reconnect chatte
 
 JOINTS = 6
 RUNNING = 7
+KEPT = 4096  # messages kept for received(): 40 s at a 100 Hz topic
 JOINT_STATE = "sensor_msgs/JointState"
 ROS_FIELDS = {
     "q_deg": Field("deg", (JOINTS,), "JointState position"),
@@ -79,6 +83,7 @@ class RosJointSource(Driver):
         self._ros = self._topic = self._targets = None
         self._lock = threading.Lock()
         self._latest: tuple[float, dict] | None = None
+        self._arrivals: deque[tuple[float, float, dict]] = deque(maxlen=KEPT)  # monotonic, wall, message
         self._previous: tuple[float, float, tuple, tuple] | None = None  # arrival, stamp, q, qd
         self._arrived = threading.Event()
 
@@ -91,6 +96,7 @@ class RosJointSource(Driver):
         the first message."""
         self.close()
         self._latest, self._previous = None, None
+        self._arrivals.clear()
         self._arrived.clear()
         ros = roslibpy.Ros(self.host, self.port)
         try:
@@ -106,8 +112,10 @@ class RosJointSource(Driver):
             self._targets = RosTargets(self, roslibpy.Topic(ros, self.target_topic, JOINT_STATE, latch=True))
 
     def _on_message(self, message: dict) -> None:
+        arrived = time.monotonic()
         with self._lock:
-            self._latest = (time.monotonic(), message)
+            self._latest = (arrived, message)
+            self._arrivals.append((arrived, time.time(), message))
         self._arrived.set()
 
     def target_channel(self) -> RosTargets | None:
@@ -122,19 +130,38 @@ class RosJointSource(Driver):
             pass
 
     def read(self) -> Reading:
-        if self._ros is None:
-            raise DeviceUnreachable(self.name, f"{self._where} not connected (open() first)")
-        if not self._ros.is_connected:
-            raise DeviceUnreachable(self.name, f"{self._where} connection lost")
+        self._check_connected()
         with self._lock:
             arrived, message = self._latest
         age = time.monotonic() - arrived
         if age > self.stale_s:
             raise DeviceTimeout(self.name, f"no new message on {self._where} for {age:.2f} s")
+        return Reading.now(self.name, self._values(arrived, message), ROS_FIELDS)
+
+    def received(self) -> list[Reading]:
+        """The messages that arrived since the last call (at most ``KEPT``), each stamped at its
+        arrival; a malformed one is a GarbledReply, as :meth:`read`'s (those before it are lost)."""
+        self._check_connected()
+        with self._lock:
+            arrivals = list(self._arrivals)
+            self._arrivals.clear()
+        units = {name: field.units for name, field in ROS_FIELDS.items()}
+        return [
+            Reading(self.name, self._values(arrived, message), units, arrived, wall)
+            for arrived, wall, message in arrivals
+        ]
+
+    def _check_connected(self) -> None:
+        if self._ros is None:
+            raise DeviceUnreachable(self.name, f"{self._where} not connected (open() first)")
+        if not self._ros.is_connected:
+            raise DeviceUnreachable(self.name, f"{self._where} connection lost")
+
+    def _values(self, arrived: float, message) -> dict:
+        """A message's fields (see ``ROS_FIELDS``), ``arrived`` [s, monotonic] its arrival."""
         t, q, velocity = self._parse(message)
         qd = velocity if velocity is not None else self._speed(arrived, t, q)
-        values = {"q_deg": q, "qd_deg_s": qd, "robot_mode": RUNNING, "controller_time_s": t}
-        return Reading.now(self.name, values, ROS_FIELDS)
+        return {"q_deg": q, "qd_deg_s": qd, "robot_mode": RUNNING, "controller_time_s": t}
 
     def _speed(self, arrived: float, t: float, q: tuple[float, ...]) -> tuple[float, ...]:
         """The joints' change [deg/s] since the message before, over the stamps or, where they do

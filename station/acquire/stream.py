@@ -1,12 +1,14 @@
 """Each device read continuously in its own thread, every reading time-stamped where it is taken
 (a sweep session, ``station.acquire.sweep``).
 
-- The robot: its driver polled twice per package period; each new package is kept with the
+- The robot: its driver polled twice per package period (a subscription's, as ROS's, drained as
+  often: every message it pushed, stamped at its arrival); each new package is kept with the
   controller's timestamp (RTDE: ``controller_time_s``, the controller's clock) and its arrival on
   the station's clock (``time.monotonic``), so the two clocks can be tied
   (``calib.alignment.clock_offset``). A source without a controller timestamp (OPC UA and Modbus
   polled), or whose clock stands still while its joints move (a ROS stamp of 0), is stamped at the
-  middle of its read, as a sensor is, and kept when its joints change.
+  middle of its read, as a sensor is (a pushed message: at its arrival), and kept when its joints
+  change.
 - A sensor (drawstring, dial): asked again as soon as it answers, but not sooner than
   ``min_interval_s`` after its last request (twice the rows a sweep keeps: more would only load
   the station); a reading is stamped at the
@@ -111,29 +113,21 @@ class Streams:
             thread.join(timeout=2.0)
 
     def _read_robot(self) -> None:
-        driver, out, last, still = self.drivers["robot"], self.robot, (None, None), 0
+        driver, keep = self.drivers["robot"], _Keeper(self.robot)
         while not self._stop.is_set():
             before = time.monotonic()
             try:
-                reading = driver.read()
+                pushed = driver.received()
+                if pushed is None:  # polled: a reading taken somewhere inside the read
+                    reading = driver.read()
+                    keep(reading, (before + reading.t_monotonic) / 2)
+                for reading in pushed or ():  # a subscription's: each sent as it arrived
+                    keep(reading, reading.t_monotonic)
             except DriverError as exc:
-                out.failures += 1
-                out.last_failure = str(exc)
+                self.robot.failures += 1
+                self.robot.last_failure = str(exc)
                 self._stop.wait(self._poll_s * 10)
                 continue
-            v = reading.values
-            stamp, q = v.get("controller_time_s"), tuple(v["q_deg"])
-            still = still + 1 if stamp is not None and stamp == last[0] and q != last[1] else 0
-            if out.stamped and (stamp is None or still >= STILL_CLOCK):
-                out.stamped = False  # no clock, or one standing still on moving joints
-                out.clear()
-            if (stamp, q) != last and (not out.stamped or still == 0):
-                last = (stamp, q)
-                out.stamp.append(float(stamp if out.stamped else (before + reading.t_monotonic) / 2))
-                out.q_deg.append(q)
-                out.qd_deg_s.append(tuple(v["qd_deg_s"]))
-                out.mode.append(int(v["robot_mode"]))
-                out.arrival.append(reading.t_monotonic)
             self._stop.wait(self._poll_s)
 
     def _read_sensor(self, out: SensorStream) -> None:
@@ -162,6 +156,31 @@ class Streams:
             out.value.append(value)
             out.round_trip.append(after - before)
             out.t.append((before + after) / 2)
+
+
+class _Keeper:
+    """Appends each new package to a :class:`RobotStream`: one with new joints or a new stamp, on
+    the controller's clock while the source has one that runs, else at ``taken`` [s, monotonic]."""
+
+    def __init__(self, out: RobotStream):
+        self.out, self.last, self.still = out, (None, None), 0
+
+    def __call__(self, reading, taken: float) -> None:
+        out, v = self.out, reading.values
+        stamp, q = v.get("controller_time_s"), tuple(v["q_deg"])
+        self.still = (
+            self.still + 1 if stamp is not None and stamp == self.last[0] and q != self.last[1] else 0
+        )
+        if out.stamped and (stamp is None or self.still >= STILL_CLOCK):
+            out.stamped = False  # no clock, or one standing still on moving joints
+            out.clear()
+        if (stamp, q) != self.last and (not out.stamped or self.still == 0):
+            self.last = (stamp, q)
+            out.stamp.append(float(stamp if out.stamped else taken))
+            out.q_deg.append(q)
+            out.qd_deg_s.append(tuple(v["qd_deg_s"]))
+            out.mode.append(int(v["robot_mode"]))
+            out.arrival.append(reading.t_monotonic)
 
 
 def _reopen(driver: Driver) -> None:

@@ -42,6 +42,23 @@ def test_the_joints_are_the_latest_message_in_degrees(bridge):
             time.sleep(0.05)
 
 
+def test_received_gives_every_message_once_in_order_stamped_at_its_arrival(bridge):
+    # a sweep drains the subscription: polling the latest would skip what arrived between polls
+    server, *_ = bridge
+    with RosJointSource(server.host, server.port, server.topic, JOINT_NAMES) as source:
+        source.received()
+        start = time.monotonic()
+        time.sleep(1.0)
+        got = source.received() + source.received()
+        end = time.monotonic()
+    stamps = np.array([r.values["controller_time_s"] for r in got])
+    arrivals = np.array([r.t_monotonic for r in got])
+    # the bridge publishes at rate_hz (its sleeps only add): at most one message per period
+    assert 0.5 * server.rate_hz <= len(got) <= (end - start) * server.rate_hz + 2
+    assert np.all(np.diff(stamps) > 0) and np.all(np.diff(arrivals) >= 0)
+    assert start <= arrivals[0] and arrivals[-1] <= end
+
+
 def test_a_joint_the_message_lacks_is_named_and_a_bridge_gone_is_retryable(bridge):
     server, *_ = bridge
     wrong = RosJointSource(server.host, server.port, server.topic, [*JOINT_NAMES[:5], "wrist_3_joint"])

@@ -214,3 +214,12 @@ def test_an_opcua_robot_without_a_controller_clock_is_streamed_too(tmp_path):
     assert state is State.DONE, said
     rows = rows_of(tmp_path / "sess" / "samples.csv")
     assert {int(r["pass"]) for r in rows} == set(sweep_plan().sweep_pass.tolist()) and len(rows) > 300
+
+
+def test_a_ros_robot_is_streamed_from_its_subscription(tmp_path):
+    # every JointState the bridge pushed, stamped at its arrival, not the latest one when polled
+    config = sweep_config(tmp_path, robot={"kind": "ros", "host": "127.0.0.1", "port": _free_port()})
+    _, state, said = swept(tmp_path, config)
+    assert state is State.DONE, said
+    rows = rows_of(tmp_path / "sess" / "samples.csv")
+    assert {int(r["pass"]) for r in rows} == set(sweep_plan().sweep_pass.tolist()) and len(rows) > 300
