@@ -3,8 +3,12 @@ controller to run them and for the tests to check them: each returns the program
 order it moves to them (:class:`ProgramPoint`: target id, gauge line, contact and stand-off joints
 in the controller's convention [deg], the contact pose where the format carries it, the dwell), and
 checks each target's moves (a joint move to the stand-off, a linear move onto the contact, the
-dwell, a linear move back): ValueError naming what it met instead. They read only what the
-station writes (no controller's full grammar); no real controller has checked those programs.
+dwell, a linear move back): ValueError naming what it met instead. A sweep program's passes
+(:func:`read_sweep`, :class:`SweepPass`): each pass's moves checked (a joint move to its first
+stand-off, a linear move onto the first waypoint, the dwell, blended linear moves through the
+waypoints but the last, a linear move to it, the dwell, a linear move back to its last stand-off).
+They read only what the station writes (no controller's full grammar); no real controller has
+checked those programs.
 """
 
 from __future__ import annotations
@@ -49,6 +53,164 @@ def read_program(path: Path, fmt: str) -> list[ProgramPoint]:
         "fanuc-ls": read_fanuc_ls,
     }
     return readers[fmt](path.read_text())
+
+
+@dataclass(frozen=True)
+class SweepPass:
+    """One pass of a sweep program: its ``number`` and gauge ``line``, the waypoints' ``targets``
+    and joints ``waypoints_deg`` (n, 6) in sweep order, its first and last stand-offs
+    ``standoff_deg`` (2, 6), the controller's convention [deg], and the ``dwell_s`` at each end."""
+
+    number: int
+    line: int
+    targets: np.ndarray
+    waypoints_deg: np.ndarray
+    standoff_deg: np.ndarray
+    dwell_s: float
+
+
+def read_sweep(path: Path, fmt: str) -> list[SweepPass]:
+    """The passes of the sweep program ``path`` in format ``fmt`` ([] for a program of targets)."""
+    path = Path(path)
+    if fmt == "krl":
+        return read_krl_sweep(path.read_text(), path.with_suffix(".dat").read_text())
+    readers = {"urscript": read_urscript_sweep, "rapid": read_rapid_sweep, "fanuc-ls": read_fanuc_sweep}
+    return readers[fmt](path.read_text()) if fmt in readers else []
+
+
+def read_urscript_sweep(text: str) -> list[SweepPass]:
+    """A URScript sweep's passes (joints written in rad; the waypoints' ids from the pass's comment)."""
+    steps = _steps(
+        text,
+        r"# pass (\d+), line (\d+): (\d+) waypoints, targets (\d+)\.\.(\d+)",
+        {
+            "joint": r"movej\(\[([^\]]*)\]",
+            "blend": r"movel\(\[([^\]]*)\].*, r=",
+            "linear": r"movel\(\[([^\]]*)\]",
+            "dwell": rf"sleep\(({_NUMBER})\)",
+        },
+    )
+    passes = []
+    for (number, line, count, first, last), found in steps:
+        targets = np.arange(int(first), int(last) + 1)
+        if len(targets) != int(count):
+            raise ValueError(f"pass {number}: {count} waypoints, but targets {first}..{last}")
+        points = _sweep_moves(number, found, len(targets))
+        joints = np.degrees([_floats(q) for q in points])
+        passes.append(SweepPass(number, line, targets, joints[1:-1], joints[[0, -1]], _dwell(found)))
+    return passes
+
+
+def read_krl_sweep(src: str, dat: str) -> list[SweepPass]:
+    """A KRL sweep's passes: the moves from the ``.src``, the E6AXIS points from the ``.dat``."""
+    steps = _steps(
+        src,
+        r"; pass (\d+), line (\d+):",
+        {
+            "joint": r"PTP (\w+)",
+            "blend": r"LIN (\w+) C_DIS",
+            "linear": r"LIN (\w+)$",
+            "dwell": rf"WAIT SEC ({_NUMBER})",
+        },
+    )
+    return _named_passes(steps, _krl_axes(dat), r"XT(\d+)_(ON|OFF)", str.upper)
+
+
+def read_rapid_sweep(text: str) -> list[SweepPass]:
+    """A RAPID sweep's passes: the moves of its ``! pass`` blocks, the jointtargets they name."""
+    steps = _steps(
+        text,
+        r"! pass (\d+), line (\d+):",
+        {
+            "joint": r"MoveAbsJ (\w+),",
+            "blend": r"MoveL CalcRobT\((\w+), \w+\), station_sweep, z",
+            "linear": r"MoveL CalcRobT\((\w+),",
+            "dwell": rf"WaitTime \\InPos, ({_NUMBER});",
+        },
+    )
+    return _named_passes(steps, _rapid_joints(text), r"t(\d+)_(on|off)", str.lower)
+
+
+def read_fanuc_sweep(text: str) -> list[SweepPass]:
+    """A Fanuc ``.ls`` sweep's passes: the moves of ``/MN``, the positions of ``/POS`` (each named
+    ``T<target> on`` or ``T<target> off``)."""
+    main, positions = text.split("\n/MN\n", 1)[1].split("\n/POS\n", 1)
+    steps = _steps(
+        main,
+        r"! pass (\d+) line (\d+) ;",
+        {
+            "joint": r"J P\[(\d+)\] \d+% FINE ;",
+            "blend": r"L P\[(\d+)\] \d+mm/sec CNT100 ;",
+            "linear": r"L P\[(\d+)\] \d+mm/sec FINE ;",
+            "dwell": rf"WAIT ({_NUMBER})\(sec\) ;",
+        },
+    )
+    found = re.findall(r"^P\[(\d+):\"T(\d+) (on|off)\"\]\{(.*?)\};", positions, re.M | re.S)
+    joints = {n: _fanuc_joints(body) for n, _, _, body in found}
+    names = {n: f"{target}_{kind}" for n, target, kind, _ in found}
+    renamed = [
+        (head, [(k, names.get(v, v) if k != "dwell" else v) for k, v in moves]) for head, moves in steps
+    ]
+    by_name = {names[n]: q for n, q in joints.items()}
+    return _named_passes(renamed, by_name, r"(\d+)_(on|off)", str.lower)
+
+
+def _named_passes(steps, joints: dict, pattern: str, case) -> list[SweepPass]:
+    """Passes of a format naming its points: ``joints`` by name, ``pattern`` a name's target id and
+    ``on``/``off`` (contact, stand-off); the names checked against the moves."""
+    passes = []
+    for (number, line, _), found in steps:
+        names = [case(v) for v in _sweep_moves(number, found, None)]
+        parsed = [re.fullmatch(pattern, n, re.I) for n in names]
+        kinds = ["off", *["on"] * (len(names) - 2), "off"]
+        if None in parsed or [m[2].lower() for m in parsed] != kinds:
+            raise ValueError(
+                f"pass {number}: moves to {names}: expected a stand-off, the waypoints, a stand-off"
+            )
+        targets = np.array([int(m[1]) for m in parsed])
+        if targets[0] != targets[1] or targets[-1] != targets[-2]:
+            raise ValueError(f"pass {number}: its stand-offs {names[0]}, {names[-1]} are not its ends'")
+        missing = next((n for n in names if n not in joints), None)
+        if missing is not None:
+            raise ValueError(f"pass {number}: no point {missing}")
+        q = np.array([joints[n] for n in names])
+        passes.append(SweepPass(number, line, targets[1:-1], q[1:-1], q[[0, -1]], _dwell(found)))
+    return passes
+
+
+def _sweep_moves(number: int, found, count: int | None) -> list:
+    """The points a pass's moves go to, in order: its first stand-off, the waypoints, its last
+    stand-off (checked: ``count`` waypoints where given, the moves and dwells in the order a sweep
+    makes them)."""
+    kinds = [k for k, _ in found]
+    n = count if count is not None else sum(k in ("blend", "linear") for k in kinds) - 1  # less the retreat
+    expected = ["joint", "linear", "dwell", *["blend"] * (n - 2), "linear", "dwell", "linear"]
+    if n < 2 or kinds != expected:
+        raise ValueError(
+            f"pass {number}: moves {kinds}, expected {expected if n >= 2 else 'two waypoints or more'}"
+        )
+    return [v for k, v in found if k != "dwell"]
+
+
+def _krl_axes(dat: str) -> dict[str, np.ndarray]:
+    """A KRL ``.dat``'s E6AXIS points by upper-case name: A1..A6 [deg]."""
+    return {
+        name.upper(): np.array([float(v) for v in re.findall(rf"\bA[1-6] ({_NUMBER})", body)])
+        for name, body in re.findall(r"^DECL E6AXIS (\w+)=\{([^}]*)\}", dat, re.M)
+    }
+
+
+def _rapid_joints(text: str) -> dict[str, np.ndarray]:
+    """A RAPID module's jointtargets by lower-case name: their robot axes [deg]."""
+    return {
+        name.lower(): _floats(values)
+        for name, values in re.findall(r"CONST jointtarget (\w+) := \[\[([^\]]*)\]", text)
+    }
+
+
+def _fanuc_joints(body: str) -> np.ndarray:
+    """A ``/POS`` entry's J1..J6 [deg]."""
+    return np.array([float(v) for v in re.findall(rf"J[1-6]=\s*({_NUMBER}) deg", body)])
 
 
 def left_out(text: str) -> list[int]:
@@ -96,10 +258,7 @@ def read_poses_csv(text: str) -> list[ProgramPoint]:
 def read_krl(src: str, dat: str) -> list[ProgramPoint]:
     """A KRL program's points: the moves from the ``.src``, the E6AXIS points and the contact
     poses (``X Y Z A B C``) from the ``.dat``."""
-    axes = {
-        name.upper(): np.array([float(v) for v in re.findall(rf"\bA[1-6] ({_NUMBER})", body)])
-        for name, body in re.findall(r"^DECL E6AXIS (\w+)=\{([^}]*)\}", dat, re.M)
-    }
+    axes = _krl_axes(dat)
     poses = {
         int(t): dict(re.findall(rf"\b([XYZABC]) ({_NUMBER})", body))
         for t, body in re.findall(r"^; target (\d+), line \d+: contact pose \{([^}]*)\}", dat, re.M)
@@ -120,10 +279,7 @@ def read_krl(src: str, dat: str) -> list[ProgramPoint]:
 def read_rapid(text: str) -> list[ProgramPoint]:
     """A RAPID module's points: the jointtargets each ``station_target`` call names, the contact
     pose from the comment before it (``x y z`` mm, ``q1..q4`` = w, x, y, z)."""
-    joints = {
-        name.lower(): _floats(values)
-        for name, values in re.findall(r"CONST jointtarget (\w+) := \[\[([^\]]*)\]", text)
-    }
+    joints = _rapid_joints(text)
     proc = re.search(
         r"PROC station_target\(jointtarget standoff, jointtarget contact\)(.*?)ENDPROC", text, re.S
     )
@@ -161,7 +317,7 @@ def read_fanuc_ls(text: str) -> list[ProgramPoint]:
     contact pose from the comments (``X Y Z`` mm, ``W P R`` deg)."""
     main, positions = text.split("\n/MN\n", 1)[1].split("\n/POS\n", 1)
     joints = {
-        int(n): np.array([float(v) for v in re.findall(rf"J[1-6]=\s*({_NUMBER}) deg", body)])
+        int(n): _fanuc_joints(body)
         for n, body in re.findall(r"^P\[(\d+)(?::\"[^\"]*\")?\]\{(.*?)\};", positions, re.M | re.S)
     }
     steps = _steps(

@@ -97,10 +97,12 @@ def _run(args, inputs) -> int:
             f"{folder.rrd}: the recording could not be written whole ({outcome.view.incomplete}); the "
             f"{len(folder.rows)} samples in {folder.samples_csv} are whole"
         )
-    print(
-        f"saved: {len(folder.rows)}/{len(inputs.plan)} samples in {folder.samples_csv}; "
-        f"replay the recording with: rerun {folder.rrd}"
+    kept = (
+        f"{len(folder.rows)} rows of {len(inputs.plan.passes())} passes"
+        if inputs.plan.is_sweep
+        else f"{len(folder.rows)}/{len(inputs.plan)} samples"
     )
+    print(f"saved: {kept} in {folder.samples_csv}; replay the recording with: rerun {folder.rrd}")
     return EXIT[state.value]
 
 

@@ -9,8 +9,9 @@ a sweep plan (``--plan`` with a ``pass`` column) is swept pass by pass
 (``sim_fixtures.sweep_program``), on the JR680 cell only;
 joints over OPC UA: the program runs the plan once, from when a session polls the robot (a
 ``station read`` does not start it). ``--program``: the simulated controller runs a program
-``station program`` wrote (any format), its joints read in the controller's convention; over OPC UA
-and ROS once, from when a session polls the robot.
+``station program`` wrote (any format; a sweep program's passes swept, on the JR680 cell only), its
+joints read in the controller's convention; over OPC UA and ROS once, from when a session polls the
+robot.
 
 Publishes the plan its robot walks at ``[sim] plan_csv`` (where ``station sample`` looks by
 default) and announces its robot and time scale beside it (``station.formats.announcement``: a
@@ -168,7 +169,7 @@ def program_plan(path: Path, convention: tuple[list[float], list[float]]) -> Pla
     import numpy as np
 
     from calib.conventions import model_joints
-    from sim_fixtures.programs import read_program
+    from sim_fixtures.programs import read_program, read_sweep
     from station.formats.plan import Plan
     from station.jobs.programs import FORMATS
 
@@ -178,12 +179,20 @@ def program_plan(path: Path, convention: tuple[list[float], list[float]]) -> Pla
         known = ", ".join(by_extension)
         raise InputError(f"--program {path}: not a program station program writes ({known})")
     try:
-        points = read_program(path, fmt)
+        passes = read_sweep(path, fmt)
+        points = [] if passes else read_program(path, fmt)
     except FileNotFoundError as exc:
         raise InputError(f"--program {path}: no such file {exc.filename}") from None
     except (OSError, UnicodeDecodeError, ValueError, KeyError, IndexError) as exc:
         why = f"not a {fmt} program as station program writes it: {exc}"
         raise InputError(f"--program {path}: {why}") from None
+    if passes:  # the waypoints of each pass, swept in order
+
+        def each(value):
+            return np.concatenate([np.broadcast_to(value(p), len(p.targets)) for p in passes])
+
+        q = model_joints(np.concatenate([p.waypoints_deg for p in passes]), *convention)
+        return Plan(each(lambda p: p.targets), each(lambda p: p.line), q, sweep_pass=each(lambda p: p.number))
     if not points:
         raise InputError(f"--program {path}: no measured targets in it")
     q = model_joints(np.array([p.contact_deg for p in points]), *convention)

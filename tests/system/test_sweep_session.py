@@ -27,6 +27,7 @@ from station.formats.base import read_toml
 from station.formats.plan import Plan
 from station.formats.samples import load_samples
 from tests.system.test_session import _free_port, _Sink, write_config
+from tests.system.test_sim_serve import run_cli, serving
 
 TIME_SCALE = 5.0
 
@@ -223,3 +224,27 @@ def test_a_ros_robot_is_streamed_from_its_subscription(tmp_path):
     assert state is State.DONE, said
     rows = rows_of(tmp_path / "sess" / "samples.csv")
     assert {int(r["pass"]) for r in rows} == set(sweep_plan().sweep_pass.tolist()) and len(rows) > 300
+
+
+def test_sim_serve_sweeps_the_program_station_program_wrote(tmp_path):
+    # the passes the simulated controller reads out of the written URScript (its blended movels),
+    # not the plan: what a real controller would run; a session streams every pass of it
+    import configs
+
+    plan, script = tmp_path / "sweep.csv", tmp_path / "sweep.script"
+    plan.write_text(sweep_plan().csv_text())
+    robot = str(configs.path("robots/hsr_jr680.toml"))
+    made = run_cli("program", str(plan), "--robot", robot, "--format", "urscript", "--out", str(script))
+    assert made.returncode == 0, made.stderr
+    gaps = "\n[sweep]\nmax_gap_s = 0.25\n"  # the loaded test machine's hiccups, as sweep_config's
+    with serving(tmp_path, "--program", str(script), "--time-scale", "5", extra_config=gaps) as (
+        _,
+        config,
+        _,
+    ):
+        sample = ("sample", "--config", str(config), "--plan", str(plan), "--out", str(tmp_path / "sess"))
+        done = run_cli(*sample, timeout=240)
+    assert done.returncode == 0, done.stdout[-1500:] + done.stderr
+    rows = rows_of(tmp_path / "sess" / "samples.csv")
+    assert {int(r["pass"]) for r in rows} == set(sweep_plan().sweep_pass.tolist()) and len(rows) > 300
+    assert f"saved: {len(rows)} rows of {len(sweep_plan().passes())} passes in" in done.stdout

@@ -4,11 +4,11 @@ the last (the contact kept along the edge), a linear move back from the last; th
 controller's convention, the tool the ball. Read here by the blend syntax each writer documents."""
 
 import dataclasses
-import re
 
 import numpy as np
 import pytest
 
+from sim_fixtures.programs import read_sweep
 from station.cli import main
 from station.formats.plan import load_plan
 from station.formats.tables import Controller
@@ -17,7 +17,6 @@ from station.jobs.programs.common import Program
 
 KUKA_LIKE = Controller(joint_sign=[-1, 1, 1, -1, 1, -1], joint_offset_deg=[0.0, -90.0, 90.0, 0.0, 0.0, 180.0])
 PASSES = np.array([4, 4, 4, 4, 9, 9, 9, 9])  # two passes of four waypoints, ids not from 0
-N = r"[-+0-9.eE]+"
 
 
 @pytest.fixture(scope="module")
@@ -32,73 +31,59 @@ def sweep(irb_plan):
     return robot, measurement.measurement(plan, robot, "plan.csv")
 
 
-def _urscript(text, folder):
-    moves = []
-    for kind, joints, rest in re.findall(r"^  (movej|movel)\(\[([^\]]*)\](.*)$", text, re.M):
-        q = np.degrees([float(v) for v in joints.split(",")])
-        moves.append((kind == "movej", q, ", r=" in rest))
-    return moves
+FORMATS = ("urscript", "krl", "rapid", "fanuc-ls")
 
 
-def _krl(text, folder):
-    dat = (folder / "station_measurement.dat").read_text()
-    axes = {
-        name: np.array([float(v) for v in re.findall(rf"\bA[1-6] ({N})", body)])
-        for name, body in re.findall(r"^DECL E6AXIS (\w+)=\{([^}]*)\}", dat, re.M)
-    }
-    found = re.findall(r"^(PTP|LIN) (\w+)( C_DIS)?$", text, re.M)
-    return [(kind == "PTP", axes[name], bool(blend)) for kind, name, blend in found]
-
-
-def _rapid(text, folder):
-    targets = {
-        name: np.array([float(v) for v in joints.split(",")])
-        for name, joints in re.findall(r"CONST jointtarget (\w+) := \[\[([^\]]*)\]", text)
-    }
-    found = re.findall(
-        r"^    (MoveAbsJ (\w+)|MoveL CalcRobT\((\w+), station_ball\)), \w+, (\w+), (\w+);", text, re.M
-    )
-    assert {tool for *_, tool in found} == {"station_ball"}
-    return [(bool(j), targets[j or lin], zone != "fine") for _, j, lin, zone, _ in found]
-
-
-def _fanuc(text, folder):
-    pos = {
-        int(n): np.array([float(v) for v in re.findall(rf"J[1-6]=\s*({N}) deg", body)])
-        for n, body in re.findall(r'^P\[(\d+):"[^"]*"\]\{(.*?)\};', text, re.M | re.S)
-    }
-    found = re.findall(r"^\s*\d+:  ([JL]) P\[(\d+)\] .* (FINE|CNT100) ;$", text, re.M)
-    return [(kind == "J", pos[int(n)], term == "CNT100") for kind, n, term in found]
-
-
-READERS = {"urscript": _urscript, "krl": _krl, "rapid": _rapid, "fanuc-ls": _fanuc}
-
-
-@pytest.mark.parametrize("fmt", tuple(READERS))
-def test_each_pass_is_one_blended_linear_sweep_through_its_waypoints(fmt, sweep, tmp_path):
-    robot, found = sweep
-    out = tmp_path / ("station_measurement" + programs.FORMATS[fmt].extension)
-    files = programs.write(fmt, Program(found, robot, "plan.csv", measurement.Motion(), out))
-    for path, text in files:
+def _written(fmt, robot, found, folder):
+    """The program of ``found`` in ``fmt``, written into ``folder``: its main file's path."""
+    out = folder / ("station_measurement" + programs.FORMATS[fmt].extension)
+    for path, text in programs.write(fmt, Program(found, robot, "plan.csv", measurement.Motion(), out)):
         path.write_text(text)
-    moves = READERS[fmt](files[0][1], tmp_path)
+    return out
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_each_pass_is_one_blended_linear_sweep_through_its_waypoints(fmt, sweep, tmp_path):
+    # read as the simulated controller plays it (sim_fixtures.programs.read_sweep checks each
+    # pass's moves: joint to the stand-off, linear on, dwell, blended linear moves, linear back)
+    robot, found = sweep
+    passes = read_sweep(_written(fmt, robot, found, tmp_path), fmt)
     contact = robot.controller.controller_deg(found.plan.q_deg)
     standoff = robot.controller.controller_deg(found.standoff_q_deg)
-    expected = []
-    for rows in found.plan.passes():
-        expected += [(True, standoff[rows[0]], False), (False, contact[rows[0]], False)]
-        expected += [(False, contact[k], k != rows[-1]) for k in rows[1:]]
-        expected += [(False, standoff[rows[-1]], False)]
-    assert [(j, b) for j, _, b in moves] == [(j, b) for j, _, b in expected]
-    error = np.array([q - e for (_, q, _), (_, e, _) in zip(moves, expected, strict=True)])
-    assert np.abs(error).max() < 1e-3  # deg: the joints as written (4 decimals, or 6 in rad)
+    rows = found.plan.passes()
+    assert [(p.number, p.line, p.targets.tolist()) for p in passes] == [
+        (int(found.plan.sweep_pass[r[0]]), int(found.plan.line[r[0]]), found.plan.target[r].tolist())
+        for r in rows
+    ]
+    for p, r in zip(passes, rows, strict=True):  # deg: the joints as written (4 decimals, or 6 in rad)
+        np.testing.assert_allclose(p.waypoints_deg, contact[r], atol=1e-3)
+        np.testing.assert_allclose(p.standoff_deg, standoff[[r[0], r[-1]]], atol=1e-3)
+        assert p.dwell_s == measurement.Motion().dwell_s
+
+
+@pytest.mark.parametrize(
+    ("fmt", "old", "new"),
+    [
+        ("urscript", ", r=0.0100)", ")"),  # a waypoint not blended: the tool stops mid-pass
+        ("krl", "LIN XT4_ON\nWAIT", "LIN XT4_OFF\nWAIT"),  # a pass that does not start on its first waypoint
+        ("rapid", "station_sweep, z10", "station_sweep, fine"),
+        ("fanuc-ls", "WAIT 3.00(sec)", "WAIT 0.00(sec) ;\n  99:  WAIT 3.00(sec)"),  # a dwell too many
+    ],
+)
+def test_a_sweep_whose_moves_are_not_a_pass_is_refused(fmt, sweep, tmp_path, old, new):
+    robot, found = sweep
+    path = _written(fmt, robot, found, tmp_path)
+    assert old in path.read_text()
+    path.write_text(path.read_text().replace(old, new, 1))
+    with pytest.raises(ValueError, match=r"^pass \d+: "):
+        read_sweep(path, fmt)
 
 
 def test_the_programs_state_the_sweep_speed_and_the_ball(sweep, tmp_path):
     robot, found = sweep
     mo = measurement.Motion()
     text = {}
-    for fmt in READERS:
+    for fmt in FORMATS:
         out = tmp_path / ("station_measurement" + programs.FORMATS[fmt].extension)
         text[fmt] = programs.write(fmt, Program(found, robot, "plan.csv", mo, out))[0][1]
     assert f"v={mo.sweep_mm_s / 1000:.4f}, r={mo.blend_mm / 1000:.4f})" in text["urscript"]
