@@ -16,7 +16,9 @@ pass takes the smooth part; the lag is what remains, fitted by linear least squa
 (the prediction re-taken at the new lag; a step that raises the misfit halved) until it moves less
 than a microsecond. Its information
 comes where the sensor's rate changes along the pass: the robot's accelerations and stops at the
-passes' ends.
+passes' ends. A sensor that barely changes along a pass (a dial on the edge reads only the tool's
+error across it) carries no information on its latency, and a latency error barely moves its rows:
+:func:`steepest_rate` bounds how much.
 """
 
 from __future__ import annotations
@@ -94,6 +96,22 @@ def estimate_lag(predict, t, measured, groups, position, *, iterations: int = 5)
         if abs(step) < 1e-6:
             break
     return Lag(lag, sigma, rms, first_rms, len(t))
+
+
+def steepest_rate(t, values, groups, degree: int = 3) -> float:
+    """The largest rate of change [unit per s] of a sensor's smooth part along its passes: per pass
+    (``groups`` (N,)) a polynomial of ``degree`` in time fitted to ``values`` (N,) at ``t`` (N,)
+    [s], its derivative's largest magnitude at the readings (0 without a pass of two readings).
+    A latency off by ``dt`` moves the sensor's aligned rows by at most this times ``dt``."""
+    t, values, groups = np.asarray(t, float), np.asarray(values, float), np.asarray(groups)
+    steepest = 0.0
+    for g in np.unique(groups):
+        on = (groups == g) & np.isfinite(values)
+        if on.sum() < 2 or np.ptp(t[on]) <= 0:
+            continue
+        fit = np.polynomial.Polynomial.fit(t[on], values[on], min(degree, on.sum() - 1))
+        steepest = max(steepest, float(np.max(np.abs(fit.deriv()(t[on])))))
+    return steepest
 
 
 def _pass_polynomials(groups, position) -> np.ndarray:

@@ -42,8 +42,10 @@ Latency: at the end the drawstring's latency is estimated from the stored rows
 (``calib.alignment.estimate_lag`` against the nominal kinematics and the setup's anchor) and checked
 against the stated one; a difference beyond ``latency_tolerance_s`` and three standard errors is
 named in one line (an estimate whose three standard errors exceed the tolerance is said to be too
-uncertain to check). A sensor that leaves over ``DROP_NOTE`` of its requests unanswered is named; its
-missing readings are missing rows, never filled in.
+uncertain to check). The dial's latency is not estimated: it reads the tool's error across the
+edge, which barely changes along a pass; the session says how far a latency ``latency_tolerance_s``
+off would move its rows (``calib.alignment.steepest_rate``). A sensor that leaves over ``DROP_NOTE``
+of its requests unanswered is named; its missing readings are missing rows, never filled in.
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.alignment import Lag, clock_offset, estimate_lag, interpolate
+from calib.alignment import Lag, clock_offset, estimate_lag, interpolate, steepest_rate
 from calib.kinematics import tcp_position
 from calib.params import dh_from_degrees
 from errors import DeviceError
@@ -234,6 +236,7 @@ class SweepSession:
         self._wall_minus_mono = time.time() - self._mono0
         self._t0_wall = float(folder.header["start_wall_s"])
         self._lag_rows: list[tuple] = []  # (t, length, pass, position) of every stored row
+        self._dial_rows: list[tuple] = []  # (t, dial, pass) of every stored row
         self._span: list[float] = []  # station times [s] of the stored passes' starts and ends
 
     def request_stop(self) -> None:
@@ -393,6 +396,7 @@ class SweepSession:
         good = np.array(order, int)
         along = _along(tcp[good])
         self._lag_rows += list(zip(t[good], length[good], [pid] * len(good), along, strict=True))
+        self._dial_rows += list(zip(t[good], dial[good], [pid] * len(good), strict=True))
         bad = np.setdiff1d(np.arange(len(t)), good)
         return rows, flagged, np.vstack([tcp[good], tcp[bad]]) if len(t) else np.zeros((0, 3))
 
@@ -481,6 +485,7 @@ class SweepSession:
                     "drawstring": {"stated_s": stated, "estimated_s": est, "sigma_s": sigma, "named": off}
                 }
             )
+        lines += self._dial_latency()
         for s in self.streams.sensors.values():
             if s.requests and s.unanswered / s.requests > DROP_NOTE:
                 lines.append(
@@ -498,6 +503,24 @@ class SweepSession:
             unanswered={s.name: s.unanswered for s in self.streams.sensors.values()},
         )
         return lines
+
+    def _dial_latency(self) -> list[str]:
+        """What the dial's latency can do to its rows (its reading barely changes along a pass, so
+        the stream cannot estimate it: module notes), one line; none without a dial or rows."""
+        if "dial" not in self.streams.sensors or len(self._dial_rows) < 20:
+            return []
+        t, dial, groups = (np.array(c) for c in zip(*self._dial_rows, strict=True))
+        k = self.rules.time_scale
+        rate = steepest_rate(t * k, dial, groups)  # mm per simulated s
+        stated, tolerance = self.rules.latency_s["dial"] * k, self.rules.tolerance_s
+        moved = rate * tolerance
+        dial = {"stated_s": stated, "steepest_mm_s": rate, "moved_mm_per_tolerance": moved}
+        self.folder.update_header(latency={**self.folder.header.get("latency", {}), "dial": dial})
+        return [
+            f"dial: latency not estimated (its reading changes by at most {rate:.3f} mm/s along the "
+            f"passes: a latency {tolerance * 1e3:.1f} ms off moves its rows by {moved * 1e3:.2f} um at "
+            f"most); the stated {stated * 1e3:.1f} ms is used"
+        ]
 
     def _end(self, state: State, text: str) -> State:
         self.tell(f"{state.value}: {text}; {len(self.folder.rows)} rows in {self.folder.path}")

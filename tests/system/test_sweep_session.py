@@ -126,6 +126,16 @@ def test_the_drawstring_latency_as_stated_is_confirmed(session):
     assert not latency["named"]
 
 
+def test_the_dial_latency_is_not_estimated_and_the_session_says_how_little_it_matters(session):
+    folder, _, _, said = session
+    latency = read_toml(folder / "session.toml")["latency"]
+    assert "drawstring" in latency  # both devices' figures kept
+    assert "dial: latency not estimated (its reading changes by at most" in said
+    # on the edge the dial reads the tool's error across the line, which changes slowly along a
+    # pass: a latency off by the tolerance moves its rows by less than the dial's noise (0.002 mm)
+    assert 0 < latency["dial"]["moved_mm_per_tolerance"] < 0.002
+
+
 def test_a_latency_stated_5_ms_wrong_is_found_and_named(tmp_path):
     config = sweep_config(tmp_path, sweep={"drawstring_latency_s": 0.009})
     _, state, said = swept(tmp_path, config)
