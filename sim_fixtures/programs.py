@@ -74,7 +74,12 @@ def read_sweep(path: Path, fmt: str) -> list[SweepPass]:
     path = Path(path)
     if fmt == "krl":
         return read_krl_sweep(path.read_text(), path.with_suffix(".dat").read_text())
-    readers = {"urscript": read_urscript_sweep, "rapid": read_rapid_sweep, "fanuc-ls": read_fanuc_sweep}
+    readers = {
+        "urscript": read_urscript_sweep,
+        "rapid": read_rapid_sweep,
+        "fanuc-ls": read_fanuc_sweep,
+        "poses-csv": read_poses_csv_sweep,
+    }
     return readers[fmt](path.read_text()) if fmt in readers else []
 
 
@@ -98,6 +103,24 @@ def read_urscript_sweep(text: str) -> list[SweepPass]:
         points = _sweep_moves(number, found, len(targets))
         joints = np.degrees([_floats(q) for q in points])
         passes.append(SweepPass(number, line, targets, joints[1:-1], joints[[0, -1]], _dwell(found)))
+    return passes
+
+
+def read_poses_csv_sweep(text: str) -> list[SweepPass]:
+    """A ``poses-csv`` sweep's passes (its ``pass`` column; [] without one): each pass's rows in
+    order, its ends' stand-offs, the dwell at its first row (checked: no dwell between its ends)."""
+    rows = list(csv.DictReader(io.StringIO(text)))
+    if not rows or "pass" not in rows[0]:
+        return []
+    passes = []
+    for number in dict.fromkeys(int(r["pass"]) for r in rows):
+        on = [r for r in rows if int(r["pass"]) == number]
+        if len({r["line"] for r in on}) != 1 or any(float(r["dwell_s"]) != 0 for r in on[1:-1]):
+            raise ValueError(f"pass {number}: rows on more than one line, or a dwell between its ends")
+        q = np.array([[float(r[f"q{i}_deg"]) for i in range(1, 7)] for r in on])
+        ends = np.array([[float(r[f"standoff_q{i}_deg"]) for i in range(1, 7)] for r in (on[0], on[-1])])
+        targets = np.array([int(r["target"]) for r in on])
+        passes.append(SweepPass(number, int(on[0]["line"]), targets, q, ends, float(on[0]["dwell_s"])))
     return passes
 
 
@@ -245,6 +268,8 @@ def read_poses_csv(text: str) -> list[ProgramPoint]:
     """A ``poses-csv`` file's rows (every column beside the ids and joints is the pose)."""
     points = []
     for row in csv.DictReader(io.StringIO(text)):
+        if "pass" in row:  # a sweep's waypoints: read_poses_csv_sweep
+            return []
         contact = np.array([float(row[f"q{i}_deg"]) for i in range(1, 7)])
         standoff = np.array([float(row[f"standoff_q{i}_deg"]) for i in range(1, 7)])
         joints = {f"q{i}_deg" for i in range(1, 7)} | {f"standoff_q{i}_deg" for i in range(1, 7)}

@@ -9,6 +9,11 @@ in the controller's convention (the robot file's ``[controller]``); ``dwell_s``;
 again as KUKA's ``kuka_a_deg, kuka_b_deg, kuka_c_deg`` (Z-Y'-X'') and Fanuc's ``fanuc_w_deg,
 fanuc_p_deg, fanuc_r_deg`` (turns about the fixed x, y, z). A target left out (no stand-off within
 the joint limits) has no row.
+
+A sweep plan: one row per waypoint in sweep order and a last column ``pass`` (the pass's id); a pass
+is the controller's to sweep as one blended linear move through its rows, from the first row's
+stand-off to the last row's (``dwell_s`` at those two, 0 between: the tool does not stop). A pass
+with no stand-off at an end has no rows.
 """
 
 from __future__ import annotations
@@ -48,25 +53,37 @@ def paths(out: Path) -> tuple[Path]:
 
 
 def write(p: Program) -> tuple[str]:
-    """The rows (``COLUMNS``) of every target the program measures."""
+    """The rows (``COLUMNS``, and ``pass`` for a sweep plan) of every target the program measures."""
     m = p.m
     quat, abc, wpr = quaternion_wxyz(m.pose[:, 3:]), kuka_abc(m.pose[:, 3:]), fanuc_wpr(m.pose[:, 3:])
     contact, standoff = p.contact_deg(), p.standoff_deg()
-    out = [",".join(COLUMNS)]
-    for k, target, line, skipped in p.targets():
-        if skipped:
-            continue
+
+    def row(k: int, dwell_s: float, extra: str = "") -> str:
         cells = [
-            f"{target},{line}",
+            f"{m.plan.target[k]},{m.plan.line[k]}",
             numbers(m.pose[k], 4, ","),
             numbers(quat[k], 8, ","),
             numbers(m.approach[k], 6, ","),
             numbers(m.standoff_mm[k], 4, ","),
             numbers(contact[k], 6, ","),
             numbers(standoff[k], 6, ","),
-            f"{p.motion.dwell_s:g}",
+            f"{dwell_s:g}",
             numbers(abc[k], 4, ","),
             numbers(wpr[k], 4, ","),
         ]
-        out.append(",".join(cells))
-    return ("\n".join(out) + "\n",)
+        return ",".join(cells) + extra
+
+    dwell = p.motion.dwell_s
+    if not m.plan.is_sweep:
+        return _text(COLUMNS, [row(k, dwell) for k, _, _, skipped in p.targets() if not skipped])
+    rows = [
+        row(k, dwell if k in (rows[0], rows[-1]) else 0.0, f",{number}")
+        for number, _, rows, skipped in p.passes()
+        if not skipped
+        for k in rows
+    ]
+    return _text((*COLUMNS, "pass"), rows)
+
+
+def _text(columns, rows: list[str]) -> tuple[str]:
+    return ("\n".join([",".join(columns), *rows]) + "\n",)

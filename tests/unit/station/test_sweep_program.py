@@ -31,7 +31,7 @@ def sweep(irb_plan):
     return robot, measurement.measurement(plan, robot, "plan.csv")
 
 
-FORMATS = ("urscript", "krl", "rapid", "fanuc-ls")
+FORMATS = ("urscript", "krl", "rapid", "fanuc-ls", "poses-csv")
 
 
 def _written(fmt, robot, found, folder):
@@ -68,6 +68,7 @@ def test_each_pass_is_one_blended_linear_sweep_through_its_waypoints(fmt, sweep,
         ("krl", "LIN XT4_ON\nWAIT", "LIN XT4_OFF\nWAIT"),  # a pass that does not start on its first waypoint
         ("rapid", "station_sweep, z10", "station_sweep, fine"),
         ("fanuc-ls", "WAIT 3.00(sec)", "WAIT 0.00(sec) ;\n  99:  WAIT 3.00(sec)"),  # a dwell too many
+        ("poses-csv", "\n1,0,", "\n1,3,"),  # a pass over two gauge lines
     ],
 )
 def test_a_sweep_whose_moves_are_not_a_pass_is_refused(fmt, sweep, tmp_path, old, new):
