@@ -38,6 +38,7 @@ from calib.lm import (
 )
 from calib.models import GROUP_PRIOR, MeasurementModel
 from calib.params import display_unit
+from calib.serial import block_covariance, pass_blocks
 
 DOWNWEIGHTED_BELOW = 0.25
 """A residual row whose squared robust weight falls below this counts as down-weighted (a gross
@@ -495,8 +496,24 @@ def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np
     """Standard deviations and covariance of the free unknowns and the robot's covariance, of the
     fit as it was weighted (stated noise, robust weights), each instrument's rows with the noise
     the fit found (``scale``, per group)."""
-    cov, robot_cov = covariance(model, result.x, free, result.weights, row_noise(model, scale))
+    noise, shared = row_noise(model, scale), None
+    blocks = sweep_blocks(model)
+    if blocks is not None:  # a sweep's rows share their errors: their blocks' spread, not the noise's
+        noise = np.where(blocks >= 0, 0.0, noise)
+        jac = model.residuals_and_jacobian(result.x)[1]
+        shared = block_covariance(jac, np.flatnonzero(free), result.weights, result.residuals, blocks)
+    cov, robot_cov = covariance(model, result.x, free, result.weights, noise, shared)
     return np.sqrt(np.diag(cov)), cov, robot_cov
+
+
+def sweep_blocks(model: WithPrior) -> np.ndarray | None:
+    """Each residual's block of a sweep pass (m,) (``calib.serial.pass_blocks``; -1 for rows of no
+    pass and the prior); None for a set without passes."""
+    samples = model.model.samples
+    if getattr(samples, "sweep_pass", None) is None:
+        return None
+    blocks = np.append(pass_blocks(samples.sweep_pass, samples.t_s), -1)
+    return blocks[np.where(model.rows >= 0, model.rows, -1)]
 
 
 def row_noise(model: WithPrior, scale: np.ndarray) -> np.ndarray:
@@ -512,6 +529,7 @@ def covariance(
     free: np.ndarray,
     row_weights: np.ndarray | float = 1.0,
     noise: np.ndarray | float = 1.0,
+    shared: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Covariance of the ``free`` unknowns and of the robot, the held parameters considered.
 
@@ -542,6 +560,9 @@ def covariance(
         The fit's robust weights ``W``.
     noise : ndarray, shape (m,), or float
         Each row's actual noise in units of its stated noise (``row_noise``).
+    shared : ndarray, shape (k, k), optional
+        Covariance of the free unknowns from rows whose ``noise`` is 0 here: a sweep's rows, which
+        share their errors (``calib.serial.block_covariance``).
 
     Returns
     -------
@@ -566,6 +587,7 @@ def covariance(
         spread = gain * w_block * noise_block
         products = spread @ spread.T, -gain @ a_held
         cov, cross = products if cov is None else (cov + products[0], cross + products[1])
+    cov = cov if shared is None else cov + shared
     robot = np.flatnonzero(workspace_mask(model))
     robot_cov = robot_covariance(
         cov, cross, np.flatnonzero(free), held, model.model.prior_sigma()[held], robot

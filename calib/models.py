@@ -160,19 +160,33 @@ class DrawstringSamples:
         Dial readings [mm], NaN where absent.
     line : ndarray of int, shape (N,)
         Gauge line id of each row, -1 for no line constraint.
+    sweep_pass : ndarray of int, shape (N,), optional
+        Sweep pass of each row (-1: a static pose); None for a static set.
+    t_s : ndarray, shape (N,), optional
+        When each row was read [s] (orders a pass's rows); with ``sweep_pass``.
     """
 
     q: np.ndarray
     length: np.ndarray
     dial: np.ndarray
     line: np.ndarray
+    sweep_pass: np.ndarray | None = None
+    t_s: np.ndarray | None = None
 
     def __len__(self) -> int:
         return self.q.shape[0]
 
     def subset(self, rows: np.ndarray) -> DrawstringSamples:
         """The samples of ``rows`` (indices or a boolean mask), in that order."""
-        return DrawstringSamples(self.q[rows], self.length[rows], self.dial[rows], self.line[rows])
+        swept = self.sweep_pass is not None
+        return DrawstringSamples(
+            self.q[rows],
+            self.length[rows],
+            self.dial[rows],
+            self.line[rows],
+            self.sweep_pass[rows] if swept else None,
+            self.t_s[rows] if swept else None,
+        )
 
 
 @dataclass(frozen=True)

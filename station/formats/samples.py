@@ -16,13 +16,15 @@ from station.formats.units import check_joints_in_degrees
 
 Q_COLUMNS = tuple(f"q{i}_deg" for i in range(1, 7))
 XYZ_COLUMNS = ("x_mm", "y_mm", "z_mm")
+MAX_SESSION_S = 1e9  # a row's time since its session began: decades
 
 
 @dataclass(frozen=True)
 class Samples:
     """A validated sample set: ``kind`` "drawstring" or "position", joints (N, 6) [deg], the
     measurement (N,) length or (N, 3) position [mm], dial (N,) [mm] (NaN: none), line (N,) ids
-    (-1: no line constraint)."""
+    (-1: no line constraint); a sweep's rows (columns ``pass`` and ``t_s``) their pass (N,) ids (-1:
+    none) and time (N,) [s], which say which rows share their errors (``calib.serial``)."""
 
     path: str
     kind: str
@@ -30,6 +32,8 @@ class Samples:
     measured: np.ndarray
     dial_mm: np.ndarray
     line: np.ndarray
+    sweep_pass: np.ndarray | None = None
+    t_s: np.ndarray | None = None
 
     def __len__(self) -> int:
         return self.q_deg.shape[0]
@@ -59,7 +63,17 @@ def load_samples(path) -> Samples:
     line = _line_ids(path, body, col.get("line"))
     check_joints_in_degrees(str(path), q, "rows")
     n = len(body)
-    return Samples(str(path), kind, q, measured, np.full(n, np.nan) if dial is None else dial, line)
+    swept = "pass" in col and "t_s" in col
+    return Samples(
+        str(path),
+        kind,
+        q,
+        measured,
+        np.full(n, np.nan) if dial is None else dial,
+        line,
+        _ids(path, body, col["pass"], "pass", "a pass id") if swept else None,
+        parse_numbers(path, body, [col["t_s"]], ["t_s"])[:, 0] if swept else None,
+    )
 
 
 def read_csv(path: Path, what: str) -> tuple[list[str], list[list[str]]]:
@@ -94,7 +108,11 @@ def _kind(path: Path, header: list[str]) -> str:
     return "drawstring" if has_len else "position"
 
 
-_LIMITS = {**dict.fromkeys(Q_COLUMNS, (MAX_JOINT_DEG, "deg")), "dial_mm": (MAX_DIAL_MM, "mm")}
+_LIMITS = {
+    **dict.fromkeys(Q_COLUMNS, (MAX_JOINT_DEG, "deg")),
+    "dial_mm": (MAX_DIAL_MM, "mm"),
+    "t_s": (MAX_SESSION_S, "s"),
+}
 """Range and unit of a column's numbers (the others are lengths)."""
 
 
@@ -148,13 +166,16 @@ def _parse_cells(path, body, cols, names, allow_empty) -> np.ndarray:
 
 
 def _line_ids(path, body, c) -> np.ndarray:
-    if c is None:
-        return np.zeros(len(body), int)
+    return np.zeros(len(body), int) if c is None else _ids(path, body, c, "line", "a line id")
+
+
+def _ids(path, body, c: int, name: str, what: str) -> np.ndarray:
+    """Column ``c`` (``name``) of ``body`` as ids (N,), -1 for an empty cell."""
     ids = np.empty(len(body), int)
     for i, row in enumerate(body):
         cell = row[c].strip() if c < len(row) else ""
         try:
-            ids[i] = -1 if cell == "" else id_cell(cell, "a line id")
+            ids[i] = -1 if cell == "" else id_cell(cell, what)
         except ValueError as exc:
-            raise InputError(f"{path}: row {i} (line {i + 2}): line: {exc}") from None
+            raise InputError(f"{path}: row {i} (line {i + 2}): {name}: {exc}") from None
     return ids

@@ -283,7 +283,9 @@ def _drawstring_model(
 _MODEL_OF_KIND = {"position": _position_model, "drawstring": _drawstring_model}
 _ROWS_OF_KIND = {
     "position": lambda s: PositionSamples(np.radians(s.q_deg), s.measured),
-    "drawstring": lambda s: DrawstringSamples(np.radians(s.q_deg), s.measured, s.dial_mm, s.line),
+    "drawstring": lambda s: DrawstringSamples(
+        np.radians(s.q_deg), s.measured, s.dial_mm, s.line, s.sweep_pass, s.t_s
+    ),
 }
 
 
