@@ -500,10 +500,16 @@ def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np
     blocks = sweep_blocks(model)
     if blocks is not None:  # a sweep's rows share their errors: their blocks' spread, not the noise's
         noise = np.where(blocks >= 0, 0.0, noise)
-        jac = model.residuals_and_jacobian(result.x)[1]
-        shared = block_covariance(jac, np.flatnonzero(free), result.weights, result.residuals, blocks)
+        shared = _swept_covariance(model, result, free, blocks)
     cov, robot_cov = covariance(model, result.x, free, result.weights, noise, shared)
     return np.sqrt(np.diag(cov)), cov, robot_cov
+
+
+def _swept_covariance(model: WithPrior, result: LMResult, free: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """The swept rows' covariance of the free unknowns (``calib.serial.block_covariance``); the
+    Jacobian freed before ``covariance`` takes its own."""
+    jac = model.residuals_and_jacobian(result.x)[1]
+    return block_covariance(jac, np.flatnonzero(free), result.weights, result.residuals, blocks)
 
 
 def sweep_blocks(model: WithPrior) -> np.ndarray | None:
