@@ -6,7 +6,9 @@ Per seed, ``station demo --seed S`` and ``station demo --sweep --seed S`` in sub
 its own simulated devices, one after the other), and from their output the robot time (the
 simulated seconds the program takes to walk the plan once) and the true workspace error after
 LMLC (1,000 random poses, rigid base re-fit). The target: each sweep demo within 120 s of robot
-time, its error no worse than the static demo's on the same seed. Takes about 10 minutes a seed.
+time, its error no worse than the static demo's on the same seed; and the predicted workspace
+error with its 95 % bound beside the true one (the bound must hold on every seed). Takes about 10
+minutes a seed (a sweep alone about 2).
 """
 
 from __future__ import annotations
@@ -19,13 +21,15 @@ import tempfile
 from pathlib import Path
 
 ROBOT = re.compile(r"^robot: +([\d.]+) s of robot time", re.M)
+PREDICTED = re.compile(r"^calibrate: lmlc .*predicted workspace ([\d.]+) mm \(95 %: ([\d.]+)\)", re.M)
 TRUE = re.compile(
     r"calibrate: lmlc .*true workspace error \(simulation, 1000 random poses\) [\d.]+ -> ([\d.]+) mm"
 )
 
 
-def demo(seed: int, sweep: bool, folder: Path) -> tuple[float, float, int]:
-    """Robot time [s], true workspace error after LMLC [mm] and exit code of one demo run."""
+def demo(seed: int, sweep: bool, folder: Path) -> tuple[float, float, float, float, int]:
+    """Robot time [s], true workspace error after LMLC [mm], its predicted error and 95 % bound [mm]
+    and the exit code of one demo run."""
     out = folder / f"{'sweep' if sweep else 'static'}-{seed}"
     argv = [
         sys.executable,
@@ -39,11 +43,12 @@ def demo(seed: int, sweep: bool, folder: Path) -> tuple[float, float, int]:
         str(out),
     ]
     done = subprocess.run(argv + (["--sweep"] if sweep else []), capture_output=True, text=True)
-    robot, true = ROBOT.search(done.stdout), TRUE.search(done.stdout)
-    if done.returncode != 0 or not robot or not true:
+    found = [r.search(done.stdout) for r in (ROBOT, TRUE, PREDICTED)]
+    if done.returncode != 0 or not all(found):
         print(done.stdout[-3000:], done.stderr[-3000:], file=sys.stderr)
-    nan = float("nan")
-    return (float(robot[1]) if robot else nan), (float(true[1]) if true else nan), done.returncode
+    robot, true, predicted = (float(m[1]) if m else float("nan") for m in found)
+    bound = float(found[2][2]) if found[2] else float("nan")
+    return robot, true, predicted, bound, done.returncode
 
 
 def main() -> None:
@@ -53,12 +58,14 @@ def main() -> None:
     args = parser.parse_args()
     kinds = [k for k in ("static", "sweep") if args.only in (None, k)]
     folder = Path(tempfile.mkdtemp(prefix="demo-sweep-"))
-    print("seed | " + " | ".join(f"{k} robot time [s] | {k} true error [mm] | {k} exit" for k in kinds))
+    columns = "robot time [s] | true error [mm] | predicted [mm] | 95 % bound [mm] | bound / true | exit"
+    print("seed | " + " | ".join(" | ".join(f"{k} {c}" for c in columns.split(" | ")) for k in kinds))
     for seed in args.seeds:
         cells = []
         for kind in kinds:
-            robot, true, code = demo(seed, kind == "sweep", folder)
-            cells += [f"{robot:.1f}", f"{true:.3f}", str(code)]
+            robot, true, predicted, bound, code = demo(seed, kind == "sweep", folder)
+            cells += [f"{robot:.1f}", *(f"{v:.3f}" for v in (true, predicted, bound))]
+            cells += [f"{bound / true:.2f}", str(code)]
         print(f"{seed} | " + " | ".join(cells), flush=True)
 
 
