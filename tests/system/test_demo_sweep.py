@@ -1,6 +1,6 @@
 """``station demo --sweep`` end to end: the demo's cell measured by sweeps (sweep plan, the
 simulated robot sweeping, a streaming session, calibration against the simulated truth), within
-two minutes of robot time."""
+two minutes of robot time, its predicted 95 % bound holding the true error."""
 
 from __future__ import annotations
 
@@ -27,3 +27,5 @@ def test_the_sweep_demo_calibrates_the_cell_within_two_minutes_of_robot_time(tmp
     assert len(load_samples(out / "session" / "samples.csv")) > 1000  # streamed rows, not captures
     truth = re.search(r"true workspace error \(simulation, 1000 random poses\) ([\d.]+) -> ([\d.]+) mm", text)
     assert truth and float(truth[2]) < float(truth[1]) / 20, text
+    bound = re.search(r"calibrate: lmlc .*predicted workspace [\d.]+ mm \(95 %: ([\d.]+)\)", text)
+    assert bound and float(truth[2]) <= float(bound[1]), text  # the 95 % bound holds the truth
