@@ -7,7 +7,8 @@ sessions measured as ``station sample`` would (5 readings averaged per capture),
 ``station calibrate`` does (``calibrate_samples``); the map fitted on the calibration's rows:
 
 - ``drawstring``: the calibration's own rows (drawstring along the cable, dial across the lines:
-  ``calib.map_rows``, ``calib.residual_map.fit_rows_map``), where that is on the branch;
+  ``calib.map_rows``), the map as ``station calibrate`` fits it: the joint angle errors beside the
+  table they bend, then the shared error (``calib.absorbed_angles.fit_model_map``);
 - ``tracker``: a laser tracker's rows at the same poses (noise 0.02 mm per axis), the table's
   frame registered onto the truth on those poses (``calib.residual_map.fit_map``): the map with
   the whole error the calibrated table leaves seen;
@@ -15,8 +16,8 @@ sessions measured as ``station sample`` would (5 readings averaged per capture),
   calibration absorbing part of it): what the plan and the map reach where the table is right.
 
 At the program's poses near the measured poses (a plan pose within ``calib.near.NEAR_DEG``), the
-true TCP against the table's prediction alone and the table's plus the map's (both in the table's
-frame registered on the measured poses): RMS [mm], how many lie inside the map's 95 % bound
+true TCP against the table's prediction alone and the table's plus the map's (each prediction's
+frame registered onto the truth on the measured poses): RMS [mm], how many lie inside the map's 95 % bound
 (chi-square, 3 degrees), against the instruments' noise (the drawstring's 0.02 mm). Cells without
 the unmodelled error: how many seeds keep the map off.
 
@@ -42,6 +43,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import configs  # noqa: E402
+from calib.absorbed_angles import fit_model_map  # noqa: E402
 from calib.kinematics import dh_table, tcp_position  # noqa: E402
 from calib.metrics import rigid_fit  # noqa: E402
 from calib.near import covered  # noqa: E402
@@ -126,29 +128,34 @@ def ideal(world: World, measured, program: np.ndarray, rng: np.random.Generator)
 
 
 def drawstring_map(outcome):
-    """The map of the calibration's own rows (``calib.map_rows``); None where it stays off.
-    Raises ImportError where the branch has no drawstring-row map."""
-    from calib.map_rows import model_observations
-    from calib.residual_map import fit_rows_map
-
-    x = outcome.calibration.x
-    rows = model_observations(outcome.model, x)
-    return fit_rows_map(rows, dh_table(x), outcome.model.tcp_in_flange(x))
+    """The map of the calibration's own rows as ``station calibrate`` fits it
+    (``calib.absorbed_angles.fit_model_map``); None where it stays off."""
+    return fit_model_map(outcome.model, outcome.calibration.x, outcome.calibration.identified)
 
 
 def at_program(world: World, outcome, found, rows_deg: np.ndarray, program: np.ndarray) -> dict:
     """Errors [mm] (P, 3) of the table alone and with the map ``found`` at the program's poses
-    (the table's frame registered onto the truth at the measured poses ``rows_deg``), and the map's
+    (each prediction's frame registered onto the truth at the measured poses ``rows_deg``: the map
+    moves the table, frame and all, where it undoes what the table absorbed), and the map's
     variance (P,) [mm^2] there."""
-    rot, t = rigid_fit(table_tcp(outcome, np.radians(rows_deg)), world.true_tcp_mm(rows_deg))
-    q = np.radians(program)
-    p_table = table_tcp(outcome, q) @ rot.T + t
-    truth = world.true_tcp_mm(program)
-    out = {"table": truth - p_table, "map": truth - p_table, "variance": None}
+    out = {"table": registered_error(world, outcome, None, rows_deg, program), "variance": None}
+    out["map"] = out["table"]
     if found is not None:
-        mean, variance = found.predict(q)
-        out["map"], out["variance"] = truth - p_table - mean @ rot.T, variance
+        out["map"] = registered_error(world, outcome, found, rows_deg, program)
+        out["variance"] = found.predict(np.radians(program))[1]
     return out
+
+
+def registered_error(world: World, outcome, found, rows_deg: np.ndarray, program: np.ndarray) -> np.ndarray:
+    """The truth minus the table's (plus the map ``found``'s) TCP (P, 3) [mm] at the program's
+    poses, the prediction's frame registered onto the truth at the measured poses ``rows_deg``."""
+
+    def predicted(q_deg):
+        q = np.radians(q_deg)
+        return table_tcp(outcome, q) + (0.0 if found is None else found.predict(q)[0])
+
+    rot, t = rigid_fit(predicted(rows_deg), world.true_tcp_mm(rows_deg))
+    return world.true_tcp_mm(program) - (predicted(program) @ rot.T + t)
 
 
 def rms(error: np.ndarray) -> float:
@@ -227,12 +234,6 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, help="write every cell's figures here")
     args = ap.parse_args(argv)
     kinds = ("drawstring", "tracker", "ideal") if args.rows == "all" else (args.rows,)
-    if "drawstring" in kinds:
-        try:
-            import calib.map_rows  # noqa: F401
-        except ImportError:
-            print("no drawstring-row map on this branch (calib.map_rows): tracker rows only", flush=True)
-            kinds = tuple(k for k in kinds if k != "drawstring")
     t0 = time.perf_counter()
     program = program_deg()
     plan = near_plan(program, args.near_poses)

@@ -101,9 +101,16 @@ class AngleErrors:
     def predict(self, q: np.ndarray, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The TCP error (M, 3) [mm, base frame] at readings ``q`` (M, 6) [rad] with ``jacobian``
         (M, 3, ANGLE_JOINTS), and its posterior variance per component (M,) [mm^2]."""
-        a = features(q, jacobian)
-        variance = np.sum((a @ self.covariance) * a, axis=(1, 2)) / 3.0
-        return a @ self.weights, variance
+        return self.of_features(features(q, jacobian))
+
+    def of_features(self, a: np.ndarray, widest: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The TCP error (M, 3) [mm] and its variance per component (M,) [mm^2] of the TCP's
+        responses ``a`` (M, 3, F) [mm/rad] to the coefficients: the mean of the three components',
+        or with ``widest`` the variance along the direction of the largest (a bound that holds where
+        the uncertainty lies along one direction, as where rows see the error along few)."""
+        if not widest:
+            return a @ self.weights, np.sum((a @ self.covariance) * a, axis=(1, 2)) / 3.0
+        return a @ self.weights, np.linalg.eigvalsh((a @ self.covariance) @ a.transpose(0, 2, 1))[:, -1]
 
 
 def posterior_mean(gram: np.ndarray, moment: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:
@@ -142,6 +149,8 @@ class Folds:
             self.moments.append(a.T @ e)
             self.held.append((a, e))
         self.gram, self.moment = sum(self.grams), sum(self.moments)
+        self.table_error = float(np.sqrt(3.0 * self.noise))
+        """The table alone's fold error [mm] (three components of the mean square)."""
 
     def error(self, length_deg: float, sigma_deg: float) -> float:
         """3-D RMS error [mm] (three components of the mean square) of every observation predicted
@@ -154,7 +163,7 @@ class Folds:
         return float(np.sqrt(3.0 * squares / sum(e.size for _, e in self.held)))
 
 
-def search(folds: Folds) -> dict[tuple[float, float], float]:
+def search(folds) -> dict[tuple[float, float], float]:
     """Fold error [mm] per (length, size) visited: the length at the middling size, the size at that
     length, the length again."""
     scores = {}
@@ -196,9 +205,15 @@ def fit_observed_angle_errors(
     responses ``design`` (K, F) [mm/rad] (``features``, ``observed_features``), each in the
     interleaved ``fold`` (K,) of its row; None unless they cut the table's fold error by
     ``MIN_GAIN``."""
-    folds = Folds(design, value_mm, fold)
+    return angle_errors_of(Folds(design, value_mm, fold))
+
+
+def angle_errors_of(folds) -> AngleErrors | None:
+    """The angle errors of least fold error over the grid (``search``) from ``folds`` (``Folds``'
+    ``noise``, ``gram``, ``moment``, ``error`` and ``table_error``); None unless they cut the
+    table's fold error by ``MIN_GAIN``."""
     (length, sigma), best = min(search(folds).items(), key=lambda item: item[1])
-    if best > (1.0 - MIN_GAIN) * np.sqrt(3.0 * folds.noise):
+    if best > (1.0 - MIN_GAIN) * folds.table_error:
         return None
     prior = prior_variance(length, sigma)
     weights = posterior_mean(folds.gram, folds.moment, folds.noise, prior)

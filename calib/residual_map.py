@@ -38,7 +38,7 @@ from calib.angle_errors import (
     joint_jacobian,
     observed_features,
 )
-from calib.kinematics import THETA, tcp_jacobian, tcp_position
+from calib.kinematics import N_DH, THETA, tcp_jacobian, tcp_position
 from calib.map_rows import Observations
 
 MAP_JOINTS = 3
@@ -57,6 +57,10 @@ CV_ROWS = 2000
 """At most this many rows (evenly spaced) are predicted in the cross-validation."""
 MIN_GAIN = 0.05
 """Cut of the cross-validated RMS error against the table alone the map must bring to be used."""
+TOOL = 3
+"""The TCP's coordinates in the flange frame, after the table's N_DH unknowns in ``absorbed``."""
+ABSORBED = N_DH + TOOL + 6
+"""``ResidualMap.absorbed``'s rows: the table's unknowns, the TCP's, the base frame's turn and shift."""
 CHUNK = 1024
 """Query poses per block of the neighbour search (memory: CHUNK x rows distances)."""
 
@@ -421,6 +425,11 @@ class ResidualMap:
     cv_rmse_mm, table_cv_rmse_mm : float
         3-D RMS error [mm] of the rows predicted from the other folds, with the map (the last stage
         on) and with the table alone.
+    absorbed : ndarray, shape (ABSORBED, F), or None
+        What the table (rad, mm) and the TCP in the flange [mm] took of the angle errors per
+        coefficient, where they were fitted beside it (``calib.absorbed_angles``): added back, less
+        the rigid move of the base frame (rad, mm) it makes of the calibration's rows (a frame the
+        lines and the anchor fitted with the table alone stay in).
     """
 
     dh: np.ndarray
@@ -429,6 +438,7 @@ class ResidualMap:
     shared: SharedError | ObservedShared | None
     cv_rmse_mm: float
     table_cv_rmse_mm: float
+    absorbed: np.ndarray | None = None
 
     @property
     def explained(self) -> float:
@@ -443,11 +453,37 @@ class ResidualMap:
         q = np.asarray(q, float)
         mean, variance = np.zeros((q.shape[0], 3)), np.zeros(q.shape[0])
         if self.angles is not None:
-            mean, variance = self.angles.predict(q, joint_jacobian(self.dh, q, self.tool_mm))
+            mean, variance = self.angles.of_features(self.angle_features(q), self.absorbed is not None)
         if self.shared is None:
             return mean, variance + (self.angles.rest_mm2 if self.angles is not None else 0.0)
         shared_mean, shared_variance = self.shared.predict(q)
         return mean + shared_mean, variance + shared_variance
+
+    def angle_features(self, q: np.ndarray) -> np.ndarray:
+        """The TCP's response (M, 3, F) [mm/rad] to the angle errors' coefficients at readings ``q``
+        (M, 6) [rad], with what the table took of them added back (``absorbed``)."""
+        if self.absorbed is None:
+            return features(q, joint_jacobian(self.dh, q, self.tool_mm))
+        p, jac = tcp_jacobian(self.dh, q, self.tool_mm)
+        joints = jac[:, :, [4 * j + THETA for j in range(MAP_JOINTS)]]
+        return features(q, joints) + table_response(self.dh, q, p, jac) @ self.absorbed
+
+
+def table_response(dh: np.ndarray, q: np.ndarray, tcp_mm: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
+    """The TCP's move (M, 3, ABSORBED) [mm per rad or mm] per unit of the table's unknowns (their
+    ``jacobian`` (M, 3, N_DH) at readings ``q`` (M, 6) [rad]), of the TCP's flange-frame
+    coordinates (the flange's axes), and of a small turn [rad] and shift [mm] of the base frame
+    (the TCP ``tcp_mm`` (M, 3) turned about the origin, moved)."""
+    zero = tcp_position(dh, q, np.zeros(TOOL))
+    flange = np.stack([tcp_position(dh, q, axis) - zero for axis in np.eye(TOOL)], axis=2)
+    return np.concatenate([jacobian[:, :, :N_DH], flange, frame_response(tcp_mm)], axis=2)
+
+
+def frame_response(tcp_mm: np.ndarray) -> np.ndarray:
+    """The move (M, 3, 6) [mm per rad, mm per mm] of points ``tcp_mm`` (M, 3) per small turn of the
+    frame about its axes (``omega x p``) and per shift along them."""
+    turn = np.cross(np.eye(3)[None, :, :], tcp_mm[:, None, :]).transpose(0, 2, 1)
+    return np.concatenate([turn, np.broadcast_to(np.eye(3), (len(tcp_mm), 3, 3))], axis=2)
 
 
 def fit_map(q: np.ndarray, error_mm: np.ndarray, dh: np.ndarray, tool_mm: np.ndarray) -> ResidualMap | None:
@@ -496,6 +532,8 @@ def map_arrays(found: ResidualMap) -> dict[str, np.ndarray]:
         a = found.angles
         out["angle_kernel"] = np.array([a.length_deg, a.sigma_deg, a.rest_mm2])
         out["angle_weights"], out["angle_covariance"] = a.weights, a.covariance
+    if found.absorbed is not None:
+        out["angle_absorbed"] = found.absorbed
     if found.shared is not None:
         s = found.shared
         out["shared_kernel"] = np.array(
@@ -524,7 +562,8 @@ def map_from_arrays(arrays: dict[str, np.ndarray]) -> ResidualMap:
         else:
             shared = SharedError(whole_readings(arrays["shared_q"]), arrays["shared_error_mm"], *kernel)
     cv, table = (float(v) for v in arrays["cv_rmse_mm"])
-    return ResidualMap(arrays["dh"], arrays["tool_mm"], angles, shared, cv, table)
+    absorbed = arrays["angle_absorbed"] if "angle_absorbed" in arrays else None
+    return ResidualMap(arrays["dh"], arrays["tool_mm"], angles, shared, cv, table, absorbed)
 
 
 def whole_readings(q: np.ndarray) -> np.ndarray:

@@ -102,7 +102,9 @@ def run(args) -> int:
         found, map_report = None, None
         if not outcome.report.fit_check.refusal:
             ticker.stage("fitting the residual map")
-            found, map_report = fit_table_map(outcome.model, outcome.calibration.x, not args.no_map)
+            found, map_report = fit_table_map(
+                outcome.model, outcome.calibration.x, outcome.calibration.identified, not args.no_map
+            )
     if outcome.report.fit_check.refusal:
         raise InputError(f"{args.samples}: {outcome.report.fit_check.refusal}; nothing written")
     report = dataclasses.replace(outcome.report, map=map_report)

@@ -18,7 +18,7 @@ calibration held), and the targets a first pass left unmeasured go first.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -32,7 +32,7 @@ from station.formats.plan import Plan
 from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs.compensate import mapped_compensation
-from station.jobs.residual_map import fit_table_map
+from station.jobs.residual_map import fit_table_map, mapped_q_deg
 from station.jobs.running import Refit
 from station.jobs.verification import table_held
 
@@ -98,7 +98,7 @@ def correct_targets(
     the residual map of the refit's rows where they show one (``station.jobs.residual_map``; from
     ``SESSION_MAP_ROWS`` rows on)."""
     calibrated = calibrated_model(robot, fit)
-    found = fit_table_map(fit.model, fit.x)[0] if fit.n >= SESSION_MAP_ROWS else None
+    found = fit_table_map(fit.model, fit.x, fit.free)[0] if fit.n >= SESSION_MAP_ROWS else None
     fitted = fitted_lines(setup, fit)
     return TargetCorrection(
         fit.n, *_corrected(robot, setup, calibrated, fitted, plan_q_deg, plan_lines, found)
@@ -136,11 +136,13 @@ def _corrected(
 
 
 def table_lines(
-    table: RobotFile, setup: SetupFile, samples: Samples
+    table: RobotFile, setup: SetupFile, samples: Samples, residual_map: ResidualMap | None = None
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """The gauge lines (point [mm], unit direction) by id as ``samples`` place them in ``table``'s
-    frame: the setup unknowns fitted with the table held, as ``station verify`` fits them."""
-    model, x0 = table_held(samples, table, setup, "setup")
+    frame (plus its ``residual_map``'s prediction): the setup unknowns fitted with the table held,
+    as ``station verify`` fits them."""
+    judged = replace(samples, q_deg=mapped_q_deg(residual_map, samples.q_deg))
+    model, x0 = table_held(judged, table, setup, "setup")
     fit = hold_robot(model, x0)[1]
     return {lid: model.line(fit.x, lid) for lid in getattr(model, "line_ids", [])}
 
@@ -159,7 +161,7 @@ def offline_correction(
     planned joints; with the first pass's ``samples`` (and its ``setup``), carried into the table's
     frame through the lines they place (else the table's frame taken for the setup's); ``n``: the
     samples the table was calibrated on (0 if it does not say)."""
-    fitted = {} if samples is None or setup is None else table_lines(table, setup, samples)
+    fitted = {} if samples is None or setup is None else table_lines(table, setup, samples, residual_map)
     calibrated = table.model()
     found = _corrected(nominal, setup, calibrated, fitted, plan.q_deg, plan.line, residual_map, plan.pose)
     return TargetCorrection(int((table.calibration or {}).get("n_samples", 0)), *found)

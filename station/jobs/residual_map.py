@@ -1,6 +1,7 @@
 """The residual map (``calib.residual_map``) as the station uses it: fitted by ``station calibrate``
 on the calibration's own rows after the fit (``calib.map_rows``: a tracker's rows, or a drawstring
-cell's along the cable and across the lines), stored beside the corrected table
+cell's along the cable and across the lines; the angle errors beside what the table absorbed of them,
+``calib.absorbed_angles``), stored beside the corrected table
 (``station.formats.tables.MapFile``), added to the table's prediction by ``station verify``,
 ``station compensate`` and the in-session corrected targets.
 
@@ -14,8 +15,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from calib.map_rows import model_observations
-from calib.residual_map import FOLDS, MIN_GAIN, ResidualMap, fit_rows_map, mapped_readings
+from calib.absorbed_angles import fit_model_map
+from calib.residual_map import FOLDS, MIN_GAIN, ResidualMap, mapped_readings
 
 
 @dataclass(frozen=True)
@@ -44,15 +45,18 @@ class MapReport:
         return f"residual map: on ({self.why})"
 
 
-def fit_table_map(model, x: np.ndarray, enabled: bool = True) -> tuple[ResidualMap | None, MapReport]:
-    """The map of a calibration's ``model`` (its rows) at its solution ``x``, and what the report
-    says of it; none where ``enabled`` is false (``--no-map``), too few rows or no held-out gain."""
+def fit_table_map(
+    model, x: np.ndarray, free: np.ndarray, enabled: bool = True
+) -> tuple[ResidualMap | None, MapReport]:
+    """The map of a calibration's ``model`` (its rows) at its solution ``x`` with its ``free``
+    unknowns (``calib.absorbed_angles.fit_model_map``), and what the report says of it; none where
+    ``enabled`` is false (``--no-map``), too few rows or no held-out gain."""
     rows = len(model.samples)
     if not enabled:
         return None, MapReport(False, "--no-map", rows)
     if rows < 2 * FOLDS:
         return None, MapReport(False, f"{rows} rows: a map needs {2 * FOLDS} or more", rows)
-    found = fit_rows_map(model_observations(model, x), model.dh(x), model.tcp_in_flange(x))
+    found = fit_model_map(model, x, free)
     if found is None:
         why = f"the rows left out in turn show no gain of {MIN_GAIN:.0%} over the table alone"
         return None, MapReport(False, why, rows)

@@ -1,0 +1,224 @@
+"""Joint angle errors fitted beside the table they bend: the residual map of a calibration's own
+model (``fit_model_map``; ``station calibrate`` and the in-session targets use it).
+
+A calibration fits its table and setup to rows that carry a joint's cyclic error too: the fit moves
+the table (on a drawstring cell also the anchor and the lines) to take out what of the error those
+unknowns express, so the rows' residuals keep only the rest, and a map learnt from them alone
+misses the part the table absorbed, which shows at the TCP where the rows do not look (a simulated
+drawstring cell with ``UR10_LIKE``'s error: the rows keep 0.22 mm, the table is 0.73 mm off at a
+program's poses near the measured ones, where the error itself is 0.38 mm). Here the coefficients
+``w`` of the angle errors (``calib.angle_errors``) and a change ``dx`` of the calibration's free
+table, tool and setup unknowns are fitted together to its whitened residuals ``r`` (the fit's own
+metric), linearised at the solution::
+
+    r + J dx + B w = noise,   w ~ N(0, prior),  dx free,
+
+``J`` the model's Jacobian, ``B`` the angle errors' response through its columns of joints 1-3's
+angle offsets (a link turning by ``dq`` moves each residual as its offset would). With ``dx``
+profiled out, ``w`` is the Bayesian regression of ``-r`` on ``B`` less its projection on ``J``'s
+columns, and ``dx = -J^+ B w`` (the calibration's own solution kept where ``w = 0``). The table's and
+the tool's part of ``dx`` per coefficient is added back where the map predicts (``ResidualMap.
+absorbed``), less the rigid move of the base frame it makes of the calibration's rows: the lines and
+the anchor fitted with the table alone stay where they are. The coefficients' covariance takes the
+folds' mean square for the noise (not the rows' whole, which the angle errors mostly are), and the
+bound the variance along the direction of the largest (the rows see the error along few).
+
+A position instrument's rows (a tracker's) keep ``calib.residual_map.fit_rows_map``: they see the
+whole error, and the table's change, unlike the angle errors, does not fall back away from the
+rows (IPA UR10, trained on series C, tested on A, B and D: 0.450 mm with the rows' map, 0.616 mm
+with this one; B with every 5th pose held out: 0.182 and 0.168 mm).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from calib.angle_errors import (
+    ANGLE_JOINTS,
+    FOLDS,
+    HARMONICS,
+    AngleErrors,
+    angle_errors_of,
+    features,
+    posterior_covariance,
+    posterior_mean,
+    prior_variance,
+)
+from calib.kinematics import N_DH, THETA, tcp_jacobian
+from calib.map_rows import model_observations
+from calib.residual_map import (
+    TOOL,
+    ResidualMap,
+    fit_observed_shared,
+    fit_rows_map,
+    frame_response,
+    rms3,
+    table_response,
+)
+
+RCOND = 1e-6
+"""Relative singular value below which the free unknowns' unit columns count as dependent (as
+``calib.calibrate``'s ``rank_rtol``)."""
+
+
+def residual_features(model, q: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
+    """The response (m, F) of the model's whitened residuals to the angle errors' coefficients
+    (``calib.angle_errors.features``' order): each residual's column of joints 1-3's angle offsets
+    in ``jacobian`` (m, n) times the harmonics of the joint's reading in its row (``q`` (N, 6)
+    [rad])."""
+    along = jacobian[:, [4 * j + THETA for j in range(ANGLE_JOINTS)]][:, None, :]
+    return features(q[model.rows], along)[:, 0, :]
+
+
+def tool_response(model, x: np.ndarray) -> np.ndarray:
+    """The TCP's move in the flange frame (3, n) [mm] per unit of each unknown (zero but for the
+    model's tool columns; the tool is linear in them)."""
+    out = np.zeros((TOOL, x.size))
+    base = model.tcp_in_flange(x)
+    for i in np.flatnonzero(getattr(model, "tool_mask", np.zeros(x.size, bool))):
+        step = np.zeros(x.size)
+        step[i] = 1.0
+        out[:, i] = model.tcp_in_flange(x + step) - base
+    return out
+
+
+def fit_absorbed_angle_errors(
+    model, x: np.ndarray, free: np.ndarray
+) -> tuple[AngleErrors, np.ndarray, float] | None:
+    """Angle errors of joints 1-3 fitted with the change of the calibration's ``free`` (n,) table,
+    tool and setup unknowns they call for (module docstring; joint-space terms stay, the errors
+    are learnt on top of what they took), from ``model``'s whitened residuals and Jacobian at its
+    solution ``x``: the errors (their ``rest_mm2`` in whitened units), the change (n, F) [internal
+    units per coefficient] and how many times the in-sample mean square the folds leave (>= 1);
+    None unless they cut the folds' error (``ProfiledFolds``) by
+    ``calib.angle_errors.MIN_GAIN``."""
+    r, jac = model.residuals_and_jacobian(x)
+    design = residual_features(model, model.samples.q, jac)
+    scale = np.linalg.norm(jac, axis=0)
+    table_or_setup = (np.arange(x.size) < N_DH) | model.setup_mask | model.tool_mask
+    used = np.asarray(free, bool) & table_or_setup & (scale > 0)
+    folds = ProfiledFolds(design, r, jac[:, used] / scale[used], model.rows % FOLDS)
+    angles = angle_errors_of(folds)
+    if angles is None:
+        return None
+    prior = prior_variance(angles.length_deg, angles.sigma_deg)
+    covariance = posterior_covariance(folds.gram, angles.rest_mm2, prior)
+    angles = dataclasses.replace(angles, covariance=covariance)
+    change = np.zeros((x.size, design.shape[1]))
+    change[used] = folds.change / scale[used, None]
+    in_sample = float(np.mean((folds.left + folds.seen @ angles.weights) ** 2))
+    return angles, -change, max(angles.rest_mm2 / max(in_sample, 1e-300), 1.0)
+
+
+def profiled(jac: np.ndarray, design: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The unknowns' change per coefficient (k, F) and for the residuals (k,) that the columns
+    ``jac`` (m, k) take of ``design`` (m, F) and ``r`` (m,) (least squares), and what is left of
+    each."""
+    change, shift = (np.linalg.lstsq(jac, v, rcond=RCOND)[0] for v in (design, r))
+    return change, shift, design - jac @ change, r - jac @ shift
+
+
+class ProfiledFolds:
+    """``calib.angle_errors.Folds`` of whitened residuals whose table, tool and setup are refitted
+    with the angle errors: each fold's residuals predicted from the other folds' rows, the
+    unknowns' change fitted on those rows too (so the table alone's fold error is a refit's, not
+    the calibration's in-sample residual).
+
+    Parameters
+    ----------
+    design : ndarray, shape (m, F)
+        The residuals' response to the coefficients (``residual_features``).
+    r : ndarray, shape (m,)
+        The whitened residuals.
+    jac : ndarray, shape (m, k)
+        Their derivatives by the free table, tool and setup unknowns (columns of unit norm).
+    fold : ndarray, shape (m,)
+        Each residual's fold (its row's).
+    """
+
+    def __init__(self, design: np.ndarray, r: np.ndarray, jac: np.ndarray, fold: np.ndarray):
+        self.change, _, self.seen, self.left = profiled(jac, design, r)
+        self.noise = float(np.mean(self.left**2))
+        self.gram, self.moment = self.seen.T @ self.seen, -self.seen.T @ self.left
+        self.parts = []
+        for f in range(FOLDS):
+            train, held = fold != f, fold == f
+            change, shift, seen, left = profiled(jac[train], design[train], r[train])
+            response = design[held] - jac[held] @ change
+            self.parts.append((seen.T @ seen, -seen.T @ left, response, jac[held] @ shift - r[held]))
+        self.size = int(fold.size)
+        self.table_error = float(np.sqrt(3.0 * sum(np.sum(v**2) for *_, v in self.parts) / self.size))
+
+    def error(self, length_deg: float, sigma_deg: float) -> float:
+        """``calib.angle_errors.Folds.error`` (whitened units)."""
+        prior = prior_variance(length_deg, sigma_deg)
+        squares = 0.0
+        for gram, moment, response, value in self.parts:
+            weights = posterior_mean(gram, moment, self.noise, prior)
+            squares += np.sum((value - response @ weights) ** 2)
+        return float(np.sqrt(3.0 * squares / self.size))
+
+
+def absorbed_of(model, x: np.ndarray, change: np.ndarray) -> np.ndarray:
+    """``ResidualMap.absorbed`` (ABSORBED, F) of a change of the unknowns (n, F) per coefficient:
+    its table's and tool's part [rad, mm], then the base frame's turn and shift [rad, mm] that
+    take out the rigid move the angle errors and it make of the calibration's rows."""
+    partial = np.vstack([change[:N_DH], tool_response(model, x) @ change, np.zeros((6, change.shape[1]))])
+    q, dh, tool = model.samples.q, model.dh(x), model.tcp_in_flange(x)
+    p, jac = tcp_jacobian(dh, q, tool)
+    joints = jac[:, :, [4 * j + THETA for j in range(ANGLE_JOINTS)]]
+    moved = features(q, joints) + table_response(dh, q, p, jac) @ partial
+    rigid = frame_response(p).reshape(-1, 6)
+    partial[-6:] = -np.linalg.lstsq(rigid, moved.reshape(rigid.shape[0], -1), rcond=None)[0]
+    return partial
+
+
+def corrected(model, x: np.ndarray, angles: AngleErrors, change: np.ndarray):
+    """The model on readings turned by the angle errors, and its unknowns ``x`` changed as they call
+    for: where the rows' residuals are what both leave."""
+    q = model.samples.q
+    turned = np.array(q, float)
+    for j in range(ANGLE_JOINTS):
+        turned[:, j] += turn_rad(angles.weights, q, j)
+    samples = dataclasses.replace(model.samples, q=turned)
+    return model.with_samples(samples), x + change @ angles.weights
+
+
+def turn_rad(weights: np.ndarray, q: np.ndarray, joint: int) -> np.ndarray:
+    """Joint ``joint``'s angle error [rad] (N,) at readings ``q`` (N, 6) [rad] of coefficients
+    ``weights`` (F,) (``calib.angle_errors.features``' order)."""
+    order = np.arange(1, HARMONICS + 1)
+    angle = q[:, joint, None] * order
+    w = weights[2 * HARMONICS * joint : 2 * HARMONICS * (joint + 1)]
+    return np.cos(angle) @ w[:HARMONICS] + np.sin(angle) @ w[HARMONICS:]
+
+
+def fit_model_map(model, x: np.ndarray, free: np.ndarray) -> ResidualMap | None:
+    """The residual map of a calibration's ``model`` at its solution ``x`` with its ``free`` (n,)
+    unknowns (``Calibration.identified``): the angle errors fitted beside the table they bend
+    (``fit_absorbed_angle_errors``), then the shared error of what both
+    leave of the rows' observations (``calib.map_rows``; ``calib.residual_map.fit_rows_map``'s
+    second stage); None where neither cuts the folds' error."""
+    rows = model_observations(model, x)
+    if rows.positions:  # the table's change does not fall back far from the rows (module notes)
+        return fit_rows_map(rows, model.dh(x), model.tcp_in_flange(x))
+    if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
+        return None
+    table = rms3(rows.value_mm[:, None])
+    found = fit_absorbed_angle_errors(model, x, free)
+    angles = absorbed = None
+    if found is not None:
+        angles, change, inflation = found
+        left = model_observations(*corrected(model, x, angles, change))
+        rows = dataclasses.replace(left, q=rows.q)
+        rest_mm2 = float(np.mean(rows.value_mm**2)) * inflation
+        angles = dataclasses.replace(angles, rest_mm2=rest_mm2)
+        absorbed = absorbed_of(model, x, change)
+    shared = fit_observed_shared(rows, rows.value_mm)
+    if angles is None and shared is None:
+        return None
+    best = shared.cv_rmse_mm if shared is not None else float(np.sqrt(3.0 * angles.rest_mm2))
+    dh, tool = model.dh(x), model.tcp_in_flange(x)
+    return ResidualMap(np.asarray(dh, float), np.asarray(tool, float), angles, shared, best, table, absorbed)
