@@ -16,7 +16,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from calib.absorbed_angles import fit_model_map
-from calib.residual_map import FOLDS, MIN_GAIN, ResidualMap, mapped_readings
+from calib.map_rows import model_observations
+from calib.residual_map import FOLDS, MIN_GAIN, ResidualMap, fit_rows_map, mapped_readings
 
 
 @dataclass(frozen=True)
@@ -46,17 +47,21 @@ class MapReport:
 
 
 def fit_table_map(
-    model, x: np.ndarray, free: np.ndarray, enabled: bool = True
+    model, x: np.ndarray, free: np.ndarray | None, enabled: bool = True
 ) -> tuple[ResidualMap | None, MapReport]:
     """The map of a calibration's ``model`` (its rows) at its solution ``x`` with its ``free``
-    unknowns (``calib.absorbed_angles.fit_model_map``), and what the report says of it; none where
-    ``enabled`` is false (``--no-map``), too few rows or no held-out gain."""
+    unknowns (``calib.absorbed_angles.fit_model_map``; None: of the rows' residuals alone,
+    ``calib.residual_map.fit_rows_map``), and what the report says of it; none where ``enabled``
+    is false (``--no-map``), too few rows or no held-out gain."""
     rows = len(model.samples)
     if not enabled:
         return None, MapReport(False, "--no-map", rows)
     if rows < 2 * FOLDS:
         return None, MapReport(False, f"{rows} rows: a map needs {2 * FOLDS} or more", rows)
-    found = fit_model_map(model, x, free)
+    if free is None:
+        found = fit_rows_map(model_observations(model, x), model.dh(x), model.tcp_in_flange(x))
+    else:
+        found = fit_model_map(model, x, free)
     if found is None:
         why = f"the rows left out in turn show no gain of {MIN_GAIN:.0%} over the table alone"
         return None, MapReport(False, why, rows)
