@@ -1,5 +1,5 @@
 """Joint angle errors fitted beside the table they bend: the residual map of a calibration's own
-model (``fit_model_map``; ``station calibrate`` and the in-session targets use it).
+model (``fit_model_map``; ``station calibrate`` stores it, the in-session targets keep the rows' map).
 
 A calibration fits its table and setup to rows that carry a joint's cyclic error too: the fit moves
 the table (on a drawstring cell also the anchor and the lines) to take out what of the error those
