@@ -71,13 +71,19 @@ class WithPrior:
         self.rows = np.concatenate([model.rows, np.full(self._k.size, -1)])
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
-        """The model's whitened residuals and Jacobian at ``x`` (n,), the prior rows appended."""
-        r, jac = self.model.residuals_and_jacobian(x, jacobian)
-        r = np.concatenate([r, (x[self._k] - self.x_ref[self._k]) * self._inv])
+        """The model's whitened residuals and Jacobian at ``x`` (n,), the prior rows appended: into
+        the model's own Jacobian where it leaves room for them (``residuals_and_tall_jacobian``),
+        else to a copy."""
+        tall = getattr(self.model, "residuals_and_tall_jacobian", None)
+        if jacobian and tall is not None:
+            r, jac = tall(x, self._k.size)
+        else:
+            r, jac = self.model.residuals_and_jacobian(x, jacobian)
+            if jacobian:
+                jac = np.vstack([jac, np.zeros((self._k.size, x.size))])
         if jacobian:
-            prior = np.zeros((self._k.size, x.size))
-            prior[np.arange(self._k.size), self._k] = self._inv
-            jac = np.vstack([jac, prior])
+            jac[r.size + np.arange(self._k.size), self._k] = self._inv
+        r = np.concatenate([r, (x[self._k] - self.x_ref[self._k]) * self._inv])
         return r, jac
 
 
