@@ -27,6 +27,12 @@ Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, l
   129.7 CPU s, 1,071 MB (593 s, load 7.9); 1,000,000 rows 344.4 CPU s, 6,393 MB (983 s at load
   10, beside the guard tier; not profiled): the (3N, n) Jacobian (about 1.2 GB) and its copies
   (the prior rows appended, the fold subsets) set the memory.
+- With the residual map on by default (9fc4305; load 11-16, main's tree in the same session): 20,000
+  rows 16.7 CPU s, 1,955 MB on main against 10.0 CPU s, 677 MB after the map's k-d tree neighbours,
+  its angle errors' design in blocks, the folds' normal equations in one pass, the prior's rows into
+  the model's Jacobian and the dial check's blocked QR; 100,000 rows 68.0 CPU s, 9,548 MB against
+  35.7 CPU s, 738 MB (397 s wall at load 13). 1,000,000 rows: stopped at 110 CPU s (load 12-19),
+  4,250 MB by then (docs/results/speed.md says what is left).
 """
 
 from __future__ import annotations

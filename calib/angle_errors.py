@@ -125,42 +125,57 @@ def posterior_covariance(gram: np.ndarray, noise: float, prior: np.ndarray) -> n
     return np.linalg.inv(gram / noise + np.diag(1.0 / prior))
 
 
+DESIGN_ROWS = 8192
+"""Observations per block of the design: a block's responses (DESIGN_ROWS x F) stay some 20 MB, not
+a million rows' 9 GB."""
+
+
+def design_rows(design: np.ndarray):
+    """``design_blocks`` of a design (K, F) held whole: (slice of observations, its rows)."""
+    for s in range(0, len(design), DESIGN_ROWS):
+        yield slice(s, s + DESIGN_ROWS), design[s : s + DESIGN_ROWS]
+
+
 class Folds:
-    """Per interleaved fold, the Gram matrix and moment of its observations, and the features and
-    values of the observations it predicts.
+    """Per interleaved fold, the Gram matrix and moment of its observations, and the sum of their
+    squares and their count: what predicting its observations from the other folds needs.
 
     Parameters
     ----------
-    design : ndarray, shape (K, F)
-        Each observation's response [mm/rad] to the coefficients (``features`` seen along the
-        observation's direction).
+    design_blocks : callable
+        ``design_blocks()`` yields (slice of the observations, their responses (k, F) [mm/rad] to the
+        coefficients: ``features`` seen along each observation's direction), the K observations in
+        order (``design_rows`` of a whole design).
     value_mm : ndarray, shape (K,)
         The observed residuals [mm].
     fold : ndarray, shape (K,)
         The fold of each observation (its row's).
     """
 
-    def __init__(self, design: np.ndarray, value_mm: np.ndarray, fold: np.ndarray):
+    def __init__(self, design_blocks, value_mm: np.ndarray, fold: np.ndarray):
         self.noise = float(np.mean(value_mm**2))
-        self.grams, self.moments, self.held = [], [], []
-        for f in range(FOLDS):
-            a, e = design[fold == f], value_mm[fold == f]
-            self.grams.append(a.T @ a)
-            self.moments.append(a.T @ e)
-            self.held.append((a, e))
+        self.grams, self.moments, self.squares = [0.0] * FOLDS, [0.0] * FOLDS, [0.0] * FOLDS
+        for at, a_block in design_blocks():
+            e_block, f_block = value_mm[at], fold[at]
+            for f in range(FOLDS):
+                a, e = a_block[f_block == f], e_block[f_block == f]
+                self.grams[f] = self.grams[f] + a.T @ a
+                self.moments[f] = self.moments[f] + a.T @ e
+                self.squares[f] += float(e @ e)
+        self.count = value_mm.size
         self.gram, self.moment = sum(self.grams), sum(self.moments)
         self.table_error = float(np.sqrt(3.0 * self.noise))
         """The table alone's fold error [mm] (three components of the mean square)."""
 
     def error(self, length_deg: float, sigma_deg: float) -> float:
         """3-D RMS error [mm] (three components of the mean square) of every observation predicted
-        from the other folds."""
+        from the other folds: per fold ``|e - A w|^2 = e.e - 2 w.A^T e + w.A^T A w``."""
         prior = prior_variance(length_deg, sigma_deg)
         squares = 0.0
-        for g, m, (a, e) in zip(self.grams, self.moments, self.held, strict=True):
+        for g, m, ee in zip(self.grams, self.moments, self.squares, strict=True):
             weights = posterior_mean(self.gram - g, self.moment - m, self.noise, prior)
-            squares += np.sum((e - a @ weights) ** 2)
-        return float(np.sqrt(3.0 * squares / sum(e.size for _, e in self.held)))
+            squares += ee - 2.0 * weights @ m + weights @ g @ weights
+        return float(np.sqrt(3.0 * max(squares, 0.0) / self.count))
 
 
 def search(folds) -> dict[tuple[float, float], float]:
@@ -205,7 +220,13 @@ def fit_observed_angle_errors(
     responses ``design`` (K, F) [mm/rad] (``features``, ``observed_features``), each in the
     interleaved ``fold`` (K,) of its row; None unless they cut the table's fold error by
     ``MIN_GAIN``."""
-    return angle_errors_of(Folds(design, value_mm, fold))
+    return fit_angle_errors_in_blocks(lambda: design_rows(design), value_mm, fold)
+
+
+def fit_angle_errors_in_blocks(design_blocks, value_mm: np.ndarray, fold: np.ndarray) -> AngleErrors | None:
+    """``fit_observed_angle_errors`` with the design given a block of observations at a time
+    (``Folds``' ``design_blocks``): a million rows' responses are never whole."""
+    return angle_errors_of(Folds(design_blocks, value_mm, fold))
 
 
 def angle_errors_of(folds) -> AngleErrors | None:

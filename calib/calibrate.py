@@ -72,13 +72,19 @@ class WithPrior:
         self.rows = np.concatenate([model.rows, np.full(self._k.size, -1)])
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
-        """The model's whitened residuals and Jacobian at ``x`` (n,), the prior rows appended."""
-        r, jac = self.model.residuals_and_jacobian(x, jacobian)
-        r = np.concatenate([r, (x[self._k] - self.x_ref[self._k]) * self._inv])
+        """The model's whitened residuals and Jacobian at ``x`` (n,), the prior rows appended: into
+        the model's own Jacobian where it leaves room for them (``residuals_and_tall_jacobian``),
+        else to a copy."""
+        tall = getattr(self.model, "residuals_and_tall_jacobian", None)
+        if jacobian and tall is not None:
+            r, jac = tall(x, self._k.size)
+        else:
+            r, jac = self.model.residuals_and_jacobian(x, jacobian)
+            if jacobian:
+                jac = np.vstack([jac, np.zeros((self._k.size, x.size))])
         if jacobian:
-            prior = np.zeros((self._k.size, x.size))
-            prior[np.arange(self._k.size), self._k] = self._inv
-            jac = np.vstack([jac, prior])
+            jac[r.size + np.arange(self._k.size), self._k] = self._inv
+        r = np.concatenate([r, (x[self._k] - self.x_ref[self._k]) * self._inv])
         return r, jac
 
 
@@ -232,11 +238,29 @@ def robust_steps(
     for _ in range(steps):
         r, jac = model.residuals_and_jacobian(x)
         w = robust_weights(r, model.groups, _scale(r, model.groups), options)
+        x[free] -= scaled_least_squares(jac, free, w, r * w)
+    return x
+
+
+def scaled_least_squares(jac: np.ndarray, free: np.ndarray, w: np.ndarray, wr: np.ndarray) -> np.ndarray:
+    """numpy's least-squares solution ``dx`` (k,) of ``W J dx = W r``: the ``free`` columns (k) of
+    ``jac`` (m, n) weighted by ``w`` (m,), scaled to unit norm, against ``wr = W r`` (m,). On rows
+    that fit one block (``NORMAL_ROWS``) of the whole weighted copy, as before; on more, of ``R``
+    of the QR factorisation of ``[W J / d | W r]`` built block by block (the same solution and
+    singular-value cut, without m-row copies: a million rows' is some 1.5 GB each)."""
+    if len(jac) <= NORMAL_ROWS:
         wj = jac[:, free] * w[:, None]
         d = np.linalg.norm(wj, axis=0)
         d[d == 0] = 1.0
-        x[free] -= np.linalg.lstsq(wj / d, r * w, rcond=None)[0] / d
-    return x
+        return np.linalg.lstsq(wj / d, wr, rcond=None)[0] / d
+    cols = np.flatnonzero(free)
+    d = np.sqrt(block_sum(np.sum(wj**2, axis=0) for wj in weighted_blocks(jac, cols, w)))
+    d[d == 0] = 1.0
+    r = np.empty((0, cols.size + 1))
+    for wj, wr_block in zip(weighted_blocks(jac, cols, w), row_blocks(wr), strict=True):
+        r = np.linalg.qr(np.vstack([r, np.column_stack([wj / d, wr_block])]), mode="r")
+    cut = np.finfo(float).eps * max(len(jac), cols.size)  # lstsq's own on the m rows
+    return np.linalg.lstsq(r[: cols.size, : cols.size], r[: cols.size, cols.size], rcond=cut)[0] / d
 
 
 def identify(

@@ -406,6 +406,26 @@ def normal_equations(
     return normal, gradient
 
 
+def fold_normal_equations(
+    jac: np.ndarray, free: np.ndarray, w: np.ndarray, wr: np.ndarray, label: np.ndarray, labels: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``normal_equations`` of each set of rows: ``(W J)^T W J`` (labels, k, k) and ``(W J)^T W r``
+    (labels, k) over the rows of each ``label`` (m,) (0 to ``labels - 1``), in one pass over the
+    Jacobian (cross-validation's folds: all rows less a fold's, without a pass per fold)."""
+    cols = np.flatnonzero(free)
+    normal, gradient = np.zeros((labels, cols.size, cols.size)), np.zeros((labels, cols.size))
+    for s in range(0, len(jac), NORMAL_ROWS):
+        block = slice(s, s + NORMAL_ROWS)
+        wj = jac[block, cols]
+        wj *= w[block, None]
+        for lab in np.unique(label[block]):
+            on = label[block] == lab
+            part = wj[on]
+            normal[lab] += part.T @ part
+            gradient[lab] += wr[block][on] @ part
+    return normal, gradient
+
+
 def _damped_step(hess: np.ndarray, grad: np.ndarray, mu: float) -> np.ndarray:
     """Solve ``(H + mu I) dx = -g`` for the column-scaled Gauss-Newton matrix ``H``."""
     n = hess.shape[0]

@@ -525,6 +525,12 @@ class DrawstringLineModel:
         """Whitened residuals (m,) and their analytic Jacobian (m, n), None unless ``jacobian``."""
         return self._evaluate(x, jacobian)
 
+    def residuals_and_tall_jacobian(self, x: np.ndarray, spare_rows: int):
+        """``residuals_and_jacobian`` with ``spare_rows`` zero rows after the model's (m + spare_rows,
+        n): room for ``calib.calibrate.WithPrior``'s rows without a copy of the Jacobian (a million
+        rows' is some 1.5 GB)."""
+        return self._evaluate(x, True, spare_rows)
+
     def _robot_jacobian(self, x) -> tuple[np.ndarray, np.ndarray]:
         """TCPs (N, 3) and their derivatives (3, N, 24 + K) by the table and the terms."""
         p, jac_table, jac_terms = self.terms.tcp_jacobian(
@@ -547,13 +553,14 @@ class DrawstringLineModel:
         self._robot_cache = (key, p, dp)
         return p, dp
 
-    def _evaluate(self, x, jacobian):
-        """Residuals (m,) and Jacobian (m, n) (None unless ``jacobian``; robot columns zero where the
-        robot is held), filled block by block: the drawstring rows, then each line's."""
+    def _evaluate(self, x, jacobian, spare_rows: int = 0):
+        """Residuals (m,) and Jacobian (m + spare_rows, n) (None unless ``jacobian``; robot columns
+        zero where the robot is held, the spare rows zero), filled block by block: the drawstring
+        rows, then each line's."""
         p, dp = self._robot_points(x, jacobian and not self._robot_held)
         dp = None if self._robot_held else dp  # (a cached one too)
         r = np.empty(self.rows.size)
-        jac = np.zeros((self.rows.size, x.size)) if jacobian else None
+        jac = np.zeros((self.rows.size + spare_rows, x.size)) if jacobian else None
         at = self._length_block(x, p, dp, r, jac)
         for lid in self.line_ids:
             at = self._line_block(x, lid, p, dp, r, jac, at)

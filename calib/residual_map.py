@@ -32,9 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.angle_errors import (
+    DESIGN_ROWS,
     AngleErrors,
     features,
-    fit_observed_angle_errors,
+    fit_angle_errors_in_blocks,
     joint_jacobian,
     observed_features,
 )
@@ -63,6 +64,8 @@ ABSORBED = N_DH + TOOL + 6
 """``ResidualMap.absorbed``'s rows: the table's unknowns, the TCP's, the base frame's turn and shift."""
 CHUNK = 1024
 """Query poses per block of the neighbour search (memory: CHUNK x rows distances)."""
+SCAN_PAIRS = 20_000_000
+"""Above this many query-point pairs the neighbour search takes a k-d tree, not every distance."""
 
 
 @dataclass(frozen=True)
@@ -174,8 +177,15 @@ def distance2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def neighbours(queries: np.ndarray, points: np.ndarray, k: int, fold=None, query_fold=None) -> np.ndarray:
     """Indices (M, k') of the ``k`` nearest ``points`` (N, d) to each of ``queries`` (M, d),
-    ``k' = min(k, N)``; with ``fold`` (N,) and ``query_fold`` (M,), only points of another fold."""
+    ``k' = min(k, N)``; with ``fold`` (N,) and ``query_fold`` (M,), only points of another fold.
+
+    Every distance (``CHUNK`` queries at a time) where there are at most ``SCAN_PAIRS`` of them,
+    else a k-d tree (per fold of the queries, of the other folds' points): on 100,000 rows the
+    scan took 40 s and 10 GB. Both exact; among points at the same distance either may pick
+    another, and the order of the k' is not the same."""
     k = min(k, points.shape[0] - (0 if fold is None else int(np.bincount(fold).max())))
+    if queries.shape[0] * points.shape[0] > SCAN_PAIRS:
+        return tree_neighbours(queries, points, k, fold, query_fold)
     out = np.empty((queries.shape[0], k), int)
     for start in range(0, queries.shape[0], CHUNK):
         block = slice(start, start + CHUNK)
@@ -183,6 +193,21 @@ def neighbours(queries: np.ndarray, points: np.ndarray, k: int, fold=None, query
         if fold is not None:
             d2[query_fold[block, None] == fold[None, :]] = np.inf
         out[block] = np.argpartition(d2, k - 1, axis=1)[:, :k]
+    return out
+
+
+def tree_neighbours(queries: np.ndarray, points: np.ndarray, k: int, fold=None, query_fold=None):
+    """``neighbours`` by scipy's k-d tree (imported here: the small searches of a default ``station
+    calibrate`` need no scipy, issue 26), ``k`` at most the points outside each query's fold."""
+    from scipy.spatial import cKDTree
+
+    out = np.empty((queries.shape[0], k), int)
+    if fold is None:
+        fold, query_fold = np.zeros(points.shape[0], int), np.full(queries.shape[0], -1)
+    for f in np.unique(query_fold):
+        asking, others = query_fold == f, np.flatnonzero(fold != f)
+        tree = cKDTree(points[others], balanced_tree=False, compact_nodes=False)
+        out[asking] = others[tree.query(queries[asking], k)[1].reshape(-1, k)]
     return out
 
 
@@ -501,13 +526,11 @@ def fit_rows_map(rows: Observations, dh: np.ndarray, tool_mm: np.ndarray) -> Res
     other rows the observation operator (``ObservedShared``)."""
     if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
         return None
-    jacobian = joint_jacobian(dh, rows.q, tool_mm)
-    if rows.positions:
-        design = features(rows.q, jacobian).reshape(rows.value_mm.size, -1)
-    else:
-        design = observed_features(rows.q[rows.row], jacobian[rows.row], rows.direction)
-    angles = fit_observed_angle_errors(design, rows.value_mm, rows.row % FOLDS)
-    left = rows.value_mm if angles is None else rows.value_mm - design @ angles.weights
+    design = observation_design(rows, joint_jacobian(dh, rows.q, tool_mm))
+    angles = fit_angle_errors_in_blocks(design, rows.value_mm, rows.row % FOLDS)
+    left = rows.value_mm.copy()
+    for at, a in design() if angles is not None else ():
+        left[at] -= a @ angles.weights
     if rows.positions:
         shared = fit_shared(rows.q, left.reshape(-1, 3))
     else:
@@ -517,6 +540,26 @@ def fit_rows_map(rows: Observations, dh: np.ndarray, tool_mm: np.ndarray) -> Res
     table = rms3(rows.value_mm[:, None])
     best = shared.cv_rmse_mm if shared is not None else float(np.sqrt(3.0 * angles.rest_mm2))
     return ResidualMap(np.asarray(dh, float), np.asarray(tool_mm, float), angles, shared, best, table)
+
+
+def observation_design(rows: Observations, jacobian: np.ndarray):
+    """``design()``: the responses of ``rows``' observations to the angle errors' coefficients
+    (``features`` of a position instrument's rows, ``observed_features`` of others') with the joint
+    Jacobian (N, 3, 3) [mm/rad] of each row, yielded ``DESIGN_ROWS`` at a time as (slice of the
+    observations, responses (k, F)) (``calib.angle_errors.Folds``)."""
+
+    def design():
+        if rows.positions:  # three observations a row, in order: the row's features
+            step = DESIGN_ROWS // 3
+            for s in range(0, rows.q.shape[0], step):
+                a = features(rows.q[s : s + step], jacobian[s : s + step])
+                yield slice(3 * s, 3 * (s + a.shape[0])), a.reshape(3 * a.shape[0], -1)
+            return
+        for s in range(0, rows.row.size, DESIGN_ROWS):
+            at = slice(s, s + DESIGN_ROWS)
+            yield at, observed_features(rows.q[rows.row[at]], jacobian[rows.row[at]], rows.direction[at])
+
+    return design
 
 
 def map_arrays(found: ResidualMap) -> dict[str, np.ndarray]:

@@ -45,7 +45,7 @@ import numpy as np
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate
 from calib.joint_terms import COMPLIANCE, COMPLIANCE_PRIOR, JointTerms, TermGroup
 from calib.kmeans import REGION_JOINTS, region_folds
-from calib.lm import normal_equations
+from calib.lm import fold_normal_equations
 from calib.models import MeasurementModel
 from calib.special import gammaincc
 
@@ -195,14 +195,18 @@ def _fold_errors(model, x, free, weights, folds) -> np.ndarray:
     prior = WithPrior(model, model.x0)
     r, jac = prior.residuals_and_jacobian(x)
     wr = r * weights
-    # normal equations of all rows, less each fold's: a few unknowns, so one product for all folds
-    # (the whitened, prior-regularised Jacobian is well enough conditioned to square)
-    normal, gradient = normal_equations(jac, free, weights, wr)
+    # normal equations of all rows, less each fold's: a few unknowns, so one pass for all folds
+    # (the whitened, prior-regularised Jacobian is well enough conditioned to square); the prior
+    # rows (row -1) in a set of their own
+    fold_of_row = np.full(len(model.samples), len(folds))
+    for f, rows in enumerate(folds):
+        fold_of_row[rows] = f
+    label = np.where(prior.rows >= 0, fold_of_row[prior.rows], len(folds))
+    fold_normal, fold_gradient = fold_normal_equations(jac, free, weights, wr, label, len(folds) + 1)
+    normal, gradient = fold_normal.sum(axis=0), fold_gradient.sum(axis=0)
     out = np.empty(len(model.samples))
-    for rows in folds:
-        left = np.flatnonzero(np.isin(prior.rows, rows))
-        fold_normal, fold_gradient = normal_equations(jac, free, weights, wr, left)
-        step = np.linalg.lstsq(normal - fold_normal, -(gradient - fold_gradient), rcond=None)[0]
+    for f, rows in enumerate(folds):
+        step = np.linalg.lstsq(normal - fold_normal[f], -(gradient - fold_gradient[f]), rcond=None)[0]
         x_fold = x.copy()
         x_fold[free] += step
         out[rows] = model.with_samples(model.samples.subset(rows)).row_error_mm(x_fold)

@@ -7,6 +7,7 @@ import pytest
 
 import configs
 from calib import calibrate as calibrate_module
+from calib import lm
 from calib.calibrate import column_geometry, identify
 from calib.identifiability import select_columns, structural_holds
 from calib.kinematics import dh_table, tcp_position
@@ -195,3 +196,19 @@ def test_column_geometry_keeps_what_identify_looks_at(rng, monkeypatch):
     kept = select_columns(r, order)
     np.testing.assert_array_equal(kept, select_columns(jac, order))
     assert not kept[4] and kept[[0, 1, 2, 3, 5]].all()
+
+
+@pytest.mark.parametrize("dependent", [False, True])
+def test_the_least_squares_step_in_blocks_is_numpys_of_the_whole(monkeypatch, dependent):
+    """``robust_steps``' step on more rows than a block (the dial check on a million rows) from R of
+    a blocked QR: numpy's lstsq of the whole weighted, column-scaled copy, to the rounding; with a
+    column the others produce, the same minimum-norm solution (the same singular-value cut)."""
+    rng = np.random.default_rng(8)
+    jac, w, wr = rng.normal(size=(95, 7)), rng.uniform(0.1, 1.0, 95), rng.normal(size=95)
+    free = np.array([True, False, True, True, False, True, True])
+    if dependent:
+        jac[:, 3], free[:] = jac[:, 0] - 2.0 * jac[:, 5], True
+    expected = calibrate_module.scaled_least_squares(jac, free, w, wr)  # one block: the whole
+    monkeypatch.setattr(calibrate_module, "NORMAL_ROWS", 10)
+    monkeypatch.setattr(lm, "NORMAL_ROWS", 10)
+    np.testing.assert_allclose(calibrate_module.scaled_least_squares(jac, free, w, wr), expected, atol=1e-12)

@@ -167,6 +167,29 @@ def test_the_covariance_in_blocks_of_rows_is_the_sandwich(rng, monkeypatch):
     )
 
 
+def test_the_prior_rows_go_into_the_models_jacobian_bit_for_bit_as_appended(rng):
+    """``WithPrior`` fills the prior's rows into room the model's Jacobian leaves (no copy of a
+    million rows'): the same residuals and Jacobian, to the last digit, as appended to a copy."""
+
+    class Plain:  # the model without its tall Jacobian: the copy's path
+        def __init__(self, model):
+            self.model = model
+
+        def __getattr__(self, name):
+            if name == "residuals_and_tall_jacobian":
+                raise AttributeError(name)
+            return getattr(self.model, name)
+
+    model = _model(rng, 3, with_terms=True)
+    x = model.x0 + rng.normal(0, 1e-4, model.x0.size)
+    tall, copied = WithPrior(model, model.x0), WithPrior(Plain(model), model.x0)
+    (r, jac), (r_copy, jac_copy) = tall.residuals_and_jacobian(x), copied.residuals_and_jacobian(x)
+    np.testing.assert_array_equal(r, r_copy)
+    np.testing.assert_array_equal(jac, jac_copy)
+    assert jac.shape == (tall.rows.size, x.size) and jac[len(model.rows) :].any()
+    np.testing.assert_array_equal(tall.residuals_and_jacobian(x, False)[0], r)
+
+
 def test_single_line_holds_the_anchor_rotation_about_it(rng):
     assert "anchor.about_line_mm" in _model(rng, 1).gauges()
     assert "anchor.about_line_mm" not in _model(rng, 3).gauges()

@@ -164,6 +164,19 @@ def test_normal_equations_in_blocks_are_the_weighted_products(rng, monkeypatch, 
     np.testing.assert_allclose(gradient, wj.T @ wr[picked], rtol=1e-12)
 
 
+def test_the_normal_equations_of_each_fold_in_one_pass_are_each_folds_products(rng, monkeypatch):
+    """Blocks of 4 rows cutting across the sets: each set's products as of its rows alone (none: zero)."""
+    monkeypatch.setattr(lm, "NORMAL_ROWS", 4)
+    jac, w, wr = rng.normal(size=(50, 5)), rng.uniform(0.1, 1.0, 50), rng.normal(size=50)
+    free, label = np.array([True, False, True, True, False]), rng.integers(0, 3, 50)
+    normal, gradient = lm.fold_normal_equations(jac, free, w, wr, label, 4)
+    for lab in range(4):
+        picked = np.flatnonzero(label == lab)
+        wj = jac[np.ix_(picked, np.flatnonzero(free))] * w[picked, None]
+        np.testing.assert_allclose(normal[lab], wj.T @ wj, rtol=1e-12)
+        np.testing.assert_allclose(gradient[lab], wj.T @ wr[picked], rtol=1e-12)
+
+
 def test_the_solvers_products_on_one_block_are_the_whole_arrays_to_the_last_digit(rng, monkeypatch):
     """The scaled normal equations and the predicted reduction: on rows that fit one block, exactly
     the whole-array products (what planning's fits computed before blocks); on several blocks the
