@@ -58,6 +58,11 @@ from calib.residual_map import (
     table_response,
 )
 
+MAP_ROWS = 20_000
+"""Rows the angle errors are fitted on at most: a larger calibration's every k-th (the errors are
+smooth over each joint's turn; their fit holds the residuals' response whole, 6 GB at 100,000
+rows of a drawstring cell)."""
+
 RCOND = 1e-6
 """Relative singular value below which the free unknowns' unit columns count as dependent (as
 ``calib.calibrate``'s ``rank_rtol``)."""
@@ -195,17 +200,28 @@ def turn_rad(weights: np.ndarray, q: np.ndarray, joint: int) -> np.ndarray:
     return np.cos(angle) @ w[:HARMONICS] + np.sin(angle) @ w[HARMONICS:]
 
 
+def thinned(model):
+    """``model`` on every k-th of its sample rows, at most ``MAP_ROWS`` of them (itself if fewer)."""
+    n = model.samples.q.shape[0]
+    if n <= MAP_ROWS:
+        return model
+    return model.with_samples(model.samples.subset(np.arange(0, n, -(-n // MAP_ROWS))))
+
+
 def fit_model_map(model, x: np.ndarray, free: np.ndarray) -> ResidualMap | None:
     """The residual map of a calibration's ``model`` at its solution ``x`` with its ``free`` (n,)
     unknowns (``Calibration.identified``): the angle errors fitted beside the table they bend
     (``fit_absorbed_angle_errors``), then the shared error of what both
     leave of the rows' observations (``calib.map_rows``; ``calib.residual_map.fit_rows_map``'s
-    second stage); None where neither cuts the folds' error."""
+    second stage; a drawstring cell's on at most ``MAP_ROWS`` of its rows); None where neither cuts
+    the folds' error."""
     rows = model_observations(model, x)
     if rows.positions:  # the table's change does not fall back far from the rows (module notes)
         return fit_rows_map(rows, model.dh(x), model.tcp_in_flange(x))
     if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
         return None
+    model = thinned(model)
+    rows = model_observations(model, x)
     table = rms3(rows.value_mm[:, None])
     found = fit_absorbed_angle_errors(model, x, free)
     angles = absorbed = None
