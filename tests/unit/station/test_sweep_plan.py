@@ -119,3 +119,11 @@ def test_alternating_keeps_round_robin_order_and_splits_a_line_with_most_passes(
     assert sorted(order) == sorted(chosen)
     assert all(a[0] != b[0] for a, b in zip(order, order[1:], strict=False))
     assert [c[1] for c in order if c[0] == 0] == ["a", "d", "e"]
+
+
+def test_extra_passes_without_sweep_is_a_one_line_error(tmp_path, capsys):
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--extra-passes", "2"]
+    assert cli.main(argv + ["--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--extra-passes: only with --sweep" in err
+    assert not (tmp_path / "p.csv").exists()
