@@ -82,7 +82,8 @@ def sweep_design(
 
     chosen: list = []
     for _ in range(passes):
-        chosen += [best(chosen, [lid]) for lid in pool]
+        for lid in pool:
+            chosen.append(best(chosen, [lid]))
     for _ in range(extra):
         if lids := [lid for lid in pool if pool[lid]]:
             chosen.append(best(chosen, lids))
