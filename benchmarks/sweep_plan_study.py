@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 import configs  # noqa: E402
 from calib.methods import DEFAULT_TERM_MODEL  # noqa: E402
 from calib.sweep import PassShape  # noqa: E402
-from sim_fixtures.station_sim import sweep_cell  # noqa: E402
+from sim_fixtures.station_sim import sweep_cell, sweep_robot  # noqa: E402
 from sim_fixtures.sweep_program import SweepRobot  # noqa: E402
 from sim_fixtures.world import Noise  # noqa: E402
 from station.commands.demo import HOLDOUT_PER_LINE, demo_config, truth_line  # noqa: E402
@@ -64,21 +64,14 @@ def main() -> None:
     design = sweeping.sweep_design(
         robot_file, setup, str(setup_path), passes=args.passes, extra=args.extra, shape=shape
     )
-    plan, sim = design.plan, StationConfig.model_validate(demo_config(0, sweep=True)).sim
+    plan, config = design.plan, StationConfig.model_validate(demo_config(0, sweep=True))
     promise = design.report["predicted"]["plan"]["predicted_rmse_mm"]
     print(f"{len(design.report['passes'])} passes, promising {promise:.3f} mm")
     print("seed | robot time [s] | rows | true error [mm]")
     folder = Path(tempfile.mkdtemp(prefix="sweep-plan-study-"))
     for seed in args.seeds:
         cell, paths = sweep_cell(seed, plan.q_deg, plan.line, plan.sweep_pass)
-        robot = SweepRobot(
-            paths,
-            speed_mm_s=sim.sweep_speed_mm_s,
-            accel_mm_s2=sim.sweep_accel_mm_s2,
-            speed_deg_s=sim.speed_deg_s,
-            accel_deg_s2=sim.accel_deg_s2,
-            dwell_s=sim.dwell_s,
-        )
+        robot = sweep_robot(config, paths)
         q, lines = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz)
         world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
         rng = np.random.default_rng([seed, 1])
