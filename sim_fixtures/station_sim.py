@@ -142,6 +142,22 @@ def sweep_cell(
     return WorldCell(world, q, lines), paths
 
 
+def sweep_robot(cfg, paths: list, hold: bool = False) -> SweepRobot:
+    """The sweeping program over ``paths`` (:func:`sweep_cell`'s) at the station config ``cfg``'s
+    ``[sim]`` speeds, dwells and time scale."""
+    sim = cfg.sim
+    return SweepRobot(
+        paths,
+        speed_mm_s=sim.sweep_speed_mm_s,
+        accel_mm_s2=sim.sweep_accel_mm_s2,
+        speed_deg_s=sim.speed_deg_s,
+        accel_deg_s2=sim.accel_deg_s2,
+        dwell_s=sim.dwell_s,
+        time_scale=cfg.time_scale,
+        hold=hold,
+    )
+
+
 @dataclass(frozen=True)
 class Retarget:
     """Where the rehearsed program really takes its target k (``SimRobot``'s ``retarget``): if the
@@ -352,17 +368,7 @@ class SimStation:
         self.served: dict[str, tuple] = {}
 
     def _sweeper(self, paths, hold: bool) -> SweepRobot:
-        sim = self.cfg.sim
-        return SweepRobot(
-            paths,
-            speed_mm_s=sim.sweep_speed_mm_s,
-            accel_mm_s2=sim.sweep_accel_mm_s2,
-            speed_deg_s=sim.speed_deg_s,
-            accel_deg_s2=sim.accel_deg_s2,
-            dwell_s=sim.dwell_s,
-            time_scale=self.cfg.time_scale,
-            hold=hold,
-        )
+        return sweep_robot(self.cfg, paths, hold)
 
     def _measured_at(self, latency_s: float, jitter_s: float) -> float:
         """The real time [s since start] whose world a sensor of that latency and jitter

@@ -6,8 +6,10 @@ configurations whose TCPs touch the true line) the contact pose is interpolated,
 (so the TCP stays on the true line, off it along the dial axis by the waypoints' placements, blended)
 and orientation by spherical interpolation, every ``KNOT_MM`` of TCP travel; the true robot's IK
 solves each knot (seeded by the joint-linear blend of the two waypoints). Between knots the joints
-are interpolated linearly (the TCP leaves the straight line by well under a micrometre at 2 mm
-knots). The time law along a pass is a trapezoid in the TCP's arc length: ``speed_mm_s`` and
+are interpolated linearly: the TCP leaves the edge sideways by the chord's sag, which grows with
+the knots' spacing squared (2 mm knots: up to 14 um where the tool turns fast, enough to bias a
+sweep's calibration by 0.1 mm; 0.5 mm: under 1 um, half the dial's noise).
+The time law along a pass is a trapezoid in the TCP's arc length: ``speed_mm_s`` and
 ``accel_mm_s2`` (simulated), as a controller's linear move (``movel``) with blending would.
 
 The cycle, forever: dwell ``dwell_s`` at pass 0's first waypoint, sweep to its last, dwell there,
@@ -29,7 +31,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from sim_fixtures.robot_program import RUNNING, RobotState, move_duration, trapezoid
 
-KNOT_MM = 2.0  # TCP travel between the IK-solved knots of a pass's path
+KNOT_MM = 0.5  # TCP travel between the IK-solved knots of a pass's path
 
 
 @dataclass(frozen=True)

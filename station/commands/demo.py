@@ -16,9 +16,9 @@ The steps a user takes at a real station, each with a one-line summary:
    ``verify.json``, ``verify-nominal.json``.
 
 ``--sweep``: the same cell measured by sweeps: ``station plan --sweep`` (``SWEEP_PASSES`` passes per
-line), the simulated robot sweeping each pass at the plan's TCP speed, ``station sample`` streaming
-rows along it; LMLC alone calibrates (MCS chooses among static poses, not among a stream's rows);
-steps 1-5 (the verification is a static session's).
+line and ``SWEEP_EXTRA`` more where they promise most), the simulated robot sweeping each pass at
+the plan's TCP speed, ``station sample`` streaming rows along it; LMLC alone calibrates (MCS
+chooses among static poses, not among a stream's rows); steps 1-5 (the verification is a static session's).
 Either way the demo prints its robot time: the simulated seconds the robot program takes to walk
 the plan once (every move, dwell and sweep, back to its start).
 """
@@ -46,7 +46,8 @@ TIME_SCALE = 40.0
 SWEEP_TIME_SCALE = 1.0  # real time, as a cell sweeps: faster, a reading's round trip spans more of the sweep
 START_S = 4.0  # the simulated robot waits at its first target while the session starts
 HOLDOUT_PER_LINE = 12
-SWEEP_PASSES = 2  # per gauge line: about 85 s of robot time on the demo's cell
+SWEEP_PASSES = 2  # per gauge line ...
+SWEEP_EXTRA = 2  # ... then these more, on the lines that promise most: about 115 s of robot time
 SWEEP_DWELL_S = 1.0  # the simulated robot's stop at each end of a pass
 CONTRACT = {"rtde": ("127.0.0.1", 30004), "modbus": ("127.0.0.1", 5020), "dial": "/tmp/station-sim/dial"}
 
@@ -170,7 +171,8 @@ def _sweep_plan(out: Path, config_path: Path) -> Plan:
     cfg = load_station_config(config_path)
     robot = load_robot(runner.resolve(cfg.session.robot_model, config_path))
     setup_path = runner.resolve(cfg.session.setup, config_path)
-    design = sweeping.sweep_design(robot, load_setup(setup_path), str(setup_path), passes=SWEEP_PASSES)
+    setup = load_setup(setup_path)
+    design = sweeping.sweep_design(robot, setup, str(setup_path), passes=SWEEP_PASSES, extra=SWEEP_EXTRA)
     atomic_write(out / "plan.csv", design.plan.csv_text())
     r = design.report
     print(

@@ -58,6 +58,12 @@ def register(sub) -> None:
         help="a sweep plan instead: N continuous passes (default 1) along each gauge line, the tool kept on "
         "the edge and turned as it slides (station program writes them as blended linear moves)",
     )
+    p.add_argument(
+        "--extra-passes",
+        type=_positive,
+        metavar="K",
+        help="with --sweep: K passes more, each on the line where it promises most (default none)",
+    )
     p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -69,6 +75,8 @@ def run(args) -> int:
     from station.formats.base import Output, check_writable, write_outputs
     from station.jobs import planning
 
+    if args.extra_passes and not args.sweep:
+        raise InputError("--extra-passes: only with --sweep (it adds passes to a sweep plan)")
     if args.sweep and args.near is not None:
         raise InputError("--near and --sweep: choose one (a sweep's passes run the whole edge)")
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
@@ -135,7 +143,9 @@ def _sweep(args, robot, setup, where) -> int:
     from station.formats.base import Output, write_outputs
     from station.jobs import sweeping
 
-    design = sweeping.sweep_design(robot, setup, where, passes=args.sweep, seed=args.seed)
+    design = sweeping.sweep_design(
+        robot, setup, where, passes=args.sweep, extra=args.extra_passes or 0, seed=args.seed
+    )
     outputs = [Output.text(args.out, "--out", design.plan.csv_text())]
     if args.report:
         outputs.append(Output.text(args.report, "--report", json.dumps(design.report, indent=2) + "\n"))

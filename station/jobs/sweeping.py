@@ -7,8 +7,9 @@ tilted and rolled at random at each (as ``station plan``'s candidates), kept whe
 is reachable, inside the limits and away from singularities. Choice: greedily, a pass per line at a
 time, the one whose rows (sampled at ``SCORE_HZ``, each weighing ``row_hz / SCORE_HZ`` rows) lower
 the predicted workspace error of everything chosen most (``calib.experiment.expected_modes``, the
-static planner's promise). The plan's rows are the waypoints; ``pass`` numbers the passes, in the
-order chosen: a pass on each line, then a second on each, ... (no two consecutive passes on one line).
+static planner's promise); then ``extra`` passes more, each the best of every line's candidates left.
+The plan's rows are the waypoints; ``pass`` numbers the passes: a pass on each line, then a second
+on each, ..., the extra ones among them so that no two consecutive passes share a line.
 """
 
 from __future__ import annotations
@@ -40,12 +41,13 @@ def sweep_design(
     where: str = "setup",
     *,
     passes: int = 1,
+    extra: int = 0,
     seed: int = 0,
     shape: PassShape = SHAPE,
     sweep: SweepLimits = SWEEP,
 ) -> Design:
-    """``passes`` passes per gauge line of ``setup`` (module docstring); InputError naming the line
-    where too few valid passes were found."""
+    """``passes`` passes per gauge line of ``setup``, then ``extra`` more on whichever lines promise
+    most (module docstring); InputError naming the line where too few valid passes were found."""
     lines = placements(setup, where)
     ds_setup = drawstring_setup(setup, where)
     dh, tool = robot_arrays(robot)
@@ -53,7 +55,7 @@ def sweep_design(
     rng = np.random.default_rng(seed)
     pool = {}
     for lid, line in lines.items():
-        found = line_passes(dh, tool, limits, line, shape, sweep, rng, max(CANDIDATES, passes))
+        found = line_passes(dh, tool, limits, line, shape, sweep, rng, max(CANDIDATES, passes + extra))
         if len(found) < passes:
             raise InputError(
                 f"{where}: [[lines]] id {lid}: {len(found)} of {passes} passes along the edge stay "
@@ -68,13 +70,38 @@ def sweep_design(
         line = np.concatenate([np.full(len(rows), lid) for lid, _, rows in chosen])
         return promise(expected_modes(design_model(dh, tool, ds_setup, q, line), workspace_q, weight))
 
+    def best(chosen: list, lids) -> tuple:
+        """The (line id, waypoints, rows) of ``lids``' candidates promising least beside ``chosen``."""
+        scored = [
+            (promised([*chosen, (lid, q, rows)])["predicted_rmse_mm"], lid, k)
+            for lid in lids
+            for k, (q, rows) in enumerate(pool[lid])
+        ]
+        _, lid, k = min(scored)
+        return (lid, *pool[lid].pop(k))
+
     chosen: list = []
     for _ in range(passes):
-        for lid, candidates in pool.items():
-            scored = [promised([*chosen, (lid, q, rows)])["predicted_rmse_mm"] for q, rows in candidates]
-            q, rows = candidates.pop(int(np.argmin(scored)))
-            chosen.append((lid, q, rows))
+        for lid in pool:
+            chosen.append(best(chosen, [lid]))
+    for _ in range(extra):
+        if lids := [lid for lid in pool if pool[lid]]:
+            chosen.append(best(chosen, lids))
+    chosen = alternating(chosen)
     return Design(_plan(robot, lines, chosen), _report(dh, tool, limits, chosen, sweep, promised(chosen)))
+
+
+def alternating(chosen: list) -> list:
+    """``chosen`` passes (line id first) reordered so that no two in a row share a line where the
+    counts allow: each next from the line with most passes left that is not the one just swept
+    (ties: the lines' order), in the order chosen within a line."""
+    left = {lid: [c for c in chosen if c[0] == lid] for lid in dict.fromkeys(c[0] for c in chosen)}
+    out: list = []
+    while any(left.values()):
+        others = [lid for lid in left if left[lid] and (not out or lid != out[-1][0])]
+        lid = max(others or [lid for lid in left if left[lid]], key=lambda k: len(left[k]))
+        out.append(left[lid].pop(0))
+    return out
 
 
 def _plan(robot: RobotFile, lines: dict, chosen: list) -> Plan:

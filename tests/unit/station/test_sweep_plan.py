@@ -19,7 +19,7 @@ from station.formats.base import read_toml
 from station.formats.plan import load_plan
 from station.formats.samples import Samples
 from station.formats.tables import SetupFile, load_robot, load_setup
-from station.jobs import calibration
+from station.jobs import calibration, sweeping
 from station.jobs.sweeping import SWEEP
 
 ROBOT, SETUP = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.toml")
@@ -96,4 +96,34 @@ def test_a_line_no_pass_can_sweep_is_a_one_line_error(tmp_path, capsys):
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "[[lines]] id 1: 0 of 1 passes" in err
+    assert not (tmp_path / "p.csv").exists()
+
+
+def test_extra_passes_go_where_they_promise_most_and_never_twice_in_a_row_on_a_line(swept):
+    plan, report = swept
+    design = sweeping.sweep_design(load_robot(ROBOT), load_setup(SETUP), str(SETUP), passes=1, extra=2)
+    lines = [int(design.plan.line[idx[0]]) for idx in design.plan.passes()]
+    assert len(lines) == 5 and all(a != b for a, b in zip(lines, lines[1:], strict=False))
+    one_each = {int(plan.line[idx[0]]): plan.q_deg[idx] for idx in plan.passes()}
+    kept = [design.plan.q_deg[idx] for idx in design.plan.passes()]
+    for lid, q in one_each.items():  # the first round is the plan of one pass a line, unchanged
+        assert any(w.shape == q.shape and np.allclose(w, q) for w in kept), lid
+    promised = design.report["predicted"]["plan"]["predicted_rmse_mm"]
+    assert promised < report["predicted"]["plan"]["predicted_rmse_mm"]
+
+
+def test_alternating_keeps_round_robin_order_and_splits_a_line_with_most_passes():
+    chosen = [(0, "a"), (1, "b"), (2, "c"), (0, "d"), (0, "e"), (1, "f")]
+    assert [c[1] for c in sweeping.alternating(chosen[:3])] == ["a", "b", "c"]
+    order = sweeping.alternating(chosen)
+    assert sorted(order) == sorted(chosen)
+    assert all(a[0] != b[0] for a, b in zip(order, order[1:], strict=False))
+    assert [c[1] for c in order if c[0] == 0] == ["a", "d", "e"]
+
+
+def test_extra_passes_without_sweep_is_a_one_line_error(tmp_path, capsys):
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--extra-passes", "2"]
+    assert cli.main(argv + ["--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--extra-passes: only with --sweep" in err
     assert not (tmp_path / "p.csv").exists()
