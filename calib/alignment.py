@@ -18,7 +18,7 @@ than a microsecond. Its information
 comes where the sensor's rate changes along the pass: the robot's accelerations and stops at the
 passes' ends. A sensor that barely changes along a pass (a dial on the edge reads only the tool's
 error across it) carries no information on its latency, and a latency error barely moves its rows:
-:func:`steepest_rate` bounds how much.
+:func:`steepest_rate` says about how much.
 """
 
 from __future__ import annotations
@@ -102,7 +102,8 @@ def steepest_rate(t, values, groups, degree: int = 3) -> float:
     """The largest rate of change [unit per s] of a sensor's smooth part along its passes: per pass
     (``groups`` (N,)) a polynomial of ``degree`` in time fitted to ``values`` (N,) at ``t`` (N,)
     [s], its derivative's largest magnitude at the readings (0 without a pass of two readings).
-    A latency off by ``dt`` moves the sensor's aligned rows by at most this times ``dt``."""
+    A latency off by ``dt`` moves the sensor's aligned rows by about this times ``dt`` where its
+    trend is steepest (the trend's, not the readings': no bound on a faster change between them)."""
     t, values, groups = np.asarray(t, float), np.asarray(values, float), np.asarray(groups)
     steepest = 0.0
     for g in np.unique(groups):

@@ -43,9 +43,11 @@ Latency: at the end the drawstring's latency is estimated from the stored rows
 against the stated one; a difference beyond ``latency_tolerance_s`` and three standard errors is
 named in one line (an estimate whose three standard errors exceed the tolerance is said to be too
 uncertain to check). The dial's latency is not estimated: it reads the tool's error across the
-edge, which barely changes along a pass; the session says how far a latency ``latency_tolerance_s``
-off would move its rows (``calib.alignment.steepest_rate``). A sensor that leaves over ``DROP_NOTE``
-of its requests unanswered is named; its missing readings are missing rows, never filled in.
+edge, which barely changes along a pass; the session says about how far a latency
+``latency_tolerance_s`` off would move its rows at its trend's steepest (``calib.alignment.steepest_rate``:
+a per-pass cubic's, an estimate, not a bound: the true dial may change faster at places). A sensor
+that leaves over ``DROP_NOTE`` of its requests unanswered is named; its missing readings are missing
+rows, never filled in.
 """
 
 from __future__ import annotations
@@ -517,9 +519,9 @@ class SweepSession:
         dial = {"stated_s": stated, "steepest_mm_s": rate, "moved_mm_per_tolerance": moved}
         self.folder.update_header(latency={**self.folder.header.get("latency", {}), "dial": dial})
         return [
-            f"dial: latency not estimated (its reading changes by at most {rate:.3f} mm/s along the "
-            f"passes: a latency {tolerance * 1e3:.1f} ms off moves its rows by {moved * 1e3:.2f} um at "
-            f"most); the stated {stated * 1e3:.1f} ms is used"
+            f"dial: latency not estimated (its reading's trend changes by up to {rate:.3f} mm/s along "
+            f"the passes: a latency {tolerance * 1e3:.1f} ms off moves its rows by about {moved * 1e3:.2f} "
+            f"um); the stated {stated * 1e3:.1f} ms is used"
         ]
 
     def _end(self, state: State, text: str) -> State:

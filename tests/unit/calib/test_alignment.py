@@ -82,7 +82,7 @@ def test_a_rate_that_never_changes_says_nothing_about_a_lag():
     assert found.lag_s == 0.0 and np.isinf(found.sigma_s)
 
 
-def test_steepest_rate_bounds_how_far_a_latency_error_moves_a_slow_sensor():
+def test_steepest_rate_is_the_steepest_slope_of_a_slow_sensors_trend():
     # a dial on the edge: a slow drift of known rate along each pass, read with 2 um noise
     rng = np.random.default_rng(3)
     t = np.concatenate([np.linspace(0, 10, 500), np.linspace(20, 25, 300)])
@@ -90,5 +90,5 @@ def test_steepest_rate_bounds_how_far_a_latency_error_moves_a_slow_sensor():
     drift = np.where(groups == 0, 0.004 * t, -0.01 * (t - 20) + 0.002 * (t - 20) ** 2)
     truth = max(0.004, 0.01)  # mm/s: the second pass's slope at its start
     rate = steepest_rate(t, drift + rng.normal(0, 0.002, len(t)), groups)
-    assert truth <= rate < truth + 0.004  # an upper bound, the noise's end effects small
+    assert truth <= rate < truth + 0.004  # the trend found, the noise's end effects small
     assert steepest_rate(t[:1], drift[:1], groups[:1]) == 0.0
