@@ -210,8 +210,10 @@ class _Run:
 class SweepSession:
     """Run a sweep ``plan`` against ``drivers`` into ``folder`` under ``rules``; ``robot``, ``setup``:
     the nominal model and the setup (for speeds, positions and the latency check); ``tell(text)``
-    says what happens, ``show(pass_id, line, tcp_good, tcp_flagged, t_s)`` draws a stored pass and
-    ``trail(tcp, t_s)`` where the tool slid on a pass since the last look (nominal TCPs (N, 3))."""
+    says what happens, ``show(pass_id, line, tcp_good, tcp_flagged, t_s, sample=, passes=)`` draws a
+    stored pass (``sample``: its last row's index; ``passes``: done and total) and ``trail(tcp, t_s,
+    sample)`` where the tool slid on a pass since the last look (nominal TCPs (N, 3); ``sample``: the
+    index its first row will take)."""
 
     def __init__(
         self,
@@ -221,8 +223,8 @@ class SweepSession:
         rules: SweepRules,
         kin: Kinematics,
         tell: Callable[[str], None] = lambda text: None,
-        show: Callable[..., None] = lambda *a: None,
-        trail: Callable[[np.ndarray, float], None] = lambda tcp, t_s: None,
+        show: Callable[..., None] = lambda *a, **k: None,
+        trail: Callable[[np.ndarray, float, int], None] = lambda tcp, t_s, sample: None,
     ):
         self.folder, self.plan, self.streams, self.rules, self.kin = folder, plan, streams, rules, kin
         self.tell, self.show, self.trail = tell, show, trail
@@ -240,6 +242,7 @@ class SweepSession:
         self._lag_rows: list[tuple] = []  # (t, length, pass, position) of every stored row
         self._dial_rows: list[tuple] = []  # (t, dial, pass) of every stored row
         self._span: list[float] = []  # station times [s] of the stored passes' starts and ends
+        self._next_sample = folder.next_sample  # the index the next stored row takes (the view's time)
 
     def request_stop(self) -> None:
         self._stop = True
@@ -290,6 +293,7 @@ class SweepSession:
             self.trail(
                 self.kin.tcp(robot["q_deg"][new][where >= 0]),
                 float(t[-1] + self._wall_minus_mono - self._t0_wall),
+                self._next_sample,
             )
         stored = False
         for ti, p, u in zip(t, where, pos, strict=True):
@@ -324,6 +328,7 @@ class SweepSession:
             )
             return False
         self.folder.append_rows(rows, flagged)
+        self._next_sample = self.folder.next_sample
         self._span += [run.t0, run.t1]
         pid = self.map.ids[run.p]
         self.finished.add(pid)
@@ -337,7 +342,15 @@ class SweepSession:
             + (f", {len(flagged)} flagged ({said})" if flagged else "")
             + f" ({len(self.finished)}/{len(self.map.ids)} passes)"
         )
-        self.show(pid, line, tcp[: len(rows)], tcp[len(rows) :], rows[-1]["t_s"] if rows else 0.0)
+        self.show(
+            pid,
+            line,
+            tcp[: len(rows)],
+            tcp[len(rows) :],
+            rows[-1]["t_s"] if rows else 0.0,
+            sample=self._next_sample - 1,
+            passes=(len(self.finished), len(self.map.ids)),
+        )
         return True
 
     def _rows(self, run: _Run, robot: dict) -> tuple[list[dict], list[dict], np.ndarray]:

@@ -16,8 +16,10 @@ Entities (timelines ``sample``, the capture index, and ``session_time``, seconds
   ``cell/robot/joints``, ``cell/robot/tool`` (the tool's approach onto the TCP);
 - a sweep session's ``cell/sweep/now`` (where the tool slides on a pass, as the robot's packages
   come: grey), ``cell/sweep/<pass>/rows`` (the nominal TCPs of a stored pass's rows, green) and
-  ``cell/sweep/<pass>/flagged`` (its flagged rows, red), each as its pass is stored;
-- ``progress``: samples taken of the plan's;
+  ``cell/sweep/<pass>/flagged`` (its flagged rows, red), each as its pass is stored, on ``sample``
+  too (its rows' index: the timeline the layout shows);
+- ``progress``: samples taken of the plan's (a sweep: passes stored, the last one's rows and flagged
+  rows);
 - ``live/error`` (reading - the running calibration's prediction, made before the sample joins a
   fit), ``live/error/limit/upper|lower`` (what the prediction's uncertainty and the noise explain)
   and ``live/error/suspect`` (readings beyond it); ``live/predicted_workspace_mm`` and
@@ -76,6 +78,9 @@ RECENT_SAMPLES = 20
 """The live error's plot shows this many recent samples, at their own scale: the first samples of a
 line, millimetres off, would flatten the hundredths that follow."""
 ROBOT, TOOL = (40, 120, 140), (240, 150, 30)
+SWEEP_RADII = {"now": -2.0, "rows": -1.5, "flagged": -2.5}
+"""A sweep's points in UI points (negative: Rerun's screen size), not millimetres: rows a
+millimetre apart along metre-long lines would be below a pixel in the whole cell's view."""
 
 
 def blueprint(eye: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
@@ -282,27 +287,41 @@ class LiveView:
         if live.suspect:
             self.rec.log("live/error/suspect", rr.Scalars(live.error_mm))
 
-    def sweeping(self, tcp_mm, t_s: float) -> None:
-        """Where the tool slid on a pass since the last call: nominal TCPs (N, 3) [mm]."""
+    def sweeping(self, tcp_mm, t_s: float, sample: int) -> None:
+        """Where the tool slid on a pass since the last call: nominal TCPs (N, 3) [mm], at session
+        time ``t_s`` [s] and ``sample``, the index the pass's first row will take (the view's
+        timeline is the rows' index in both kinds of session)."""
+        self.rec.set_time("sample", sequence=sample)
         self.rec.set_time("session_time", duration=t_s)
         self.rec.log(
-            "cell/sweep/now", rr.Points3D(np.asarray(tcp_mm, float).reshape(-1, 3), radii=2.0, colors=[GREY])
+            "cell/sweep/now",
+            rr.Points3D(np.asarray(tcp_mm, float).reshape(-1, 3), radii=SWEEP_RADII["now"], colors=[GREY]),
         )
 
-    def sweep(self, pass_id: int, line: int, tcp_mm, flagged_mm, t_s: float) -> None:
+    def sweep(self, pass_id: int, line: int, tcp_mm, flagged_mm, t_s: float, *, sample: int, passes) -> None:
         """A sweep's stored pass on gauge ``line``: the nominal TCPs (N, 3) [mm] of its rows and
-        (K, 3) of its flagged rows, at session time ``t_s`` [s]."""
+        (K, 3) of its flagged rows, at session time ``t_s`` [s] and ``sample`` (its last row's
+        index); ``passes`` (done, total) for the progress."""
+        self.rec.set_time("sample", sequence=sample)
         self.rec.set_time("session_time", duration=t_s)
-        label = f"pass {pass_id} (line {line})"
+        tcp, flagged = (np.asarray(v, float).reshape(-1, 3) for v in (tcp_mm, flagged_mm))
         self.rec.log(
-            f"cell/sweep/{pass_id}/rows",
-            rr.Points3D(np.asarray(tcp_mm, float).reshape(-1, 3), radii=1.5, colors=[GREEN], labels=[label]),
+            f"cell/sweep/{pass_id}/rows", rr.Points3D(tcp, radii=SWEEP_RADII["rows"], colors=[GREEN])
         )
-        if len(flagged_mm):
+        if len(flagged):
             self.rec.log(
                 f"cell/sweep/{pass_id}/flagged",
-                rr.Points3D(np.asarray(flagged_mm, float).reshape(-1, 3), radii=3.0, colors=[RED]),
+                rr.Points3D(flagged, radii=SWEEP_RADII["flagged"], colors=[RED]),
             )
+        done, total = passes
+        self.rec.log(
+            "progress",
+            rr.TextDocument(
+                f"**{done} of {total} passes** ({100.0 * done / max(total, 1):.0f} %), the last on line "
+                f"{line}: {len(tcp)} rows stored (green), {len(flagged)} flagged (red)",
+                media_type=rr.MediaType.MARKDOWN,
+            ),
+        )
 
     def _robot(self, chain: np.ndarray, tcp: np.ndarray, approach) -> None:
         """The robot as it stands: links through its joints, the joints, and the tool pointing
