@@ -208,7 +208,9 @@ class RobotOpcUa(Section):
     Robotics companion specification's ``DeviceSet/<MotionDevice>/Axes/<Axis>/ParameterSet``) and
     ``ActualSpeed`` (empty: the change between reads), ``{axis}`` standing for 1 .. 6, in ``unit``
     (per second for speeds); the writable nodes a controller program reads corrected targets from
-    (``target_node`` per axis, ``target_index_node``; either empty: no in-session correction)."""
+    (``target_node`` per axis, ``target_index_node``; either empty: no in-session correction);
+    ``subscription_ms`` > 0: a sweep gets every sample the server publishes at that interval
+    (a subscription) instead of polling (0)."""
 
     kind: Literal["opcua"]
     url: Annotated[str, Field(pattern=r"^opc\.tcp://[^\x00/]+(/[^\x00]*)?$")] = "opc.tcp://127.0.0.1:4840"
@@ -216,6 +218,7 @@ class RobotOpcUa(Section):
     speed_node: NodeTemplate = f"{AXIS_PARAMETERS}/ActualSpeed"
     unit: Literal["deg", "rad"] = "deg"
     timeout_s: Timeout = 1.0
+    subscription_ms: float = Field(0.0, ge=0.0, le=10_000.0)
     target_node: NodeTemplate = f"{AXIS_PARAMETERS}/TargetPosition"
     target_index_node: Annotated[
         str, Field(max_length=4096, pattern=r"^[^\x00{}]*$"), AfterValidator(_node_id)
@@ -238,6 +241,7 @@ class RobotOpcUa(Section):
             timeout_s=self.timeout_s,
             target_nodes=targets,
             target_index_node=self.target_index_node or None,
+            subscription_ms=self.subscription_ms,
         )
 
     def endpoint(self) -> str:

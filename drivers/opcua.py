@@ -13,6 +13,15 @@ and an Int32 index (``target_index_node``), written in one Write request, the po
 the index last (the program takes the positions once the index names its next target). Nodes the
 server lacks, or will not let us write: no channel (``target_channel()`` None, ``no_channel`` why).
 
+Subscription (``subscription_ms`` > 0, for a sweep: the joints at the controller's own rate, each
+sample stamped by it): the position (and speed) nodes are monitored with a queue, the server
+publishing every ``subscription_ms``; :meth:`OpcUaJointSource.received` assembles the changes into
+readings, one per source timestamp, each axis not in it held at its last value (a server may stamp
+its axes apart), the newest timestamp held back until a later one shows it whole (or two
+publishing intervals pass). Each sample is asked for even where its value did not change (the
+trigger StatusValueTimestamp): a server that ignores it sends nothing while the robot stands still,
+so the link is also checked by a read every ``timeout_s`` (its errors as :meth:`read`'s).
+
 The companion specification has no single "program running" flag, so ``robot_mode`` reads RUNNING
 (7, as over RTDE) while the server answers; a stopped controller shows as joints that stand still.
 Freshness: every read asks the server (a read, not a subscription), so a value is as old as the
@@ -31,7 +40,9 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import threading
 import time
+from collections import deque
 from collections.abc import Sequence
 
 from asyncua import ua
@@ -59,6 +70,8 @@ OPCUA_FIELDS = {
     "controller_time_s": Field("s", (), "the server's source timestamp of joint 1, s since the epoch"),
 }
 UNIT_TO_DEG = {"deg": 1.0, "rad": math.degrees(1.0)}
+QUEUE = 256  # values the server queues per node between publishes (2.5 s of a 100 Hz controller)
+KEPT = 8 * 4096  # changes kept for received() (6 or 12 per sample)
 NUMBERS = {
     getattr(ua.VariantType, name)
     for name in ("SByte", "Byte", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Float", "Double")
@@ -84,6 +97,7 @@ class OpcUaJointSource(Driver):
         name: str = "robot",
         target_nodes: Sequence[str] | None = None,
         target_index_node: str | None = None,
+        subscription_ms: float = 0.0,
     ):
         if len(position_nodes) != JOINTS or (speed_nodes is not None and len(speed_nodes) != JOINTS):
             raise ValueError(f"OPC UA joints need {JOINTS} position (and speed) node ids")
@@ -98,6 +112,13 @@ class OpcUaJointSource(Driver):
         )
         self._targets: OpcUaTargets | None = None
         self.no_channel = "no target nodes configured" if self.target_ids is None else "not opened"
+        self.subscription_ms = subscription_ms
+        self._changes: deque[tuple[int, ua.DataValue, float, float]] = deque(maxlen=KEPT)
+        self._lock = threading.Lock()
+        self._held: dict[int, float] = {}  # node index -> its last value (the subscription's readings)
+        self._pending: list[tuple[int, ua.DataValue, float, float]] = []  # the newest timestamp's
+        self._pushed: tuple[float, tuple] | None = None  # the last subscribed reading's (stamp, q)
+        self._checked = 0.0  # when the subscribed link was last checked by a read [s, monotonic]
 
     def open(self) -> None:
         """Connect and read every node once (a node id the server lacks: DeviceReplyError naming it);
@@ -117,6 +138,41 @@ class OpcUaJointSource(Driver):
         self._nodes = [client.get_node(n) for n in self.node_ids]
         self._read_values()
         self._targets = self._find_targets()
+        if self.subscription_ms > 0:
+            self._subscribe()
+
+    def _subscribe(self) -> None:
+        """Monitor every node (module notes); the server's refusal is a DeviceReplyError."""
+        with self._lock:
+            self._changes.clear()
+        self._held, self._pending, self._pushed, self._checked = {}, [], None, time.monotonic()
+        params = ua.CreateSubscriptionParameters(
+            RequestedPublishingInterval=self.subscription_ms,
+            RequestedLifetimeCount=10_000,
+            RequestedMaxKeepAliveCount=max(1, int(1000 * self.timeout_s / self.subscription_ms)),
+            PublishingEnabled=True,
+        )
+        try:
+            sub = self._client.create_subscription(params, _Changes(self))
+            codes = sub.create_monitored_items([_every_sample(node, k) for k, node in enumerate(self._nodes)])
+        except (asyncio.TimeoutError, TimeoutError) as exc:
+            raise DeviceTimeout(self.name, self._silent) from exc
+        except (OSError, ConnectionError, ThreadLoopNotRunning, ua.UaError) as exc:
+            raise DeviceReplyError(
+                self.name, f"OPC UA {self.url}: no subscription: {_why(exc)}", "SUBSCRIPTION"
+            ) from exc
+        bad = [(n, c) for n, c in zip(self.node_ids, codes, strict=True) if isinstance(c, ua.StatusCode)]
+        if bad:
+            raise DeviceReplyError(
+                self.name,
+                f"OPC UA {self.url}: cannot monitor node {bad[0][0]}: {bad[0][1].name}",
+                bad[0][1].name,
+            )
+
+    def _changed(self, node: int, value: ua.DataValue) -> None:
+        """A node's new value, from the subscription's thread."""
+        with self._lock:
+            self._changes.append((node, value, time.monotonic(), time.time()))
 
     @property
     def _silent(self) -> str:
@@ -163,18 +219,51 @@ class OpcUaJointSource(Driver):
         if self._client is None:
             raise DeviceUnreachable(self.name, f"OPC UA {self.url} not connected (open() first)")
         values, stamp = self._read_values()
-        now = time.monotonic()
+        fields, self._last = self._joints(values, time.monotonic(), stamp, self._last)
+        return Reading.now(self.name, fields, OPCUA_FIELDS)
+
+    def received(self) -> list[Reading] | None:
+        """With a subscription (module notes), a reading per source timestamp changed since the
+        last call, oldest first, stamped at its last change's arrival; None where polled."""
+        if self.subscription_ms <= 0:
+            return None
+        if self._client is None:
+            raise DeviceUnreachable(self.name, f"OPC UA {self.url} not connected (open() first)")
+        if time.monotonic() - self._checked > self.timeout_s:
+            self._read_values()  # the link still answers (module notes)
+            self._checked = time.monotonic()
+        with self._lock:
+            changes = self._pending + list(self._changes)
+            self._changes.clear()
+        changes.sort(key=lambda c: _seconds(c[1]))
+        newest = _seconds(changes[-1][1]) if changes else None
+        waited = changes and time.monotonic() - changes[-1][2] > 2e-3 * self.subscription_ms
+        self._pending = [] if waited else [c for c in changes if _seconds(c[1]) == newest]
+        readings, units = [], {name: field.units for name, field in OPCUA_FIELDS.items()}
+        for stamp, group in _by_stamp(changes[: len(changes) - len(self._pending)]):
+            for node, value, _, _ in group:
+                self._held[node] = self._value(self.node_ids[node], value.Value, speed=node >= JOINTS)
+            if len(self._held) < len(self.node_ids) or (self._pushed and stamp <= self._pushed[0]):
+                continue  # an axis not heard from yet, or a change older than a reading given
+            values = [self._held[k] for k in range(len(self.node_ids))]
+            fields, self._pushed = self._joints(values, stamp, stamp, self._pushed)
+            readings.append(Reading(self.name, fields, units, group[-1][2], group[-1][3]))
+        return readings
+
+    def _joints(self, values: list[float], at: float, stamp: float, last) -> tuple[dict, tuple]:
+        """The reading's fields from the nodes' ``values`` (the config's unit), taken at ``at`` [s]
+        with source timestamp ``stamp``, and what the next call's speed needs; ``last`` (the
+        previous ``(at, q)`` on the same clock, or None) gives the speed where there are no speed
+        nodes."""
         factor = UNIT_TO_DEG[self.unit]
         q = tuple(v * factor for v in values[:JOINTS])
         if self._speeds:
             qd = tuple(v * factor for v in values[JOINTS:])
-        elif self._last is None or now <= self._last[0]:
+        elif last is None or at <= last[0]:
             qd = (math.inf,) * JOINTS  # unknown until a second read: not settled
         else:
-            qd = tuple((a - b) / (now - self._last[0]) for a, b in zip(q, self._last[1], strict=True))
-        self._last = (now, q)
-        values_out = {"q_deg": q, "qd_deg_s": qd, "robot_mode": RUNNING, "controller_time_s": stamp}
-        return Reading.now(self.name, values_out, OPCUA_FIELDS)
+            qd = tuple((a - b) / (at - last[0]) for a, b in zip(q, last[1], strict=True))
+        return {"q_deg": q, "qd_deg_s": qd, "robot_mode": RUNNING, "controller_time_s": stamp}, (at, q)
 
     def _read_values(self) -> tuple[list[float], float]:
         """Every node's value (one Read request) and joint 1's source timestamp [s since epoch]."""
@@ -221,6 +310,48 @@ class OpcUaJointSource(Driver):
                 self.name, f"OPC UA {self.url}: node {node_id} holds {value:g} {unit}, not {what}"
             )
         return value
+
+
+class _Changes:
+    """The subscription's handler: each node's new value to its source."""
+
+    def __init__(self, source: OpcUaJointSource):
+        self.index = {node.nodeid: k for k, node in enumerate(source._nodes)}
+        self.source = source
+
+    def datachange_notification(self, node, val, data) -> None:
+        self.source._changed(self.index[node.nodeid], data.monitored_item.Value)
+
+
+def _every_sample(node, handle: int) -> ua.MonitoredItemCreateRequest:
+    """A request to monitor ``node``'s value with a queue, reporting a sample whose timestamp
+    changed even where its value did not (a robot standing still: otherwise no news, as if lost)."""
+    item = ua.ReadValueId(NodeId=node.nodeid, AttributeId=ua.AttributeIds.Value)
+    trigger = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp)
+    wanted = ua.MonitoringParameters(
+        ClientHandle=handle + 1, QueueSize=QUEUE, DiscardOldest=True, Filter=trigger
+    )
+    return ua.MonitoredItemCreateRequest(
+        ItemToMonitor=item, MonitoringMode=ua.MonitoringMode.Reporting, RequestedParameters=wanted
+    )
+
+
+def _seconds(value: ua.DataValue) -> float:
+    """A value's source timestamp (else the server's) [s since the epoch]; NaN without either."""
+    stamp = value.SourceTimestamp or value.ServerTimestamp
+    return stamp.timestamp() if stamp else math.nan
+
+
+def _by_stamp(changes: list) -> list[tuple[float, list]]:
+    """Changes sorted by timestamp, grouped by it."""
+    groups: list[tuple[float, list]] = []
+    for change in changes:
+        stamp = _seconds(change[1])
+        if groups and groups[-1][0] == stamp:
+            groups[-1][1].append(change)
+        else:
+            groups.append((stamp, [change]))
+    return groups
 
 
 def _why(exc: BaseException) -> str:

@@ -4,8 +4,11 @@ Laid out as the OPC UA Robotics companion specification (OPC 40010-1) lays out a
 ``Objects/DeviceSet/Robot/Axes/Axis<i>/ParameterSet/ActualPosition`` (deg) and ``ActualSpeed``
 (deg per simulated s), each with a string node id of that path in the server's namespace 2
 (:func:`position_node`, :func:`speed_node`). Every read computes the value from the robot program at
-that instant (a value callback), stamped with the time it was read. The server runs its own
-event loop in a thread; ``start()`` returns once it listens, ``stop()`` ends it.
+that instant (a value callback), stamped with the time it was read. With ``sample_s``, while a
+client holds a subscription, the server also samples the program every ``sample_s`` [s] as a
+controller's cycle does and writes every axis's position and speed with that sample's one
+timestamp, so monitored items see each sample (reads stay computed on read). The server runs its
+own event loop in a thread; ``start()`` returns once it listens, ``stop()`` ends it.
 
 The target channel (no part of the companion specification: what a controller program or gateway
 offers a station that corrects targets in-session): writable ``TargetPosition`` (Double, deg)
@@ -23,6 +26,7 @@ import asyncio
 import logging
 import math
 import threading
+from collections import deque
 from datetime import datetime, timezone
 
 from asyncua import Server, ua
@@ -54,10 +58,11 @@ TARGET_INDEX_NODE = "ns=2;s=DeviceSet/Robot/TargetIndex"
 
 class OpcUaRobotServer:
     """Serves ``state()`` (a callable returning joints [deg] and speeds [deg/s], (6,) each) at
-    ``opc.tcp://host:port``; ``hand(target, q_deg)`` hears each corrected target written."""
+    ``opc.tcp://host:port``; ``hand(target, q_deg)`` hears each corrected target written;
+    ``sample_s``: the cycle [s] at which subscribed clients get samples (module notes; None: none)."""
 
-    def __init__(self, state, host: str, port: int = 4840, hand=None):
-        self.state, self.host, self.port, self.hand = state, host, port, hand
+    def __init__(self, state, host: str, port: int = 4840, hand=None, sample_s: float | None = None):
+        self.state, self.host, self.port, self.hand, self.sample_s = state, host, port, hand, sample_s
         self._target = [math.nan] * AXES
         self.url = f"opc.tcp://{host}:{port}"
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -66,6 +71,7 @@ class OpcUaRobotServer:
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="opcua-sim", daemon=True)
         self.edit = None  # (joint, index, ua.DataValue) -> ua.DataValue: see the module notes
+        self.sampled: deque[float] = deque(maxlen=100_000)  # each sample's timestamp [s since epoch]
 
     def start(self) -> OpcUaRobotServer:
         self._thread.start()
@@ -95,7 +101,7 @@ class OpcUaRobotServer:
         server.set_endpoint(self.url)
         server.set_server_name("station simulated robot controller")
         ns = await server.register_namespace(NAMESPACE)
-        folder = server.nodes.objects
+        folder, actual = server.nodes.objects, []
         for name in ("DeviceSet", "Robot", "Axes"):
             folder = await folder.add_object(ua.NodeId(f"{_path(folder)}{name}", ns), name)
         for axis in range(1, AXES + 1):
@@ -107,6 +113,9 @@ class OpcUaRobotServer:
                 node_id = ua.NodeId(f"DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/{key}", ns)
                 await params.add_variable(node_id, key, 0.0, varianttype=ua.VariantType.Double)
                 server.set_attribute_value_callback(node_id, self._reader(axis - 1, index))
+                # a sample written for the monitored items leaves the read callback in place
+                server.set_attribute_value_setter(node_id, lambda node, attr, value: None)
+                actual.append((axis - 1, index, node_id))
             key = "TargetPosition"
             node_id = ua.NodeId(f"DeviceSet/Robot/Axes/Axis{axis}/ParameterSet/{key}", ns)
             node = await params.add_variable(node_id, key, math.nan, varianttype=ua.VariantType.Double)
@@ -119,7 +128,31 @@ class OpcUaRobotServer:
         server.set_attribute_value_setter(index_id, self._setter(None))
         async with server:
             self._ready.set()
-            await self._stop.wait()
+            if self.sample_s is None:
+                await self._stop.wait()
+            else:
+                await self._sample(server, actual)
+
+    async def _sample(self, server: Server, actual: list) -> None:
+        """Until stopped: while a client subscribes, every ``sample_s`` one sample of the program
+        written to every axis node with one timestamp (module notes)."""
+        subscriptions = server.iserver.subscription_service.subscriptions
+        while not self._stop.is_set():
+            if subscriptions:
+                state, now = self.state(), datetime.now(timezone.utc)
+                self.sampled.append(now.timestamp())
+                for joint, index, node_id in actual:
+                    answer = ua.DataValue(
+                        ua.Variant(float(state[index][joint]), ua.VariantType.Double),
+                        SourceTimestamp=now,
+                        ServerTimestamp=now,
+                    )
+                    answer = answer if self.edit is None else self.edit(joint, index, answer)
+                    await server.write_attribute_value(node_id, answer)
+            try:
+                await asyncio.wait_for(self._stop.wait(), self.sample_s)
+            except asyncio.TimeoutError:
+                pass
 
     def _reader(self, joint: int, index: int):
         """The value callback of one joint's position (index 0) or speed (1)."""

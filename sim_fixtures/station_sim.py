@@ -54,6 +54,7 @@ PLAY_WAIT_S = 1e6  # a program run once waits this long (real s) at its first ta
 PLAY_POLL_S = 0.3  # real s: reads of the joints this long, none PLAY_GAP_S after the last, press play
 PLAY_GAP_S = 0.25  # real s: a longer pause between reads is no session polling
 PLAY_SUBSCRIBED_S = 3.0  # real s: a ROS subscription this long unbroken, press play (a session's is)
+OPCUA_CYCLE_S = 0.016  # simulated s: the OPC UA server's samples to a subscription (a 62.5 Hz cycle)
 SLACK_MM = (0.0, 20.0)  # a cable off the tool retracts into its housing: the sensor reads near zero
 
 
@@ -177,12 +178,20 @@ class Retarget:
 
 
 def opcua_robot(
-    section: RobotOpcUa, robot: SimRobot, clock: SimClock, play: bool = False, hand=None
+    section: RobotOpcUa,
+    robot: SimRobot,
+    clock: SimClock,
+    play: bool = False,
+    hand=None,
+    time_scale: float = 1.0,
 ) -> OpcUaRobotServer:
     """The robot program's joints on an OPC UA server at the section's ``url``; the config's node
     ids must be the server's (``sim_fixtures.opcua_server``: the Robotics companion layout).
     ``play``: the program (waiting at home) starts once the station polls the joints steadily
-    (:class:`PlayOnPoll`), as an operator presses play once the session waits for the robot.
+    (:class:`PlayOnPoll`), as an operator presses play once the session waits for the robot (with a
+    ``subscription_ms``, the server samples a subscribed client at ``OPCUA_CYCLE_S`` of simulated
+    time (``time_scale`` simulated seconds a real one), each sample
+    a read, play after ``PLAY_SUBSCRIBED_S`` of them, as a ROS subscription's).
     ``hand(target, q_deg)``: where corrected targets written to the server go (the program's channel)."""
     positions, speeds = section.nodes()
     if positions != [position_node(i) for i in range(1, 7)] or speeds not in (
@@ -194,7 +203,10 @@ def opcua_robot(
             "(Axis1 .. Axis6) and ActualSpeed beside it: leave both at their defaults"
         )
     url = urlsplit(section.url)
-    operator = PlayOnPoll(clock) if play else None
+    # a subscription's samples count as reads, as the ROS messages do
+    operator = (
+        PlayOnPoll(clock, PLAY_SUBSCRIBED_S if section.subscription_ms > 0 else PLAY_POLL_S) if play else None
+    )
 
     def state():
         if operator is not None:
@@ -202,7 +214,8 @@ def opcua_robot(
         now = robot.state(clock.now())
         return now.q_deg, now.qd_deg_s
 
-    return OpcUaRobotServer(state, url.hostname, url.port or 4840, hand)
+    sample_s = OPCUA_CYCLE_S / time_scale if section.subscription_ms > 0 else None
+    return OpcUaRobotServer(state, url.hostname, url.port or 4840, hand, sample_s)
 
 
 class PlayOnPoll:
@@ -430,7 +443,7 @@ class SimStation:
             robot = self.cfg.robot
             if isinstance(robot, RobotOpcUa):
                 self.devices["robot"] = opcua_robot(
-                    robot, self.published, self.clock, self.once, self.published_inbox
+                    robot, self.published, self.clock, self.once, self.published_inbox, self.cfg.time_scale
                 ).start()
             elif isinstance(robot, RobotRos):
                 self.devices["robot"] = ros_robot(

@@ -3,8 +3,8 @@
 
 - The robot: its driver polled twice per package period (a subscription's, as ROS's, drained as
   often: every message it pushed, stamped at its arrival); each new package is kept with the
-  controller's timestamp (RTDE: ``controller_time_s``, the controller's clock) and its arrival on
-  the station's clock (``time.monotonic``), so the two clocks can be tied
+  controller's timestamp (RTDE's ``controller_time_s``, an OPC UA server's source timestamp) and
+  its arrival on the station's clock (``time.monotonic``), so the two clocks can be tied
   (``calib.alignment.clock_offset``). A source without a controller timestamp (OPC UA and Modbus
   polled), or whose clock stands still while its joints move (a ROS stamp of 0), is stamped at the
   middle of its read, as a sensor is (a pushed message: at its arrival), and kept when its joints

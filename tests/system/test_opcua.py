@@ -3,6 +3,7 @@ server laid out as the OPC UA Robotics companion specification, fed by the simul
 program; what a cell's wiring gets wrong (a node id, a server gone) is named, and ``sim serve``'s
 station reads its robot through it."""
 
+import datetime as dt
 import json
 import os
 import re
@@ -24,7 +25,14 @@ from sim_fixtures.opcua_server import OpcUaRobotServer, position_node, speed_nod
 from sim_fixtures.station_sim import SimStation
 from station import cli
 from station.config import station_config
-from tests.system.moving import fails_retryably, free_address, sample, simulated_cell, two_targets
+from tests.system.moving import (
+    RETRYABLE,
+    fails_retryably,
+    free_address,
+    sample,
+    simulated_cell,
+    two_targets,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 POSITIONS = [position_node(i) for i in range(1, 7)]
@@ -81,6 +89,97 @@ def test_a_node_the_server_lacks_is_named_and_a_server_gone_is_retryable(moving)
     source.open()
     server.stop()
     assert fails_retryably(source)
+
+
+@pytest.fixture
+def sampled():
+    """The two-target program (at rest for 0.8 s at each) on a server sampling it every 5 ms for a
+    subscribed client; the program and its start [s, monotonic], which a test may set anew."""
+    robot, _, _ = two_targets(dwell_s=0.8)
+    start = [time.monotonic()]
+
+    def state():
+        now = robot.state(time.monotonic() - start[0])
+        return now.q_deg, now.qd_deg_s
+
+    server = OpcUaRobotServer(state, *free_address(), sample_s=0.005).start()
+    yield server, robot, start
+    server.stop()
+
+
+def received_for(source, seconds: float) -> list:
+    """Every reading ``source``'s subscription gave for ``seconds``, drained every 20 ms."""
+    readings, end = [], time.monotonic() + seconds
+    while time.monotonic() < end:
+        readings += source.received()
+        time.sleep(0.02)
+    return readings
+
+
+def off(stamps: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """How far [s] each ``wanted`` time is from the nearest of ``stamps`` (ascending)."""
+    i = np.searchsorted(stamps, wanted)
+    return np.minimum(
+        np.abs(stamps[np.clip(i, 0, len(stamps) - 1)] - wanted),
+        np.abs(stamps[np.clip(i - 1, 0, None)] - wanted),
+    )
+
+
+def test_a_subscription_gives_every_sample_whole_on_the_servers_timestamps(sampled):
+    server, robot, start = sampled
+    with OpcUaJointSource(server.url, POSITIONS, SPEEDS, subscription_ms=20.0) as source:
+        start[0] = t0 = time.monotonic()  # the program starts now: at rest for its first 0.8 s
+        readings = received_for(source, 2.0)
+    stamps = np.array([r.values["controller_time_s"] for r in readings])
+    assert np.all(np.diff(stamps) > 0)  # one reading a sample, in order
+    # every sample the server took in that time, not one a publish, at rest too (its timestamp
+    # changes, its value does not)
+    sampled = np.array(server.sampled)
+    taken = sampled[(sampled > stamps[0]) & (sampled <= stamps[-1])]
+    assert len(taken) > 50 and off(stamps, taken).max() < 1e-6
+    at_rest = [r for r in readings if r.values["q_deg"] == (0.0,) * 6]
+    assert len(at_rest) > 20
+    # each reading is one sample of the program: its six joints at one instant of the program
+    offset = np.median([r.t_wall - r.t_monotonic for r in readings])
+    for r in readings:
+        t = r.values["controller_time_s"] - offset - t0
+        if t < 0.01:
+            continue  # sampled before the program started again
+        ahead = np.array([robot.state(t + d).q_deg for d in (-0.05, 0.05)])
+        q = np.array(r.values["q_deg"])
+        assert np.all(q >= ahead.min(0) - 1e-9) and np.all(q <= ahead.max(0) + 1e-9)
+        assert r.t_monotonic - t0 >= t - 0.01  # it arrived after it was taken
+
+
+def test_a_server_that_stamps_its_axes_apart_gives_readings_with_the_rest_held(sampled):
+    server, _, _ = sampled
+
+    def apart(joint, index, answer):  # each axis sampled 0.5 ms after the one before (within a cycle)
+        stamp = answer.SourceTimestamp + dt.timedelta(microseconds=500 * joint)
+        return ua.DataValue(answer.Value, SourceTimestamp=stamp, ServerTimestamp=stamp)
+
+    server.edit = apart
+    with OpcUaJointSource(server.url, POSITIONS, subscription_ms=20.0) as source:
+        readings = received_for(source, 1.0)
+    stamps = np.array([r.values["controller_time_s"] for r in readings])
+    # a reading for each axis's own timestamp of every sample, the other axes held
+    sampled = np.array(server.sampled)
+    sampled = sampled[(sampled > stamps[0]) & (sampled < stamps[-1] - 0.01)]
+    assert np.all(np.diff(stamps) > 0) and len(sampled) > 50
+    assert off(stamps, sampled[:, None] + 0.5e-3 * np.arange(6)).max() < 1e-6
+
+
+def test_a_subscribed_server_gone_is_found_within_its_timeout(sampled):
+    server, _, _ = sampled
+    source = OpcUaJointSource(server.url, POSITIONS, subscription_ms=20.0, timeout_s=0.5)
+    source.open()
+    received_for(source, 0.3)
+    server.stop()
+    start = time.monotonic()
+    with pytest.raises(RETRYABLE):
+        received_for(source, 5.0)
+    assert time.monotonic() - start < 0.5 + 1.5 + 0.5  # the check's period, a read's wait, slack
+    source.close()
 
 
 def test_sim_serve_publishes_its_robot_over_opcua_for_the_station(tmp_path):

@@ -17,7 +17,7 @@ import pytest
 import tomli_w
 from rerun.chunk import RrdReader
 
-from sim_fixtures.station_sim import SimStation
+from sim_fixtures.station_sim import OPCUA_CYCLE_S, SimStation
 from sim_fixtures.world import World
 from station.acquire import runner
 from station.acquire.session import State
@@ -38,8 +38,14 @@ def sweep_plan() -> Plan:
     return Plan(np.arange(len(lines)), lines, q, sweep_pass=passes)
 
 
-def sweep_config(folder: Path, sweep: dict | None = None, sim: dict | None = None, **devices) -> Path:
-    path = write_config(folder, time_scale=TIME_SCALE)
+def sweep_config(
+    folder: Path,
+    sweep: dict | None = None,
+    sim: dict | None = None,
+    time_scale: float = TIME_SCALE,
+    **devices,
+) -> Path:
+    path = write_config(folder, time_scale=time_scale)
     raw = read_toml(path)
     raw["sim"].update(dwell_s=0.5, speed_deg_s=60.0, accel_deg_s2=240.0, **(sim or {}))
     raw["sweep"] = {"max_gap_s": 0.25, **(sweep or {})}  # the loaded test machine's hiccups
@@ -77,6 +83,24 @@ def program_s(sim: SimStation, row: dict) -> float:
     return float(row["t_wall_s"]) - (time.time() - time.monotonic()) - sim.clock.start_monotonic
 
 
+def assert_aligned(sim: SimStation, rows: list[dict], period: float, time_scale: float = TIME_SCALE) -> None:
+    """The stored joints are the true joints at a time within the reading's round trip (its
+    timestamp's uncertainty) and half a robot package ``period`` [real s] (the controller's clock
+    tied to the station's by the least transit), plus what a linear interpolation between the two
+    robot packages may miss (a quarter of the joints' step between them): for all but 1 % of the
+    rows (a busy machine's scheduling), and none farther off than 2 package periods at full speed."""
+    beyond = []
+    for r in rows:
+        t, half = program_s(sim, r), float(r["window_s"]) / 2 + period / 2
+        truth = np.array([sim.robot.state(t + d).q_deg for d in np.linspace(-half, half, 9)])
+        q = np.array([float(r[f"q{i}_deg"]) for i in range(1, 7)])
+        slack = 0.25 * float(r["q_spread_deg"]) + 1e-4
+        beyond.append(float(np.max(np.maximum(truth.min(0) - slack - q, q - truth.max(0) - slack))))
+    fastest = max(float(np.max(np.abs(sim.robot.state(program_s(sim, r)).qd_deg_s))) for r in rows)
+    assert np.mean(np.array(beyond) > 0) <= 0.01
+    assert max(beyond) <= fastest * time_scale * 2 * period
+
+
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sweep")
@@ -92,22 +116,8 @@ def test_a_sweep_stores_every_pass_with_rows_aligned_to_the_true_joints(session)
     assert {int(r["pass"]) for r in rows} == set(plan.sweep_pass.tolist())
     assert read_toml(folder / "session.toml")["finished_passes"] == sorted(set(plan.sweep_pass.tolist()))
     assert len(rows) > 500
-    # the stored joints are the true joints at a time within the reading's round trip (its
-    # timestamp's uncertainty) and half a robot package period (the controller's clock tied to the
-    # station's by the least transit), plus what a linear interpolation between the two robot
-    # packages may miss (a quarter of the joints' step between them): for all but 1 % of the rows
-    # (a busy machine's scheduling), and none farther off than 2 package periods at full speed
     period = 1.0 / StationConfig.model_validate(read_toml(folder.parent / "station.toml")).robot.frequency_hz
-    beyond = []
-    for r in rows:
-        t, half = program_s(sim, r), float(r["window_s"]) / 2 + period / 2
-        truth = np.array([sim.robot.state(t + d).q_deg for d in np.linspace(-half, half, 9)])
-        q = np.array([float(r[f"q{i}_deg"]) for i in range(1, 7)])
-        slack = 0.25 * float(r["q_spread_deg"]) + 1e-4
-        beyond.append(float(np.max(np.maximum(truth.min(0) - slack - q, q - truth.max(0) - slack))))
-    fastest = max(float(np.max(np.abs(sim.robot.state(program_s(sim, r)).qd_deg_s))) for r in rows)
-    assert np.mean(np.array(beyond) > 0) <= 0.01
-    assert max(beyond) <= fastest * TIME_SCALE * 2 * period
+    assert_aligned(sim, rows, period)
     assert len(load_samples(folder / "samples.csv")) == len(rows)
 
 
@@ -226,6 +236,19 @@ def test_an_opcua_robot_without_a_controller_clock_is_streamed_too(tmp_path):
     assert state is State.DONE, said
     rows = rows_of(tmp_path / "sess" / "samples.csv")
     assert {int(r["pass"]) for r in rows} == set(sweep_plan().sweep_pass.tolist()) and len(rows) > 300
+
+
+def test_an_opcua_robot_with_a_subscription_is_streamed_at_its_servers_cycle(tmp_path):
+    # every sample the server published (every 8 ms of the program's time: at 2x, every 4 ms, a
+    # cycle this machine's asyncua server keeps), on its source timestamps tied to the station's clock
+    url = f"opc.tcp://127.0.0.1:{_free_port()}"
+    robot = {"kind": "opcua", "url": url, "subscription_ms": 20.0}
+    config = sweep_config(tmp_path, time_scale=2.0, robot=robot)
+    sim, state, said = swept(tmp_path, config)
+    assert state is State.DONE, said
+    rows = rows_of(tmp_path / "sess" / "samples.csv")
+    assert {int(r["pass"]) for r in rows} == set(sweep_plan().sweep_pass.tolist()) and len(rows) > 300
+    assert_aligned(sim, rows, OPCUA_CYCLE_S / 2.0, time_scale=2.0)
 
 
 def test_a_ros_robot_is_streamed_from_its_subscription(tmp_path):
