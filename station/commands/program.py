@@ -44,6 +44,12 @@ def register(sub) -> None:
         help="dwell at each contact, s (3: settle + capture)",
     )
     p.add_argument(
+        "--sweep",
+        action="store_true",
+        help="the plan is a sweep plan (station plan --sweep): each pass swept through its waypoints "
+        "(blended); refused for a plan without a pass column (a sweep plan is written so without it too)",
+    )
+    p.add_argument(
         "--table",
         type=Path,
         help="the offline second pass: a corrected table (station calibrate --out) whose model brings the "
@@ -70,6 +76,11 @@ def run(args) -> int:
     for path in programs.paths(args.format, args.out):
         check_writable(path, "--out")
     plan, robot = load_plan(args.plan), load_robot(args.robot)
+    if args.sweep and not plan.is_sweep:
+        raise InputError(
+            f"--sweep: {args.plan} has no pass column, a static plan: make a sweep plan with "
+            "`station plan --sweep` (or leave out --sweep for a stop-at-each-target program)"
+        )
     if args.session is not None and args.table is None:
         raise InputError("--session goes with --table: the second pass orders the corrected targets by it")
     if args.table is not None:

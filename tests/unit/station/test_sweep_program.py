@@ -107,8 +107,29 @@ def test_station_program_writes_a_sweep_plan_from_station_plan_sweep(tmp_path, c
     plan = tmp_path / "sweep.csv"
     assert main(["plan", "--robot", str(robot), "--setup", str(setup), "--sweep", "--out", str(plan)]) == 0
     out = tmp_path / "sweep.script"
-    assert main(["program", str(plan), "--robot", str(robot), "--format", "urscript", "--out", str(out)]) == 0
+    write = ["program", str(plan), "--robot", str(robot), "--format", "urscript", "--out", str(out)]
+    assert main([*write, "--sweep"]) == 0  # the contract's spelling
     text = out.read_text()
+    assert main(write) == 0 and out.read_text() == text  # the pass column decides without it too
     passes = load_plan(plan).passes()
     assert text.count("  movej(") == len(passes)
     assert text.count(", r=") == sum(len(rows) - 2 for rows in passes)
+
+
+def test_station_program_sweep_refuses_a_static_plan_in_one_line(tmp_path, capsys):
+    import configs
+
+    robot, setup = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.toml")
+    plan = tmp_path / "static.csv"
+    made = ["plan", "--robot", str(robot), "--setup", str(setup), "--per-line", "20", "--select", "40"]
+    assert main([*made, "--out", str(plan), "--no-suggest"]) == 0
+    out = tmp_path / "sweep.script"
+    capsys.readouterr()
+    code = main(
+        ["program", str(plan), "--robot", str(robot), "--format", "urscript", "--out", str(out), "--sweep"]
+    )
+    err = capsys.readouterr().err
+    assert (
+        code == 2 and err.count("\n") == 1 and "has no pass column" in err and "station plan --sweep" in err
+    )
+    assert not out.exists()
