@@ -16,10 +16,15 @@ metric), linearised at the solution::
 ``J`` the model's Jacobian, ``B`` the angle errors' response through its columns of joints 1-3's
 angle offsets (a link turning by ``dq`` moves each residual as its offset would). With ``dx``
 profiled out, ``w`` is the Bayesian regression of ``-r`` on ``B`` less its projection on ``J``'s
-columns, and ``dx = -J^+ B w`` (the calibration's own solution kept where ``w = 0``). The table's and
-the tool's part of ``dx`` per coefficient is added back where the map predicts (``ResidualMap.
-absorbed``), less the rigid move of the base frame it makes of the calibration's rows: the lines and
-the anchor fitted with the table alone stay where they are. The coefficients' covariance takes the
+columns, and ``dx = -J^+ (r + B w)``. Its part at ``w = 0``, ``-J^+ r``, is not nil: the calibration
+weighed its rows by a robust loss (those the angle errors made large count less), and least squares
+at the same rows lands elsewhere (a simulated drawstring cell with ``UR10_LIKE``'s error: 0.07 mm
+at a program's poses, most of what the map left before it was added). Once ``w`` is fitted, one
+Gauss-Newton step of the same unknowns on the rows turned by the angle errors relinearises ``dx``
+where they put it. The table's and the tool's part of ``dx``, per coefficient and at ``w = 0``
+(``ResidualMap.absorbed`` and ``absorbed_offset``), is added back where the map predicts, less the
+rigid move of the base frame it makes of the calibration's rows: the lines and the anchor fitted
+with the table alone stay where they are. The coefficients' covariance takes the
 folds' mean square for the noise (not the rows' whole, which the angle errors mostly are), and the
 bound the variance along the direction of the largest (the rows see the error along few).
 
@@ -91,19 +96,19 @@ def tool_response(model, x: np.ndarray) -> np.ndarray:
 
 def fit_absorbed_angle_errors(
     model, x: np.ndarray, free: np.ndarray
-) -> tuple[AngleErrors, np.ndarray, float] | None:
+) -> tuple[AngleErrors, np.ndarray, np.ndarray, float] | None:
     """Angle errors of joints 1-3 fitted with the change of the calibration's ``free`` (n,) table,
     tool and setup unknowns they call for (module docstring; joint-space terms stay, the errors
     are learnt on top of what they took), from ``model``'s whitened residuals and Jacobian at its
     solution ``x``: the errors (their ``rest_mm2`` in whitened units), the change (n, F) [internal
-    units per coefficient] and how many times the in-sample mean square the folds leave (>= 1);
-    None unless they cut the folds' error (``ProfiledFolds``) by
-    ``calib.angle_errors.MIN_GAIN``."""
+    units per coefficient], the change at no angle error (n,) [internal units: least squares' own
+    solution, where the calibration's robust weights left it] and how many times the in-sample
+    mean square the folds leave (>= 1); None unless they cut the folds' error (``ProfiledFolds``)
+    by ``calib.angle_errors.MIN_GAIN``."""
     r, jac = model.residuals_and_jacobian(x)
     design = residual_features(model, model.samples.q, jac)
     scale = np.linalg.norm(jac, axis=0)
-    table_or_setup = (np.arange(x.size) < N_DH) | model.setup_mask | model.tool_mask
-    used = np.asarray(free, bool) & table_or_setup & (scale > 0)
+    used = refitted(model, free, scale)
     folds = ProfiledFolds(design, r, jac[:, used] / scale[used], model.rows % FOLDS)
     angles = angle_errors_of(folds)
     if angles is None:
@@ -111,10 +116,30 @@ def fit_absorbed_angle_errors(
     prior = prior_variance(angles.length_deg, angles.sigma_deg)
     covariance = posterior_covariance(folds.gram, angles.rest_mm2, prior)
     angles = dataclasses.replace(angles, covariance=covariance)
-    change = np.zeros((x.size, design.shape[1]))
-    change[used] = folds.change / scale[used, None]
+    change, offset = np.zeros((x.size, design.shape[1])), np.zeros(x.size)
+    change[used], offset[used] = folds.change / scale[used, None], folds.shift / scale[used]
     in_sample = float(np.mean((folds.left + folds.seen @ angles.weights) ** 2))
-    return angles, -change, max(angles.rest_mm2 / max(in_sample, 1e-300), 1.0)
+    return angles, -change, -offset, max(angles.rest_mm2 / max(in_sample, 1e-300), 1.0)
+
+
+def refitted(model, free: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Which unknowns (n,) are refitted with the angle errors: the calibration's ``free`` ones of the
+    table, the tool and the setup that move its residuals (``scale`` (n,), their Jacobian's column
+    norms, > 0)."""
+    table_or_setup = (np.arange(scale.size) < N_DH) | model.setup_mask | model.tool_mask
+    return np.asarray(free, bool) & table_or_setup & (scale > 0)
+
+
+def refit_step(model, x: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """The Gauss-Newton step (n,) [internal units] of the ``refitted`` unknowns from ``x`` on
+    ``model``'s whitened residuals (least squares): the profiled change relinearised where the
+    angle errors' correction puts them."""
+    r, jac = model.residuals_and_jacobian(x)
+    scale = np.linalg.norm(jac, axis=0)
+    used = refitted(model, free, scale)
+    step = np.zeros(x.size)
+    step[used] = np.linalg.lstsq(jac[:, used] / scale[used], -r, rcond=RCOND)[0] / scale[used]
+    return step
 
 
 def profiled(jac: np.ndarray, design: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -144,7 +169,7 @@ class ProfiledFolds:
     """
 
     def __init__(self, design: np.ndarray, r: np.ndarray, jac: np.ndarray, fold: np.ndarray):
-        self.change, _, self.seen, self.left = profiled(jac, design, r)
+        self.change, self.shift, self.seen, self.left = profiled(jac, design, r)
         self.noise = float(np.mean(self.left**2))
         self.gram, self.moment = self.seen.T @ self.seen, -self.seen.T @ self.left
         self.parts = []
@@ -166,29 +191,34 @@ class ProfiledFolds:
         return float(np.sqrt(3.0 * squares / self.size))
 
 
-def absorbed_of(model, x: np.ndarray, change: np.ndarray) -> np.ndarray:
-    """``ResidualMap.absorbed`` (ABSORBED, F) of a change of the unknowns (n, F) per coefficient:
-    its table's and tool's part [rad, mm], then the base frame's turn and shift [rad, mm] that
-    take out the rigid move the angle errors and it make of the calibration's rows."""
-    partial = np.vstack([change[:N_DH], tool_response(model, x) @ change, np.zeros((6, change.shape[1]))])
+def absorbed_of(model, x: np.ndarray, change: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """``ResidualMap.absorbed`` (ABSORBED, F) of a change of the unknowns (n, F) per coefficient,
+    then ``ResidualMap.absorbed_offset`` (the last column) of their change ``offset`` (n,) at no
+    angle error: their table's and tool's part [rad, mm], then the base frame's turn and shift
+    [rad, mm] that take out the rigid move the angle errors and they make of the calibration's
+    rows."""
+    both = np.hstack([change, offset[:, None]])
+    partial = np.vstack([both[:N_DH], tool_response(model, x) @ both, np.zeros((6, both.shape[1]))])
     q, dh, tool = model.samples.q, model.dh(x), model.tcp_in_flange(x)
     p, jac = tcp_jacobian(dh, q, tool)
     joints = jac[:, :, [4 * j + THETA for j in range(ANGLE_JOINTS)]]
-    moved = features(q, joints) + table_response(dh, q, p, jac) @ partial
+    moved = table_response(dh, q, p, jac) @ partial
+    moved[:, :, :-1] += features(q, joints)
     rigid = frame_response(p).reshape(-1, 6)
     partial[-6:] = -np.linalg.lstsq(rigid, moved.reshape(rigid.shape[0], -1), rcond=None)[0]
     return partial
 
 
-def corrected(model, x: np.ndarray, angles: AngleErrors, change: np.ndarray):
+def corrected(model, x: np.ndarray, angles: AngleErrors, change: np.ndarray, offset: np.ndarray):
     """The model on readings turned by the angle errors, and its unknowns ``x`` changed as they call
-    for: where the rows' residuals are what both leave."""
+    for (``change`` (n, F) per coefficient, ``offset`` (n,) at none): where the rows' residuals are
+    what both leave."""
     q = model.samples.q
     turned = np.array(q, float)
     for j in range(ANGLE_JOINTS):
         turned[:, j] += turn_rad(angles.weights, q, j)
     samples = dataclasses.replace(model.samples, q=turned)
-    return model.with_samples(samples), x + change @ angles.weights
+    return model.with_samples(samples), x + offset + change @ angles.weights
 
 
 def turn_rad(weights: np.ndarray, q: np.ndarray, joint: int) -> np.ndarray:
@@ -224,17 +254,21 @@ def fit_model_map(model, x: np.ndarray, free: np.ndarray) -> ResidualMap | None:
     rows = model_observations(model, x)
     table = rms3(rows.value_mm[:, None])
     found = fit_absorbed_angle_errors(model, x, free)
-    angles = absorbed = None
+    angles = absorbed = offset = None
     if found is not None:
-        angles, change, inflation = found
-        left = model_observations(*corrected(model, x, angles, change))
+        angles, change, shift, inflation = found
+        turned, x_turned = corrected(model, x, angles, change, shift)
+        step = refit_step(turned, x_turned, free)
+        shift = shift + step
+        left = model_observations(turned, x_turned + step)
         rows = dataclasses.replace(left, q=rows.q)
         rest_mm2 = float(np.mean(rows.value_mm**2)) * inflation
         angles = dataclasses.replace(angles, rest_mm2=rest_mm2)
-        absorbed = absorbed_of(model, x, change)
+        absorbed = absorbed_of(model, x, change, shift)
+        absorbed, offset = absorbed[:, :-1], absorbed[:, -1]
     shared = fit_observed_shared(rows, rows.value_mm)
     if angles is None and shared is None:
         return None
     best = shared.cv_rmse_mm if shared is not None else float(np.sqrt(3.0 * angles.rest_mm2))
-    dh, tool = model.dh(x), model.tcp_in_flange(x)
-    return ResidualMap(np.asarray(dh, float), np.asarray(tool, float), angles, shared, best, table, absorbed)
+    dh, tool = np.asarray(model.dh(x), float), np.asarray(model.tcp_in_flange(x), float)
+    return ResidualMap(dh, tool, angles, shared, best, table, absorbed, offset)

@@ -455,6 +455,10 @@ class ResidualMap:
         coefficient, where they were fitted beside it (``calib.absorbed_angles``): added back, less
         the rigid move of the base frame (rad, mm) it makes of the calibration's rows (a frame the
         lines and the anchor fitted with the table alone stay in).
+    absorbed_offset : ndarray, shape (ABSORBED,), or None
+        As ``absorbed``, the change at no angle error: least squares' table where the calibration's
+        robust weights (rows the angle errors made large) or its weighing left it, added with the
+        angle errors.
     """
 
     dh: np.ndarray
@@ -464,6 +468,7 @@ class ResidualMap:
     cv_rmse_mm: float
     table_cv_rmse_mm: float
     absorbed: np.ndarray | None = None
+    absorbed_offset: np.ndarray | None = None
 
     @property
     def explained(self) -> float:
@@ -478,20 +483,25 @@ class ResidualMap:
         q = np.asarray(q, float)
         mean, variance = np.zeros((q.shape[0], 3)), np.zeros(q.shape[0])
         if self.angles is not None:
-            mean, variance = self.angles.of_features(self.angle_features(q), self.absorbed is not None)
+            a, offset = self.angle_features(q)
+            mean, variance = self.angles.of_features(a, self.absorbed is not None)
+            mean = mean + offset
         if self.shared is None:
             return mean, variance + (self.angles.rest_mm2 if self.angles is not None else 0.0)
         shared_mean, shared_variance = self.shared.predict(q)
         return mean + shared_mean, variance + shared_variance
 
-    def angle_features(self, q: np.ndarray) -> np.ndarray:
+    def angle_features(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The TCP's response (M, 3, F) [mm/rad] to the angle errors' coefficients at readings ``q``
-        (M, 6) [rad], with what the table took of them added back (``absorbed``)."""
+        (M, 6) [rad], with what the table took of them added back (``absorbed``), and the TCP's
+        move (M, 3) [mm] of ``absorbed_offset`` (zero without it)."""
         if self.absorbed is None:
-            return features(q, joint_jacobian(self.dh, q, self.tool_mm))
+            return features(q, joint_jacobian(self.dh, q, self.tool_mm)), np.zeros((q.shape[0], 3))
         p, jac = tcp_jacobian(self.dh, q, self.tool_mm)
         joints = jac[:, :, [4 * j + THETA for j in range(MAP_JOINTS)]]
-        return features(q, joints) + table_response(self.dh, q, p, jac) @ self.absorbed
+        response = table_response(self.dh, q, p, jac)
+        offset = np.zeros(ABSORBED) if self.absorbed_offset is None else self.absorbed_offset
+        return features(q, joints) + response @ self.absorbed, response @ offset
 
 
 def table_response(dh: np.ndarray, q: np.ndarray, tcp_mm: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
@@ -577,6 +587,8 @@ def map_arrays(found: ResidualMap) -> dict[str, np.ndarray]:
         out["angle_weights"], out["angle_covariance"] = a.weights, a.covariance
     if found.absorbed is not None:
         out["angle_absorbed"] = found.absorbed
+    if found.absorbed_offset is not None:
+        out["angle_absorbed_offset"] = found.absorbed_offset
     if found.shared is not None:
         s = found.shared
         out["shared_kernel"] = np.array(
@@ -605,8 +617,8 @@ def map_from_arrays(arrays: dict[str, np.ndarray]) -> ResidualMap:
         else:
             shared = SharedError(whole_readings(arrays["shared_q"]), arrays["shared_error_mm"], *kernel)
     cv, table = (float(v) for v in arrays["cv_rmse_mm"])
-    absorbed = arrays["angle_absorbed"] if "angle_absorbed" in arrays else None
-    return ResidualMap(arrays["dh"], arrays["tool_mm"], angles, shared, cv, table, absorbed)
+    absorbed, offset = (arrays.get(key) for key in ("angle_absorbed", "angle_absorbed_offset"))
+    return ResidualMap(arrays["dh"], arrays["tool_mm"], angles, shared, cv, table, absorbed, offset)
 
 
 def whole_readings(q: np.ndarray) -> np.ndarray:
