@@ -183,10 +183,12 @@ def registered_error(world, model, x, found, new) -> np.ndarray:
 
 
 def test_angle_errors_fitted_beside_the_table_predict_its_3d_error(model_maps):
-    """At new contacts among the measured ones the table alone is 0.58-0.60 mm off in 3-D (it took
+    """At new contacts among the measured ones the table alone is 0.58-0.61 mm off in 3-D (it took
     part of the cyclic error into its geometry); with the map of the angle errors fitted beside it
-    (what the table took added back) 0.10, 0.10 and 0.24 mm: each at most half the table's, pooled
-    at most a third, and the true error inside the 95 % bound at 90 % of the poses pooled (95.5 %)."""
+    (what the table took added back) 0.049, 0.050 and 0.060 mm (0.10, 0.10 and 0.24 before the
+    table's change at no angle error was added back too): each at most half the table's, pooled
+    within 4x the drawstring's noise, and the true error inside the 95 % bound at 90 % of the poses
+    pooled (100 %)."""
     table, mapped, inside = [], [], []
     for world, model, x, found, new in model_maps:
         assert found is not None and found.absorbed is not None
@@ -195,7 +197,7 @@ def test_angle_errors_fitted_beside_the_table_predict_its_3d_error(model_maps):
         variance = found.predict(np.radians(new.q_deg))[1]
         inside.append(np.sum(mapped[-1] ** 2, axis=1) <= CHI2_3_95 * variance)
         assert rms(mapped[-1]) <= 0.5 * rms(table[-1])
-    assert rms(np.vstack(mapped)) <= rms(np.vstack(table)) / 3
+    assert rms(np.vstack(mapped)) <= 4 * SIGMA_MM
     assert np.mean(np.concatenate(inside)) >= 0.90
 
 
