@@ -40,6 +40,11 @@ from calib.models import GROUP_PRIOR, MeasurementModel
 from calib.params import display_unit
 from calib.serial import block_covariance, pass_blocks
 
+COARSE_ROWS = 20_000
+"""Sample rows above which ``robust_fit`` first fits this many of them (``coarse``) and finishes on
+all rows from there: each of its rounds still converges on all rows, to the same minimum within the
+solver's tolerances, in a few iterations over all rows instead of some twenty."""
+
 DOWNWEIGHTED_BELOW = 0.25
 """A residual row whose squared robust weight falls below this counts as down-weighted (a gross
 reading): for the Cauchy loss at 3 noise scales, beyond 5.2 of them."""
@@ -70,6 +75,16 @@ class WithPrior:
         self.tool_mask = model.tool_mask
         self.groups = np.concatenate([model.groups, np.full(self._k.size, GROUP_PRIOR)])
         self.rows = np.concatenate([model.rows, np.full(self._k.size, -1)])
+
+    def coarse(self) -> WithPrior | None:
+        """This model on ``COARSE_ROWS`` of its sample rows, a fixed draw spread over all of them
+        (every k-th row would alias with a session's repeated poses), or None where it has no more
+        (or its rows cannot be taken apart)."""
+        samples = getattr(self.model, "samples", None)
+        if samples is None or len(samples) <= COARSE_ROWS:
+            return None
+        rows = np.sort(np.random.default_rng(0).choice(len(samples), COARSE_ROWS, replace=False))
+        return WithPrior(self.model.with_samples(samples.subset(rows)), self.x_ref)
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
         """The model's whitened residuals and Jacobian at ``x`` (n,), the prior rows appended: into
@@ -177,7 +192,10 @@ def robust_fit(
     scale0: np.ndarray | None = None,
 ) -> tuple[LMResult, np.ndarray]:
     """Linear-loss LM, then (unless ``options.loss`` is linear) two robust rounds, each with the
-    loss scale re-estimated from the previous residuals (MAD per residual group). Given the noise
+    loss scale re-estimated from the previous residuals (MAD per residual group). On more than
+    ``COARSE_ROWS`` sample rows each round but the last starts from the same round on
+    ``WithPrior.coarse``'s rows (coarse to fine: on all rows it then takes a few iterations), and the
+    robust rounds from the damping the run before ended with. Given the noise
     scale at ``x0`` (``scale0``: a fit that ended there, e.g. the setup's), the first round is robust
     at that scale too: least squares with every unknown free would bend the table towards a wild
     reading (36 rows, one 1000 mm off: the table 1.6 m wrong), and the robust rounds would start
@@ -205,25 +223,40 @@ def robust_fit(
     scale : ndarray, shape (groups,)
         Noise scale per residual group at the result.
     """
-    fun = model.residuals_and_jacobian
     lm = options.lm
-    kw = dict(free=free, groups=model.groups, callback=callback)
     first = _with(lm, loss="linear")
     if scale0 is not None and options.loss != "linear":
         first = _with(lm, loss=options.loss, loss_scale=loss_scale(scale0, options))
-    result = levenberg_marquardt(fun, x0, options=first, **kw)
+    coarse = model.coarse() if isinstance(model, WithPrior) else None
+    result = _fit(model, x0, free, first, callback, coarse)
     scale = _scale(result.residuals, model.groups)
     if options.loss == "linear":
         return result, scale
     history = list(result.history)
-    for _ in range(2):
-        result = levenberg_marquardt(
-            fun, result.x, options=_with(lm, loss=options.loss, loss_scale=loss_scale(scale, options)), **kw
-        )
+    for last in (False, True):  # the last round's scale is the previous one's but for rounding
+        lm_round = _with(lm, loss=options.loss, loss_scale=loss_scale(scale, options))
+        if coarse is not None:
+            lm_round = _with(lm_round, damping=result.history[-1].damping)
+        result = _fit(model, result.x, free, lm_round, callback, None if last else coarse)
         history += result.history
         scale = _scale(result.residuals, model.groups)
     result.history = history
     return result, scale
+
+
+def _fit(model, x: np.ndarray, free: np.ndarray, lm: LMOptions, callback, coarse) -> LMResult:
+    """``levenberg_marquardt`` on ``model`` from ``x`` over ``x[free]``; where ``coarse`` (a
+    ``WithPrior`` on fewer rows) is given, from its run with the same options, at the damping that
+    run ended with (coarse to fine: the run on all rows then starts within the subset's spread of
+    its minimum, with the steps the damping has grown to trust)."""
+    if coarse is not None:
+        start = levenberg_marquardt(
+            coarse.residuals_and_jacobian, x, options=lm, free=free, groups=coarse.groups
+        )
+        x, lm = start.x, _with(lm, damping=start.history[-1].damping)
+    return levenberg_marquardt(
+        model.residuals_and_jacobian, x, options=lm, free=free, groups=model.groups, callback=callback
+    )
 
 
 def robust_steps(

@@ -443,6 +443,7 @@ class DrawstringLineModel:
 
     def _alike(self, samples: DrawstringSamples, terms: JointTerms) -> DrawstringLineModel:
         model = DrawstringLineModel(samples, self.setup_values, self.frame, self.x0[:N_DH], self.tool, terms)
+        model._robot_held = self._robot_held
         return model.by_axes() if self._by_axes else model
 
     # -- unpacking ---------------------------------------------------------------------------

@@ -8,7 +8,7 @@ import pytest
 import configs
 from calib import calibrate as calibrate_module
 from calib import lm
-from calib.calibrate import column_geometry, identify
+from calib.calibrate import CalibrationOptions, column_geometry, identify
 from calib.identifiability import select_columns, structural_holds
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
@@ -212,3 +212,37 @@ def test_the_least_squares_step_in_blocks_is_numpys_of_the_whole(monkeypatch, de
     monkeypatch.setattr(calibrate_module, "NORMAL_ROWS", 10)
     monkeypatch.setattr(lm, "NORMAL_ROWS", 10)
     np.testing.assert_allclose(calibrate_module.scaled_least_squares(jac, free, w, wr), expected, atol=1e-12)
+
+
+def test_coarse_to_fine_lands_where_the_plain_fit_does(outliers, monkeypatch):
+    """Above ``COARSE_ROWS`` rows each robust round starts from the same round on a subset: the
+    same minimum within the solver's tolerance (``ftol`` of the cost lets a parameter stop up to
+    ``sqrt(2 ftol F)`` of its sigmas from it), the same held parameters, the same gross readings,
+    the predicted workspace error to the same bound. The three-line cell with gross readings, the
+    threshold lowered to half its rows."""
+    plain = _run(outliers)
+    runs = []
+    monkeypatch.setattr(calibrate_module, "COARSE_ROWS", 75)
+    monkeypatch.setattr(calibrate_module, "levenberg_marquardt", _recording(runs))
+    coarse = _run(outliers)
+    a, b = plain.calibration, coarse.calibration
+    assert min(r.size for r in runs) < a.after.residuals.size  # the subset's runs ran
+    assert b.held == a.held and np.array_equal(b.identified, a.identified)
+    np.testing.assert_array_equal(b.downweighted, a.downweighted)
+    bound = np.sqrt(2.0 * CalibrationOptions().lm.ftol * a.after.cost)
+    free = a.identified
+    assert np.all(np.abs(b.x[free] - a.x[free]) <= bound * a.sigma[free])
+    np.testing.assert_allclose(b.sigma[free], a.sigma[free], rtol=bound)
+    ws_a, ws_b = plain.report.workspace.predicted_rmse_mm, coarse.report.workspace.predicted_rmse_mm
+    assert abs(ws_b - ws_a) <= bound * ws_a
+
+
+def _recording(runs):
+    """``levenberg_marquardt`` that appends each run's residuals to ``runs``."""
+
+    def run(*args, **kwargs):
+        result = lm.levenberg_marquardt(*args, **kwargs)
+        runs.append(result.residuals)
+        return result
+
+    return run

@@ -136,6 +136,8 @@ def test_by_axes_is_the_same_model_to_the_rounding_and_stays_so(rng):
     for derived in (fast.with_samples(rows), fast.with_terms(JointTerms()), fast.holding_robot()):
         assert derived._by_axes
     assert not model.with_samples(rows)._by_axes
+    assert fast.holding_robot().with_samples(rows)._robot_held  # a subset of the setup fit's rows
+    assert not fast.with_samples(rows)._robot_held
 
 
 def _sandwich(prior, x, free, w, noise):
