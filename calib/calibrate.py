@@ -45,6 +45,10 @@ COARSE_ROWS = 20_000
 all rows from there: each of its rounds still converges on all rows, to the same minimum within the
 solver's tolerances, in a few iterations over all rows instead of some twenty."""
 
+SETTLED_SCALE = 0.01
+"""Relative change of every group's loss scale below which a robust round on many rows starts from
+the previous round's solution on all rows, without its subset's run first (``robust_fit``)."""
+
 DOWNWEIGHTED_BELOW = 0.25
 """A residual row whose squared robust weight falls below this counts as down-weighted (a gross
 reading): for the Cauchy loss at 3 noise scales, beyond 5.2 of them."""
@@ -193,9 +197,10 @@ def robust_fit(
 ) -> tuple[LMResult, np.ndarray]:
     """Linear-loss LM, then (unless ``options.loss`` is linear) two robust rounds, each with the
     loss scale re-estimated from the previous residuals (MAD per residual group). On more than
-    ``COARSE_ROWS`` sample rows each round but the last starts from the same round on
-    ``WithPrior.coarse``'s rows (coarse to fine: on all rows it then takes a few iterations), and the
-    robust rounds from the damping the run before ended with. Given the noise
+    ``COARSE_ROWS`` sample rows each round starts from the same round on ``WithPrior.coarse``'s
+    rows (coarse to fine: on all rows it then takes a few iterations) unless its loss scale is the
+    previous round's within ``SETTLED_SCALE`` (its minimum is then that round's), and the robust
+    rounds from the damping the run before ended with. Given the noise
     scale at ``x0`` (``scale0``: a fit that ended there, e.g. the setup's), the first round is robust
     at that scale too: least squares with every unknown free would bend the table towards a wild
     reading (36 rows, one 1000 mm off: the table 1.6 m wrong), and the robust rounds would start
@@ -233,13 +238,15 @@ def robust_fit(
     if options.loss == "linear":
         return result, scale
     history = list(result.history)
-    for last in (False, True):  # the last round's scale is the previous one's but for rounding
+    before = scale0
+    for _ in range(2):
         lm_round = _with(lm, loss=options.loss, loss_scale=loss_scale(scale, options))
+        settled = before is not None and np.allclose(scale, before, rtol=SETTLED_SCALE, atol=0.0)
         if coarse is not None:
             lm_round = _with(lm_round, damping=result.history[-1].damping)
-        result = _fit(model, result.x, free, lm_round, callback, None if last else coarse)
+        result = _fit(model, result.x, free, lm_round, callback, None if settled else coarse)
         history += result.history
-        scale = _scale(result.residuals, model.groups)
+        before, scale = scale, _scale(result.residuals, model.groups)
     result.history = history
     return result, scale
 
