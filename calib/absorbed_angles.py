@@ -79,7 +79,7 @@ def residual_features(model, q: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
     in ``jacobian`` (m, n) times the harmonics of the joint's reading in its row (``q`` (N, 6)
     [rad])."""
     along = jacobian[:, [4 * j + THETA for j in range(ANGLE_JOINTS)]][:, None, :]
-    return features(q[model.rows], along)[:, 0, :]
+    return features(q, along, model.rows)[:, 0, :]
 
 
 def tool_response(model, x: np.ndarray) -> np.ndarray:

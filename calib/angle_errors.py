@@ -50,15 +50,17 @@ def joint_jacobian(dh: np.ndarray, q: np.ndarray, tool_mm: np.ndarray) -> np.nda
     return jac[:, :, [4 * j + THETA for j in range(ANGLE_JOINTS)]]
 
 
-def features(q: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
-    """The TCP's response (N, 3, F) [mm/rad] to each coefficient (F = ANGLE_JOINTS x 2 HARMONICS:
+def features(q: np.ndarray, jacobian: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+    """The TCP's response (M, 3, F) [mm/rad] to each coefficient (F = ANGLE_JOINTS x 2 HARMONICS:
     per joint the cosines, then the sines) at readings ``q`` (N, 6) [rad] with ``jacobian``
-    (N, 3, ANGLE_JOINTS)."""
+    (M, 3, ANGLE_JOINTS), row i of it at the readings ``q[rows[i]]`` (default: M = N, the same
+    rows; several residuals of a row share its harmonics, computed once)."""
     order = np.arange(1, HARMONICS + 1)
     out = []
     for j in range(ANGLE_JOINTS):
         angle = q[:, j, None] * order
         basis = np.concatenate([np.cos(angle), np.sin(angle)], axis=1)
+        basis = basis if rows is None else basis[rows]
         out.append(jacobian[:, :, j, None] * basis[:, None, :])
     return np.concatenate(out, axis=2)
 
