@@ -243,7 +243,7 @@ def robust_fit(
         lm_round = _with(lm, loss=options.loss, loss_scale=loss_scale(scale, options))
         settled = before is not None and np.allclose(scale, before, rtol=SETTLED_SCALE, atol=0.0)
         if coarse is not None:
-            lm_round = _with(lm_round, damping=result.history[-1].damping)
+            lm_round = _carried(lm_round, result)
         result = _fit(model, result.x, free, lm_round, callback, None if settled else coarse)
         history += result.history
         before, scale = scale, _scale(result.residuals, model.groups)
@@ -260,10 +260,19 @@ def _fit(model, x: np.ndarray, free: np.ndarray, lm: LMOptions, callback, coarse
         start = levenberg_marquardt(
             coarse.residuals_and_jacobian, x, options=lm, free=free, groups=coarse.groups
         )
-        x, lm = start.x, _with(lm, damping=start.history[-1].damping)
+        x, lm = start.x, _carried(lm, start)
     return levenberg_marquardt(
         model.residuals_and_jacobian, x, options=lm, free=free, groups=model.groups, callback=callback
     )
+
+
+def _carried(lm: LMOptions, result: LMResult) -> LMOptions:
+    """``lm`` starting at the damping ``result``'s last trial used where that is smaller (a run that
+    ended at its minimum; never a larger one: a run stopped by the damping's growth would hand on
+    steps too short to move)."""
+    if not result.history:
+        return lm
+    return _with(lm, damping=min(result.history[-1].damping, lm.damping))
 
 
 def robust_steps(

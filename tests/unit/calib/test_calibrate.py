@@ -246,3 +246,18 @@ def _recording(runs):
         return result
 
     return run
+
+
+def test_a_run_hands_on_only_a_smaller_damping():
+    """Coarse to fine starts a run at the damping the run before ended with, never above the
+    options' own (a run stopped by the damping's growth would hand on steps too short to move), and
+    at the options' own after a run without trials."""
+    options = lm.LMOptions(damping=1e-3)
+
+    def ended_at(damping):
+        history = [] if damping is None else [lm.Iteration(1.0, damping, 0.1, True)]
+        return lm.LMResult(np.zeros(1), 1.0, np.zeros(1), np.ones(1), np.ones(1, bool), 2, "", 1, 1, history)
+
+    assert calibrate_module._carried(options, ended_at(1e-7)).damping == 1e-7
+    assert calibrate_module._carried(options, ended_at(1e17)).damping == 1e-3
+    assert calibrate_module._carried(options, ended_at(None)) is options
