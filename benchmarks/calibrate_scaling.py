@@ -33,6 +33,12 @@ Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, l
   the model's Jacobian and the dial check's blocked QR; 100,000 rows 68.0 CPU s, 9,548 MB against
   35.7 CPU s, 738 MB (397 s wall at load 13). 1,000,000 rows: stopped at 110 CPU s (load 12-19),
   4,250 MB by then (docs/results/speed.md says what is left).
+- The robust fits coarse to fine (``calib.calibrate.COARSE_ROWS``: each round first on 20,000 of
+  the rows, then on all from there; main's tree in the same session, load 6-9): 100,000 rows
+  30.3 CPU s, 1,350 MB on main against 25.4 CPU s, 1,234 MB (91.3 s wall); 1,000,000 rows
+  263.6 CPU s, 5,134 MB on main against 191.2 CPU s, 5,272 MB (542 s wall at load 8.6); 20,000
+  rows the same code (13.3 and 11.9 CPU s: the load's spread). Same answers within the solver's
+  tolerance (docs/results/speed.md). The targets are not met.
 """
 
 from __future__ import annotations
