@@ -36,7 +36,7 @@ from calib.lm import (
     row_blocks,
     weighted_blocks,
 )
-from calib.models import GROUP_PRIOR, MeasurementModel
+from calib.models import GROUP_PRIOR, MeasurementModel, spread_rows
 from calib.params import display_unit
 from calib.serial import block_covariance, pass_blocks
 
@@ -87,7 +87,7 @@ class WithPrior:
         samples = getattr(self.model, "samples", None)
         if samples is None or len(samples) <= COARSE_ROWS:
             return None
-        rows = np.sort(np.random.default_rng(0).choice(len(samples), COARSE_ROWS, replace=False))
+        rows = spread_rows(len(samples), COARSE_ROWS)
         return WithPrior(self.model.with_samples(samples.subset(rows)), self.x_ref)
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):

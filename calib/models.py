@@ -42,6 +42,12 @@ class SampleRows(Protocol):
     def subset(self, rows: np.ndarray) -> SampleRows: ...
 
 
+def spread_rows(n: int, k: int) -> np.ndarray:
+    """``k`` of ``n`` row indices (ascending), a fixed draw spread over all of them: a thinned set
+    that every k-th row would not alias with a session's repeated poses."""
+    return np.sort(np.random.default_rng(0).choice(n, k, replace=False))
+
+
 class MeasurementModel(Protocol):
     """What every measurement model provides.
 
