@@ -1,7 +1,7 @@
 """Sweep plans compared offline (issue 37): a plan's true workspace error over seeds in a minute.
 
     python benchmarks/sweep_plan_study.py [--passes 2] [--extra 2] [--tilt 25] [--roll 60]
-        [--seeds 0 1 2 3]
+        [--seeds 0 1 2 3] [--draws 1]
 
 ``station plan --sweep`` on the demo's robot and setup (``--passes`` a line, ``--extra`` more,
 ``--tilt`` / ``--roll`` the largest tool turns [deg]); then per seed the demo's simulated cell
@@ -10,6 +10,9 @@ sweeps it as ``station demo --sweep`` does (``sim_fixtures.station_sim.sweep_cel
 read once at the simulator's instrument noise with the joints exact (its controller's are), every
 row kept; LMLC as ``station calibrate`` runs it; the true workspace error on 1,000 random poses.
 What ``benchmarks/demo_sweep.py`` measures, less the stream's timing and flags: a plan's limit.
+``--draws K``: the rows read K times with fresh noise (the first draw is the one-draw run's), each
+calibrated; their true errors, mean and range (one seed's error moves by a factor 2-3 between
+draws of the noise alone, so a single draw compares plans poorly).
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ def main() -> None:
     parser.add_argument("--tilt", type=float, default=25.0)
     parser.add_argument("--roll", type=float, default=60.0)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    parser.add_argument("--draws", type=int, default=1)
     args = parser.parse_args()
     robot_file, setup_path = (
         load_robot(configs.path("robots/hsr_jr680.toml")),
@@ -74,20 +78,24 @@ def main() -> None:
         robot = sweep_robot(config, paths)
         q, lines = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz)
         world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
-        rng = np.random.default_rng([seed, 1])
-        world.measure(q, lines, rng).to_csv(folder / "rows.csv")
         world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([seed, 4])).to_csv(folder / "holdout.csv")
-        outcome = calibration.calibrate_samples(
-            load_samples(folder / "rows.csv"),
-            robot_file,
-            setup,
-            setup_where=str(setup_path),
-            holdout=load_samples(folder / "holdout.csv"),
-            method="lmlc",
-            terms=DEFAULT_TERM_MODEL,
-        )
-        true = truth_line(world, outcome).split("->")[1].split()[0]
-        print(f"{seed} | {robot.cycle_s:.1f} | {len(q)} | {true}", flush=True)
+        trues = []
+        for draw in range(args.draws):
+            rng = np.random.default_rng([seed, 1] + ([draw] if draw else []))
+            world.measure(q, lines, rng).to_csv(folder / "rows.csv")
+            outcome = calibration.calibrate_samples(
+                load_samples(folder / "rows.csv"),
+                robot_file,
+                setup,
+                setup_where=str(setup_path),
+                holdout=load_samples(folder / "holdout.csv"),
+                method="lmlc",
+                terms=DEFAULT_TERM_MODEL,
+            )
+            trues.append(float(truth_line(world, outcome).split("->")[1].split()[0]))
+        spread = f" (mean {np.mean(trues):.3f}, {min(trues):.3f}-{max(trues):.3f})" if args.draws > 1 else ""
+        said = " / ".join(f"{v:.3f}" for v in trues)
+        print(f"{seed} | {robot.cycle_s:.1f} | {len(q)} | {said}{spread}", flush=True)
 
 
 if __name__ == "__main__":

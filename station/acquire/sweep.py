@@ -2,7 +2,8 @@
 through a pass's waypoints without stopping, and the station streams every device
 (``station.acquire.stream``) and aligns the readings onto one time base.
 
-Rows. One row per drawstring reading (decimated to ``[sweep] rows_per_s`` per simulated second),
+Rows. One row per drawstring reading (decimated to ``[sweep] rows_per_s`` per simulated second:
+of the readings in each slot the one whose timing leaves its length least uncertain, see flags),
 taken while the robot sweeps a pass: its time ``t`` is the middle of the reading's request and
 reply moved back by the drawstring's stated latency (``[sweep] drawstring_latency_s``), the moment
 the length it reports was true. The joints there are interpolated linearly between the robot's two
@@ -360,9 +361,10 @@ class SweepSession:
         t_read, length, trip = self.streams.sensors["drawstring"].arrays()
         on = (t_read >= run.t0 + lat["drawstring"]) & (t_read <= run.t1 + lat["drawstring"])
         t_read, length, trip = t_read[on], length[on], trip[on]
-        keep = _decimated(t_read, r.row_spacing_s)
-        t, length, trip = t_read[keep] - lat["drawstring"], length[keep], trip[keep]
         times = robot["stamp"] + self.offset
+        timing = self._timing_mm(times, robot, t_read - lat["drawstring"], trip)
+        keep = _decimated(t_read, r.row_spacing_s, timing)
+        t, length, trip, timing = t_read[keep] - lat["drawstring"], length[keep], trip[keep], timing[keep]
         q, q_ok = interpolate(times, robot["q_deg"], t, r.max_gap_s)
         qd, _ = interpolate(times, robot["qd_deg_s"], t, r.max_gap_s)
         stopped, _ = interpolate(times, (robot["mode"] != RUNNING).astype(float), t, r.max_gap_s)
@@ -376,7 +378,7 @@ class SweepSession:
         _flag(reason, np.isfinite(length) & ((length < low) | (length > high)), "drawstring outside its gate")
         _flag(reason, speed > r.max_speed_mm_s, "too fast")
         dial = self._dial(t, reason)
-        _flag(reason, self._timing_mm(times, robot, t, trip) > r.timing_limit_mm, "timing uncertain")
+        _flag(reason, timing > r.timing_limit_mm, "timing uncertain")
         rows_p = self.map.rows[run.p]
         nearest = rows_p[np.argmin(np.max(np.abs(q_safe[:, None] - self.plan.q_deg[rows_p]), axis=2), axis=1)]
         wall = t + self._wall_minus_mono
@@ -547,12 +549,15 @@ def _flag(reason: np.ndarray, where: np.ndarray, why: str) -> None:
     reason[where & (reason == "")] = why
 
 
-def _decimated(t: np.ndarray, spacing_s: float) -> np.ndarray:
-    """Indices of the first reading in each ``spacing_s`` [s] of ``t`` (increasing times; 0: all)."""
+def _decimated(t: np.ndarray, spacing_s: float, timing_mm: np.ndarray) -> np.ndarray:
+    """Indices of one reading in each ``spacing_s`` [s] of ``t`` (increasing times; 0: all): the
+    best timed (least ``timing_mm``, the first of equals), chosen by its timing alone, never its value."""
     if len(t) == 0 or spacing_s <= 0:
         return np.arange(len(t))
-    _, first = np.unique(np.floor((t - t[0]) / spacing_s), return_index=True)
-    return first
+    slot = np.floor((t - t[0]) / spacing_s)
+    order = np.lexsort((np.arange(len(t)), timing_mm, slot))
+    _, first = np.unique(slot[order], return_index=True)
+    return np.sort(order[first])
 
 
 def _bracket(times, t) -> tuple[np.ndarray, np.ndarray]:
