@@ -344,4 +344,9 @@ def test_a_second_sim_serve_that_cannot_start_leaves_the_first_ones_plan(tmp_pat
         second = run_cli("sim", "serve", "--config", str(config), "--seed", "5")
         assert second.returncode == 1 and "cannot start the simulated devices" in second.stderr
         assert plan_path.read_text() == published
-        assert run_cli("read", "--config", str(config)).returncode == 0  # the first still serves
+        # the first still serves: every device answers (the dial may say "past the end": the robot
+        # walks the plan, between targets on a loaded machine, off the edge: exit 3, its code)
+        read = run_cli("read", "--config", str(config))
+        values = json.loads(read.stdout)
+        assert read.returncode in (0, 3) and len(values["q_deg"]) == 6 and values["length_mm"] > 0
+        assert read.returncode == 0 or read.stderr.startswith("station: dial: "), read.stderr
