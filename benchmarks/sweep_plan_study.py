@@ -1,7 +1,7 @@
 """Sweep plans compared offline (issue 37): a plan's true workspace error over seeds in a minute.
 
     python benchmarks/sweep_plan_study.py [--passes 2] [--extra 2] [--tilt 25] [--roll 60]
-        [--seeds 0 1 2 3] [--draws 1]
+        [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed]
 
 ``station plan --sweep`` on the demo's robot and setup (``--passes`` a line, ``--extra`` more,
 ``--tilt`` / ``--roll`` the largest tool turns [deg]); then per seed the demo's simulated cell
@@ -10,6 +10,9 @@ sweeps it as ``station demo --sweep`` does (``sim_fixtures.station_sim.sweep_cel
 read once at the simulator's instrument noise with the joints exact (its controller's are), every
 row kept; LMLC as ``station calibrate`` runs it; the true workspace error on 1,000 random poses.
 What ``benchmarks/demo_sweep.py`` measures, less the stream's timing and flags: a plan's limit.
+``--late-ms D``: the drawstring's lengths true ``D`` ms after the rows' stamps (a device measuring
+earlier in its round trip than the station assumes); ``--untimed``: the rows without their
+``pass`` and ``t_s`` columns, so the calibration fits no timing (``calib.models.TIMING_NAME``).
 ``--draws K``: the rows read K times with fresh noise (the first draw is the one-draw run's), each
 calibrated; their true errors, mean and range (one seed's error moves by a factor 2-3 between
 draws of the noise alone, so a single draw compares plans poorly).
@@ -31,23 +34,13 @@ import configs  # noqa: E402
 from calib.methods import DEFAULT_TERM_MODEL  # noqa: E402
 from calib.sweep import PassShape  # noqa: E402
 from sim_fixtures.station_sim import sweep_cell, sweep_robot  # noqa: E402
-from sim_fixtures.sweep_program import SweepRobot  # noqa: E402
+from sim_fixtures.sweep_program import swept_rows, write_swept  # noqa: E402
 from sim_fixtures.world import Noise  # noqa: E402
 from station.commands.demo import HOLDOUT_PER_LINE, demo_config, truth_line  # noqa: E402
 from station.config import StationConfig  # noqa: E402
 from station.formats.samples import load_samples  # noqa: E402
 from station.formats.tables import load_robot, load_setup  # noqa: E402
 from station.jobs import calibration, sweeping  # noqa: E402
-
-
-def swept_rows(robot: SweepRobot, plan_lines: np.ndarray, paths: list, hz: float):
-    """Joints [deg] (N, 6) and line ids (N,) of the rows ``hz`` a second along every sweep."""
-    q, lines = [], []
-    for piece in (p for p in robot._pieces if p.kind == "sweep"):
-        t = np.arange(piece.start_s, piece.start_s + piece.duration_s, 1.0 / hz)
-        q.append(np.array([robot.state(s).q_deg for s in t]))
-        lines.append(np.full(len(t), plan_lines[paths[piece.p].rows[0]]))
-    return np.concatenate(q), np.concatenate(lines)
 
 
 def main() -> None:
@@ -58,6 +51,8 @@ def main() -> None:
     parser.add_argument("--roll", type=float, default=60.0)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--draws", type=int, default=1)
+    parser.add_argument("--late-ms", type=float, default=0.0)
+    parser.add_argument("--untimed", action="store_true")
     args = parser.parse_args()
     robot_file, setup_path = (
         load_robot(configs.path("robots/hsr_jr680.toml")),
@@ -76,13 +71,13 @@ def main() -> None:
     for seed in args.seeds:
         cell, paths = sweep_cell(seed, plan.q_deg, plan.line, plan.sweep_pass)
         robot = sweep_robot(config, paths)
-        q, lines = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz)
+        rows = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz, args.late_ms / 1e3)
         world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
         world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([seed, 4])).to_csv(folder / "holdout.csv")
         trues = []
         for draw in range(args.draws):
             rng = np.random.default_rng([seed, 1] + ([draw] if draw else []))
-            world.measure(q, lines, rng).to_csv(folder / "rows.csv")
+            write_swept(world, rows, rng, folder / "rows.csv", timed=not args.untimed)
             outcome = calibration.calibrate_samples(
                 load_samples(folder / "rows.csv"),
                 robot_file,
@@ -95,7 +90,7 @@ def main() -> None:
             trues.append(float(truth_line(world, outcome).split("->")[1].split()[0]))
         spread = f" (mean {np.mean(trues):.3f}, {min(trues):.3f}-{max(trues):.3f})" if args.draws > 1 else ""
         said = " / ".join(f"{v:.3f}" for v in trues)
-        print(f"{seed} | {robot.cycle_s:.1f} | {len(q)} | {said}{spread}", flush=True)
+        print(f"{seed} | {robot.cycle_s:.1f} | {len(rows.q)} | {said}{spread}", flush=True)
 
 
 if __name__ == "__main__":

@@ -147,3 +147,42 @@ def _lag_step(design, column, misfit) -> tuple[float, float]:
     left = column - design @ p_coef
     sigma = float(np.sqrt(resid @ resid / dof / max(left @ left, 1e-300)))
     return float(coef[0]), sigma
+
+
+def pass_rates(values, t, groups, path=None, max_step: float = np.inf) -> np.ndarray:
+    """The rate of change [unit per s] (N,) of ``values`` (N,) read at times ``t`` (N,) [s] along
+    each pass (``groups`` (N,), -1: no pass), by central differences in time order. 0 on rows of
+    no pass, of a pass with fewer than two distinct times, where two readings share a time, and
+    where ``path`` (N, D) (e.g. the joints) moved more than ``max_step`` (any coordinate) to a
+    neighbouring row: a difference quotient is a rate only over a short stretch of one path."""
+    values, t, groups = np.asarray(values, float), np.asarray(t, float), np.asarray(groups)
+    path = np.zeros((len(values), 1)) if path is None else np.asarray(path, float).reshape(len(values), -1)
+    rate = np.zeros(len(values))
+    for g in np.unique(groups[groups >= 0]):
+        rows = np.flatnonzero(groups == g)
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        if len(rows) < 2 or np.any(np.diff(t[rows]) <= 0):
+            continue
+        step = np.max(np.abs(np.diff(path[rows], axis=0)), axis=1)
+        short = np.r_[step[0], np.maximum(step[:-1], step[1:]), step[-1]] <= max_step
+        rate[rows] = np.where(short, np.gradient(values[rows], t[rows]), 0.0)
+    return rate
+
+
+def interpolation_error(t_known, values, t) -> np.ndarray:
+    """About how far (N,) [the values' unit] linear interpolation of ``values`` (K,) known at
+    increasing times ``t_known`` (K,) [s] may be off at times ``t`` (N,): ``h / 8`` times the change
+    of slope from the segment around each time to its neighbours (``h`` the segment's length; a
+    parabola's interpolation error, exactly). Inf where a neighbour is NaN (a reading beside a
+    gap: the value changed in a way the readings do not show); 0 with fewer than three readings."""
+    t_known, values, t = np.asarray(t_known, float), np.asarray(values, float), np.asarray(t, float)
+    if len(t_known) < 3:
+        return np.zeros(len(t))
+    h = np.diff(t_known)
+    slope = np.diff(values) / np.where(h > 0, h, np.nan)
+    k = np.clip(np.searchsorted(t_known, t, side="right") - 1, 0, len(h) - 1)
+    before = np.abs(slope[k] - slope[np.maximum(k - 1, 0)])
+    after = np.abs(slope[np.minimum(k + 1, len(h) - 1)] - slope[k])
+    change = np.fmax(before, after)  # NaN only where both are
+    change[np.isnan(before) | np.isnan(after)] = np.inf
+    return change * h[k] / 8

@@ -14,6 +14,7 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
+from calib.alignment import pass_rates
 from calib.identifiability import structural_holds, tolerance
 from calib.joint_terms import JointTerms
 from calib.kinematics import N_DH, dh_table, tcp_position, tcp_position_by_axes
@@ -241,11 +242,13 @@ class DrawstringSetup:
 @dataclass(frozen=True)
 class DrawstringFrame:
     """What a training fit fixes for every later evaluation: the line references (by line id),
-    the anchor's starting point [mm] and the basis its three unknowns move it along."""
+    the anchor's starting point [mm], the basis its three unknowns move it along, and whether the
+    rows were ``timed`` (swept: the drawstring's timing is an unknown, ``DrawstringLineModel``)."""
 
     lines: dict[int, LineReference]
     anchor0: np.ndarray
     anchor_basis: np.ndarray
+    timed: bool = False
 
     @classmethod
     def from_nominal(cls, samples: DrawstringSamples, setup: DrawstringSetup, dh, tool) -> DrawstringFrame:
@@ -281,7 +284,8 @@ class DrawstringFrame:
             radial = rel - (rel @ ref.direction) * ref.direction
             radial /= np.linalg.norm(radial)
             basis = np.column_stack([radial, ref.direction, np.cross(ref.direction, radial)])
-        return cls(lines, anchor0, basis)
+        timed = samples.sweep_pass is not None and bool(np.any(samples.sweep_pass >= 0))
+        return cls(lines, anchor0, basis, timed)
 
     def anchor_names(self) -> tuple[str, str, str]:
         """Names of the anchor's three unknowns: base axes, or (radial, along, about) one line."""
@@ -303,11 +307,14 @@ class FittedLine:
 @dataclass(frozen=True)
 class DrawstringSetupEstimate:
     """The drawstring setup at a solution: ``anchor_mm`` (3,) [mm] in the base frame, the reading's
-    ``length_offset_mm`` [mm] and the fitted ``lines``. Field names are the report's keys."""
+    ``length_offset_mm`` [mm], the fitted ``lines`` and, for swept rows, ``timing_ms``: how much
+    later than stamped the drawstring's lengths were true [ms] (None: static rows). Field names are
+    the report's keys."""
 
     anchor_mm: np.ndarray
     length_offset_mm: float
     lines: tuple[FittedLine, ...]
+    timing_ms: float | None = None
 
 
 CHAIN_ROWS = 2048
@@ -340,13 +347,27 @@ def least_aligned_direction(directions: np.ndarray) -> np.ndarray:
     return np.linalg.svd(directions)[2][-1]
 
 
+TIMING_NAME = "drawstring.timing_ms"
+TIMING_PRIOR_MS = 10.0
+"""What is known of a sweep's drawstring timing before measuring [ms, 1 sigma]: the latency the
+station states, within what a device's round trip and a busy bus leave unknown."""
+RATE_STEP_DEG = 2.0
+"""Rows of a pass farther apart than this in a joint [deg] are not one stretch of a path (a sweep
+records rows every few hundredths of a degree): no rate, no timing, where they meet."""
+
+
 class DrawstringLineModel:
     """Drawstring distances to a ground anchor plus gauge-block line contacts (the paper's LMLC).
 
-    Unknowns ``x = [dh (24), anchor (3), length_offset (1), 4 per line, terms (K)]``. Residuals, in
-    this order:
+    Unknowns ``x = [dh (24), anchor (3), length_offset (1), 4 per line, timing (1, swept rows
+    only), terms (K)]``. Residuals, in this order:
 
-    - drawstring, every row: ``(|p - anchor| - length_offset - Y) / sigma_length``
+    - drawstring, every row: ``(|p - anchor| - length_offset + rate * timing - Y) / sigma_length``,
+      ``rate`` the nominal length's rate along the row's pass [mm/s] (0 off a pass): a reading
+      stamped ``timing`` earlier than its length was true (the moment a device measures inside its
+      round trip is not known to the station) errs by ``rate * timing``, an error that follows the
+      path and does not average out over rows; a tenth of a millisecond of it moved a sweep's
+      table by more than its noise did
     - line, two per row on a line: ``sqrt(rho) * offset(p - dial * dial_axis, line) / sigma_line``
 
     with ``p`` the TCP at the angles the links take (``calib.joint_terms``).
@@ -380,11 +401,19 @@ class DrawstringLineModel:
             for k, lid in enumerate(self.line_ids)
         }
         line_names = tuple(f"line{lid}.{n}" for lid in self.line_ids for n in ("c1_mm", "c2_mm", "b1", "b2"))
-        setup_names = frame.anchor_names() + ("length_offset_mm",) + line_names
+        timing_names = (TIMING_NAME,) if frame.timed else ()
+        setup_names = frame.anchor_names() + ("length_offset_mm",) + line_names + timing_names
         self.names = DH_NAMES + setup_names + self.terms.names
         self._terms_at = N_DH + len(setup_names)
+        self._timing_at = self._terms_at - 1 if frame.timed else None
+        self._rate = self._length_rate(dh0) if frame.timed else None
         self.x0 = np.concatenate(
-            [np.ravel(dh0), np.zeros(3), [setup.length_offset], np.zeros(len(line_names) + len(self.terms))]
+            [
+                np.ravel(dh0),
+                np.zeros(3),
+                [setup.length_offset],
+                np.zeros(len(line_names) + len(timing_names) + len(self.terms)),
+            ]
         )
         index = np.arange(len(self.names))
         self.setup_mask = (index >= N_DH) & (index < self._terms_at)
@@ -406,6 +435,19 @@ class DrawstringLineModel:
             for lid in self.line_ids
         }
 
+    def _length_rate(self, dh0) -> np.ndarray:
+        """Each row's nominal length's rate along its pass [mm/s] (N,) (``calib.alignment.pass_rates``
+        of the starting table's distances to the starting anchor, where the rows lie within
+        ``RATE_STEP_DEG`` of their neighbours: a rate's relative error is the table's, about 1e-3,
+        and the timing it multiplies a fraction of a millisecond)."""
+        s = self.samples
+        if s.sweep_pass is None:
+            return np.zeros(len(s))
+        dist = np.linalg.norm(
+            tcp_position(dh_table(np.ravel(dh0)), s.q, self.tool) - self.frame.anchor0, axis=1
+        )
+        return pass_rates(dist, s.t_s, s.sweep_pass, s.q, np.radians(RATE_STEP_DEG))
+
     def gauges(self) -> dict[str, str]:
         """The table's structural gauges with a free anchor and free lines, and, on one line, the
         anchor's turn about it."""
@@ -418,11 +460,13 @@ class DrawstringLineModel:
 
     def prior_sigma(self) -> np.ndarray:
         """The table's manufacturing tolerance, the rough anchor's and offset's (half the stated
-        tolerances), the terms' priors; the lines are free (inf)."""
+        tolerances), the timing's ``TIMING_PRIOR_MS``, the terms' priors; the lines are free (inf)."""
         sigma = np.full(len(self.names), np.inf)
         sigma[:N_DH] = tolerance(self.names[:N_DH])
         sigma[N_DH : N_DH + 3] = self.setup_values.anchor_tolerance / 2
         sigma[N_DH + 3] = self.setup_values.offset_tolerance / 2
+        if self._timing_at is not None:
+            sigma[self._timing_at] = TIMING_PRIOR_MS
         sigma[self._terms_at :] = self.terms.prior_sigma()
         return sigma
 
@@ -477,10 +521,21 @@ class DrawstringLineModel:
         """Line ``lid`` as (point [mm], unit direction)."""
         return self.frame.lines[lid].line(x[self._line_cols[lid]])
 
+    def timing_ms(self, x: np.ndarray) -> float | None:
+        """How much later than stamped the swept rows' lengths were true [ms]; None: static rows."""
+        return None if self._timing_at is None else float(x[self._timing_at])
+
+    def model_length(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The length each row's reading should show (N,) [mm] with its TCP at ``p`` (N, 3)."""
+        length = np.linalg.norm(p - self.anchor(x), axis=1) - self.length_offset(x)
+        if self._timing_at is not None:
+            length += self._rate * x[self._timing_at] / 1e3
+        return length
+
     def setup_estimate(self, x: np.ndarray) -> DrawstringSetupEstimate:
-        """Anchor, offset and lines at ``x`` (see ``DrawstringSetupEstimate``)."""
+        """Anchor, offset, lines and timing at ``x`` (see ``DrawstringSetupEstimate``)."""
         lines = tuple(FittedLine(lid, *self.line(x, lid)) for lid in self.line_ids)
-        return DrawstringSetupEstimate(self.anchor(x), self.length_offset(x), lines)
+        return DrawstringSetupEstimate(self.anchor(x), self.length_offset(x), lines, self.timing_ms(x))
 
     # -- what the station asks ---------------------------------------------------------------
     def placement_ids(self) -> np.ndarray:
@@ -517,8 +572,7 @@ class DrawstringLineModel:
         ndarray, shape (N,)
             Reading minus model length, ``Y - (|p - anchor| - length_offset)`` [mm].
         """
-        model = np.linalg.norm(self.tcp(x) - self.anchor(x), axis=1) - self.length_offset(x)
-        return self.samples.length - model
+        return self.samples.length - self.model_length(x, self.tcp(x))
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Whitened residuals (m,): N drawstring rows, then two per row on a line."""
@@ -577,14 +631,15 @@ class DrawstringLineModel:
         """The drawstring rows' residuals into ``r`` and Jacobian into ``jac``; returns the next row."""
         st, n_rows = self.setup_values, len(self.samples)
         rel = p - self.anchor(x)
-        dist = np.linalg.norm(rel, axis=1)
-        r[:n_rows] = (dist - self.length_offset(x) - self.samples.length) / st.sigma_length
+        r[:n_rows] = (self.model_length(x, p) - self.samples.length) / st.sigma_length
         if jac is not None:
-            u = rel / dist[:, None]
+            u = rel / np.linalg.norm(rel, axis=1)[:, None]
             if dp is not None:
                 _combine(jac[:n_rows], u, dp, self._robot_columns, np.divide, st.sigma_length)
             jac[:n_rows, N_DH : N_DH + 3] = -(u @ self.frame.anchor_basis) / st.sigma_length
             jac[:n_rows, N_DH + 3] = -1.0 / st.sigma_length
+            if self._timing_at is not None:
+                jac[:n_rows, self._timing_at] = self._rate / 1e3 / st.sigma_length
         return n_rows
 
     def _line_block(self, x, lid, p, dp, r, jac, at: int) -> int:

@@ -24,7 +24,9 @@ sweep's, and a transit is off the edge anyway).
 from __future__ import annotations
 
 import bisect
+import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -177,3 +179,43 @@ class SweepRobot:
             return b.copy(), np.zeros(6), int(self.paths[piece.to].rows[0]), False, 0.0
         s, sd = trapezoid(length, into, self.speed_deg_s, self.accel_deg_s2)
         return a + way * (s / length), way * (sd / length), int(self.paths[piece.to].rows[0]), False, 0.0
+
+
+@dataclass(frozen=True)
+class SweptReadings:
+    """Rows along a sweeping robot's passes: joints [deg] (N, 6) at the rows' stamps ``t_s`` (N,)
+    [s] and where the robot was ``late_s`` after them (``q_late``: what a drawstring measuring late
+    read), line ids and pass ids (N,)."""
+
+    q: np.ndarray
+    q_late: np.ndarray
+    t_s: np.ndarray
+    lines: np.ndarray
+    passes: np.ndarray
+
+
+def swept_rows(robot: SweepRobot, plan_lines, paths: list, hz: float, late_s: float = 0.0) -> SweptReadings:
+    """The rows ``hz`` a second along every sweep of ``robot`` (over ``paths``, each pass's line
+    the plan's ``plan_lines`` of its first row), as :class:`SweptReadings`."""
+    q, q_late, t_s, lines, passes = [], [], [], [], []
+    for k, piece in enumerate(p for p in robot._pieces if p.kind == "sweep"):
+        t = np.arange(piece.start_s, piece.start_s + piece.duration_s, 1.0 / hz)
+        q.append(np.array([robot.state(s).q_deg for s in t]))
+        q_late.append(np.array([robot.state(s + late_s).q_deg for s in t]))
+        t_s.append(t)
+        lines.append(np.full(len(t), plan_lines[paths[piece.p].rows[0]]))
+        passes.append(np.full(len(t), k))
+    return SweptReadings(*(np.concatenate(a) for a in (q, q_late, t_s, lines, passes)))
+
+
+def write_swept(world, rows: SweptReadings, rng, path: Path, timed: bool = True) -> None:
+    """``rows`` read once at ``world``'s noise into the samples CSV ``path``: lengths and dial where
+    the robot was (``rows.q_late``), joints at the stamps; ``timed``: with the ``pass`` and ``t_s``
+    columns a sweep session writes."""
+    read = world.measure(rows.q_late, rows.lines, rng)
+    read = dataclasses.replace(read, q_deg=rows.q + (read.q_deg - rows.q_late))
+    read.to_csv(path)
+    if timed:
+        head, *body = Path(path).read_text().splitlines()
+        extra = (f"{a},{p},{t:.6f}" for a, p, t in zip(body, rows.passes, rows.t_s, strict=True))
+        Path(path).write_text("\n".join([head + ",pass,t_s", *extra]) + "\n")

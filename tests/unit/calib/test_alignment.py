@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from calib.alignment import clock_offset, estimate_lag, interpolate, steepest_rate
+from calib.alignment import (
+    clock_offset,
+    estimate_lag,
+    interpolate,
+    interpolation_error,
+    pass_rates,
+    steepest_rate,
+)
 
 RNG = np.random.default_rng(7)
 
@@ -92,3 +99,31 @@ def test_steepest_rate_is_the_steepest_slope_of_a_slow_sensors_trend():
     rate = steepest_rate(t, drift + rng.normal(0, 0.002, len(t)), groups)
     assert truth <= rate < truth + 0.004  # the trend found, the noise's end effects small
     assert steepest_rate(t[:1], drift[:1], groups[:1]) == 0.0
+
+
+def test_interpolation_error_is_a_parabolas_and_nothing_on_a_line():
+    """On a parabola sampled unevenly the bound is within a factor 2 of the true midpoint error of
+    the segment around each time (h^2 c / 8: the neighbours' slopes differ by c times the mean of
+    the two segments, spaced here within a factor 3); on a line zero; beside a NaN reading inf."""
+    t_known = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.005, 0.015, 40)])
+    c = 30.0  # mm/s^2
+    t = (t_known[1:-2] + t_known[2:-1]) / 2  # segment midpoints, away from the ends
+    bound = interpolation_error(t_known, c * t_known**2 / 2, t)
+    linear, _ = interpolate(t_known, c * t_known**2 / 2, t, 1.0)
+    ratio = bound / np.abs(linear[:, 0] - c * t**2 / 2)
+    assert np.all((ratio >= 0.5) & (ratio <= 2.0))
+    np.testing.assert_allclose(interpolation_error(t_known, 2.0 * t_known - 1.0, t), 0.0, atol=1e-12)
+    with_gap = np.where(np.arange(len(t_known)) == 20, np.nan, t_known)
+    assert np.isinf(interpolation_error(t_known, with_gap, t[18:20])).all()
+
+
+def test_pass_rates_are_each_passs_own_time_derivative():
+    t = np.r_[np.linspace(0.0, 1.0, 50), np.linspace(5.0, 6.0, 30)]
+    groups = np.r_[np.zeros(50, int), np.ones(30, int)]
+    values = np.where(groups == 0, 3.0 * t, -2.0 * t**2)
+    order = np.random.default_rng(1).permutation(len(t))  # rows need not come in time order
+    rate = pass_rates(values[order], t[order], groups[order])
+    expected = np.where(groups == 0, 3.0, -4.0 * t)[order]
+    inner = (t[order] > 5.0) & (t[order] < 6.0) | (groups[order] == 0)
+    np.testing.assert_allclose(rate[inner], expected[inner], rtol=1e-2)
+    assert np.all(pass_rates(values, t, np.full(len(t), -1)) == 0.0)  # no pass: no rate

@@ -9,6 +9,7 @@ import pytest
 import configs
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
+from calib.models import TIMING_NAME
 from sim_fixtures.scenario import setup_dict
 from sim_fixtures.world import World
 from station.formats.samples import Samples, load_samples
@@ -65,8 +66,12 @@ def _calibrate(samples, setup):
 def test_a_sweeps_bound_counts_what_its_passes_share(sweep):
     world, setup, white, swept = sweep
     as_white, as_swept = _calibrate(white, setup), _calibrate(swept, setup)
-    # the passes change what the fit states, not the fit
-    np.testing.assert_array_equal(as_white.calibration.x, as_swept.calibration.x)
+    # the passes change what the fit states, not the fit: rows that jump between poses are no path,
+    # so the drawstring's timing (an unknown of swept rows) stays at its start and the rest is the
+    # same to the solver's last digits (one more column in its products)
+    timing = as_swept.model.names.index(TIMING_NAME)
+    assert as_swept.calibration.x[timing] == 0.0
+    np.testing.assert_allclose(as_white.calibration.x, np.delete(as_swept.calibration.x, timing), rtol=1e-9)
     true = _true_rmse(world, as_swept.calibration.x)
     bound_white = as_white.report.workspace.predicted_rmse_95_mm
     bound_swept = as_swept.report.workspace.predicted_rmse_95_mm

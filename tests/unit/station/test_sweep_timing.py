@@ -1,0 +1,64 @@
+"""A sweep whose drawstring measured later than its rows are stamped (a device measures somewhere
+inside its round trip): the calibration fits that timing (``calib.models.TIMING_NAME``) and its
+table is as good as on rows read on time; without it, a fraction of a millisecond ruins the table.
+Against the simulated truth: the demo's cell sweeping a plan of one pass a line."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import configs
+from calib.alignment import pass_rates
+from calib.models import TIMING_NAME
+from sim_fixtures.station_sim import sweep_cell, sweep_robot
+from sim_fixtures.sweep_program import swept_rows, write_swept
+from sim_fixtures.world import Noise
+from station.commands.demo import HOLDOUT_PER_LINE, demo_config, truth_line
+from station.config import StationConfig
+from station.formats.samples import load_samples
+from station.formats.tables import load_robot, load_setup
+from station.jobs import calibration, sweeping
+
+LATE_MS = 1.0  # a serial reply of a dozen bytes at 115200 baud takes about this long
+HZ = 60.0
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    robot = load_robot(configs.path("robots/hsr_jr680.toml"))
+    setup_path = configs.path("setups/sim.toml")
+    setup = load_setup(setup_path)
+    plan = sweeping.sweep_design(robot, setup, str(setup_path), passes=1).plan
+    cell, paths = sweep_cell(0, plan.q_deg, plan.line, plan.sweep_pass)
+    program = sweep_robot(StationConfig.model_validate(demo_config(0, sweep=True)), paths)
+    world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
+    folder = tmp_path_factory.mktemp("timing")
+    world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([0, 4])).to_csv(folder / "holdout.csv")
+    return robot, setup, str(setup_path), world, cell, paths, program, folder
+
+
+def _calibrate(cell, late_ms: float, timed: bool):
+    robot, setup, where, world, wcell, paths, program, folder = cell
+    rows = swept_rows(program, wcell.plan_lines, paths, HZ, late_ms / 1e3)
+    write_swept(world, rows, np.random.default_rng(1), folder / "rows.csv", timed=timed)
+    samples, holdout = load_samples(folder / "rows.csv"), load_samples(folder / "holdout.csv")
+    outcome = calibration.calibrate_samples(
+        samples, robot, setup, setup_where=where, holdout=holdout, method="lmlc", terms="geometric"
+    )
+    true = float(truth_line(world, outcome).split("->")[1].split()[0])
+    return outcome, true, rows
+
+
+def test_a_late_drawstring_is_fitted_and_leaves_the_table_as_on_time(cell):
+    world = cell[3]
+    on_time, true_on_time, _ = _calibrate(cell, 0.0, timed=True)
+    late, true_late, rows = _calibrate(cell, LATE_MS, timed=True)
+    _, true_untimed, _ = _calibrate(cell, LATE_MS, timed=False)
+    fitted = late.calibration.x[late.model.names.index(TIMING_NAME)]
+    rate = pass_rates(world.true_length_mm(rows.q), rows.t_s, rows.passes)  # mm/s
+    sigma_ms = 1e3 * world.noise.length_mm / np.sqrt(np.sum(rate**2))  # the timing's noise alone
+    assert abs(fitted - LATE_MS) <= 4 * sigma_ms
+    assert late.report.setup.timing_ms == pytest.approx(fitted)
+    assert true_late <= 1.1 * true_on_time  # the same rows, the same noise: only the timing differs
+    assert true_untimed >= 2 * true_late  # what the timing costs a fit that does not know it
