@@ -258,7 +258,9 @@ def _run_sweep(inputs: SessionInputs, viewer: bool, web: str | None, stream) -> 
         if dropped := folder.keep_rows(lambda row: int(row["pass"]) in finished):
             tell(f"{dropped} rows of a pass left unfinished dropped: it is swept again")
         robot_hz = float(getattr(inputs.cfg.robot, "frequency_hz", 100.0))
-        rules = SweepRules.from_config(inputs.cfg, inputs.setup.drawstring.sigma_mm)
+        rules = SweepRules.from_config(
+            inputs.cfg, inputs.setup.drawstring.sigma_mm, inputs.setup.line_sigma_mm
+        )
         streams = Streams(devices.drivers, robot_hz, rules.row_spacing_s / 2)
         session = SweepSession(folder, plan, streams, rules, kin, tell, view.sweep, view.sweeping)
         with _stops_on_signal(session.request_stop):

@@ -17,8 +17,12 @@ two packages interpolated; ``window_s``: the reading's round trip [s].
 Flags: a row is stored in ``flagged.csv`` with its reason, never in ``samples.csv``, where
 
 - the dial answered out of range around it (``dial off the edge``: lifted off, or off the line),
-  read outside ``[session] dial_range_mm`` (``dial outside its gate``), or gave no reading within
-  ``[sweep] max_gap_s`` of it (``no dial reading``);
+  read outside ``[session] dial_range_mm`` (``dial outside its gate``), gave no reading within
+  ``[sweep] max_gap_s`` of it (``no dial reading``), or changed between its readings around it so
+  that interpolating them may be off by more than ``[sweep] timing_share`` of the setup's
+  ``line_sigma_mm`` (``dial changing fast``: ``calib.alignment.interpolation_error``; the tool
+  landing on or leaving the edge, a reading beside a lift-off: off by up to 1.6 mm in a demo sweep
+  before this rule);
 - the TCP moved faster along the edge than ``[sweep] max_speed_mm_s`` (``too fast``: the nominal
   model's TCP speed from the joints and joint speeds);
 - the robot's packages around it lie farther apart than ``max_gap_s`` or its mode is not RUNNING
@@ -60,7 +64,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.alignment import Lag, clock_offset, estimate_lag, interpolate, steepest_rate
+from calib.alignment import Lag, clock_offset, estimate_lag, interpolate, interpolation_error, steepest_rate
 from calib.kinematics import tcp_position
 from calib.params import dh_from_degrees
 from errors import DeviceError
@@ -95,6 +99,7 @@ class SweepRules:
     row_spacing_s: float
     tolerance_s: float  # simulated
     timing_limit_mm: float  # a row's length uncertain from its timing by more is flagged
+    dial_limit_mm: float  # a row's dial uncertain from its interpolation by more is flagged
     dial_range_mm: tuple[float, float]
     length_range_mm: tuple[float, float]
     match_deg: float
@@ -102,8 +107,9 @@ class SweepRules:
     unreachable_s: float
 
     @classmethod
-    def from_config(cls, cfg: StationConfig, sigma_mm: float) -> SweepRules:
-        """The rules of ``cfg``, for a drawstring of noise ``sigma_mm`` [mm, 1 sigma]."""
+    def from_config(cls, cfg: StationConfig, sigma_mm: float, line_sigma_mm: float) -> SweepRules:
+        """The rules of ``cfg``, for a drawstring of noise ``sigma_mm`` and a tool held to the
+        edge within ``line_sigma_mm`` (the setup's) [mm, 1 sigma]."""
         sw, se, k = cfg.sweep, cfg.session, cfg.time_scale
         return cls(
             time_scale=k,
@@ -113,6 +119,7 @@ class SweepRules:
             row_spacing_s=1.0 / (sw.rows_per_s * k),
             tolerance_s=sw.latency_tolerance_s,
             timing_limit_mm=sw.timing_share * sigma_mm,
+            dial_limit_mm=sw.timing_share * line_sigma_mm,
             dial_range_mm=tuple(se.dial_range_mm),
             length_range_mm=tuple(se.length_range_mm),
             match_deg=se.match_deg,
@@ -437,6 +444,8 @@ class SweepSession:
         _flag(reason, ~ok, "no dial reading")
         _flag(reason, ok & ~np.isfinite(dial), "dial off the edge")
         _flag(reason, np.isfinite(dial) & ((dial < low) | (dial > high)), "dial outside its gate")
+        shifted = td - self.rules.latency_s["dial"]
+        _flag(reason, interpolation_error(shifted, value, t) > self.rules.dial_limit_mm, "dial changing fast")
         return dial
 
     def _check_devices(self) -> None:

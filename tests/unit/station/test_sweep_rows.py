@@ -21,6 +21,7 @@ RULES = dict(
     row_spacing_s=0.0,
     tolerance_s=0.002,
     timing_limit_mm=0.01,  # mm: half the drawstring's 0.02 mm noise
+    dial_limit_mm=0.01,  # mm: the line noise
     dial_range_mm=(-2.0, 2.0),
     length_range_mm=(50.0, 5000.0),
     match_deg=2.0,
@@ -154,3 +155,26 @@ def test_a_reading_whose_timing_leaves_its_length_uncertain_is_flagged():
     assert np.sum(true_off > 1.5 * limit) > 40 and np.sum(true_off < 0.5 * limit) > 20  # both met
     assert not np.any(is_flagged[(t > 0.5) & (t < 0.54) & (trip < 1e-3)])
     assert np.all(is_flagged[(t > 0.98) & (t < 1.02)]) and np.any((t > 0.98) & (t < 1.02) & (trip < 1e-3))
+
+
+def test_a_dial_landing_between_its_readings_is_flagged_not_stored_off():
+    """The tool lands on the edge mid-pass (the dial's reading swings by 1 mm within about 10 ms,
+    read every 5 ms): rows whose interpolated dial may be off by more than the line noise are
+    flagged ``dial changing fast``; every stored row's dial is the true one within that noise,
+    and the rows away from the landing are all stored."""
+
+    def true_dial(t):
+        return 0.1 - 0.5 * (1.0 - np.tanh((t - 0.5) / 0.004))  # a logistic step, 0.002 s scale
+
+    t_dial = np.arange(0.0, 2.0, 0.005)
+    streams = _Streams(t_dial, true_dial(t_dial))
+    session = _session(streams, max_speed=1e5)
+    rows, flagged, _ = session._rows(_Run(0, 0.0, 2.0, 0.0, 1.0), streams.robot_arrays)
+    t_rows = np.array([r["t_s"] for r in rows])
+    dial = np.array([r["dial_mm"] for r in rows])
+    assert np.max(np.abs(dial - true_dial(t_rows))) <= RULES["dial_limit_mm"]
+    fast = [f["t_s"] for f in flagged if f["reason"] == "dial changing fast"]
+    assert fast and all(0.45 < t < 0.55 for t in fast)
+    t_read = np.array(streams.sensors["drawstring"].t) - RULES["latency_s"]["drawstring"]
+    away = lambda t: (t < 0.45) | (t > 0.55)  # noqa: E731
+    assert away(t_rows).sum() == away(t_read).sum()
