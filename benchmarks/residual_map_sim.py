@@ -19,9 +19,11 @@ At the program's poses near the measured poses (a plan pose within ``calib.near.
 true TCP against the table's prediction alone and the table's plus the map's (each prediction's
 frame registered onto the truth on the measured poses): RMS [mm], how many lie inside the map's 95 % bound
 (chi-square, 3 degrees), against the instruments' noise (the drawstring's 0.02 mm). Cells without
-the unmodelled error: how many seeds keep the map off.
+the unmodelled error: how many seeds keep the map off. ``--error cyclic`` or ``sag`` gives the cells
+one part of the error alone (what each leaves of the figure).
 
-Usage: ``python benchmarks/residual_map_sim.py [--seeds 20] [--rows drawstring|tracker|ideal|all] [--json]``.
+Usage: ``python benchmarks/residual_map_sim.py [--seeds 20] [--near-poses 60]
+[--error ur10-like|cyclic|sag] [--rows drawstring|tracker|ideal|all] [--json PATH]``.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ from calib.kinematics import dh_table, tcp_position  # noqa: E402
 from calib.metrics import rigid_fit  # noqa: E402
 from calib.near import covered  # noqa: E402
 from calib.residual_map import fit_map  # noqa: E402
-from sim_fixtures.unmodelled import UR10_LIKE  # noqa: E402
+from sim_fixtures.unmodelled import UR10_LIKE, Unmodelled  # noqa: E402
 from sim_fixtures.world import World  # noqa: E402
 from station.formats.samples import load_samples  # noqa: E402
 from station.formats.tables import load_robot, load_setup  # noqa: E402
@@ -63,6 +65,13 @@ PROGRAM_POSES = 60
 """The user's program: poses a few degrees off contacts with the cell's lines."""
 TRACKER_MM = 0.02
 """The simulated tracker's noise per axis [mm] (``sim_fixtures.unmodelled.TrackerCell``)."""
+ERRORS = {
+    "ur10-like": UR10_LIKE,
+    "cyclic": dataclasses.replace(UR10_LIKE, sag_mm_per_m2=0.0),
+    "sag": dataclasses.replace(UR10_LIKE, cyclic=()),
+}
+"""The unmodelled errors a cell may carry (``--error``): ``UR10_LIKE`` whole, its cyclic errors
+alone, its sag alone."""
 ROBOT, SETUP = configs.path("robots/hsr_jr680.toml"), configs.path("setups/sim.toml")
 
 
@@ -162,11 +171,11 @@ def rms(error: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
 
 
-def one_cell(seed: int, unmodelled: bool, plan, program, kinds) -> dict:
-    """A cell's figures per kind of map rows."""
+def one_cell(seed: int, unmodelled: Unmodelled | None, plan, program, kinds) -> dict:
+    """A cell's figures per kind of map rows, its robot carrying ``unmodelled`` (None: nothing)."""
     world = World.create(seed)
-    if unmodelled:
-        world = dataclasses.replace(world, unmodelled=UR10_LIKE)
+    if unmodelled is not None:
+        world = dataclasses.replace(world, unmodelled=unmodelled)
     measured, outcome = session(world, plan, seed)
     near = covered(np.radians(measured.q_deg), np.radians(program))
     out = {"seed": seed, "near_poses": int(near.sum())}
@@ -230,6 +239,7 @@ def main(argv=None) -> int:
         "--seeds", type=int, default=20, help="cells with and cells without the error (default 20)"
     )
     ap.add_argument("--near-poses", type=int, default=60, help="contacts --near adds (default 60)")
+    ap.add_argument("--error", choices=tuple(ERRORS), default="ur10-like", help="the cells' unmodelled error")
     ap.add_argument("--rows", choices=("drawstring", "tracker", "ideal", "all"), default="all")
     ap.add_argument("--json", type=Path, help="write every cell's figures here")
     args = ap.parse_args(argv)
@@ -241,7 +251,7 @@ def main(argv=None) -> int:
           f"{time.perf_counter() - t0:.1f} s", flush=True)  # fmt: skip
     cells, null = [], []
     for seed in range(args.seeds):
-        for unmodelled, into in ((True, cells), (False, null)):
+        for unmodelled, into in ((ERRORS[args.error], cells), (None, null)):
             into.append(one_cell(seed, unmodelled, plan, program, kinds))
             c = into[-1]
             figures = "; ".join(
@@ -250,7 +260,7 @@ def main(argv=None) -> int:
                 for k in kinds
             )
             print(
-                f"seed {seed} {'ur10-like' if unmodelled else 'none':9s} ({c['near_poses']} near): {figures}",
+                f"seed {seed} {args.error if unmodelled else 'none':9s} ({c['near_poses']} near): {figures}",
                 flush=True,
             )
     figures = summary(cells, null, kinds, World.create(0).noise.length_mm)

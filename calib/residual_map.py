@@ -39,6 +39,7 @@ from calib.angle_errors import (
     joint_jacobian,
     observed_features,
 )
+from calib.compliance import compliance_response
 from calib.kinematics import N_DH, THETA, tcp_jacobian, tcp_position
 from calib.map_rows import Observations
 
@@ -450,12 +451,13 @@ class ResidualMap:
     cv_rmse_mm, table_cv_rmse_mm : float
         3-D RMS error [mm] of the rows predicted from the other folds, with the map (the last stage
         on) and with the table alone.
-    absorbed : ndarray, shape (ABSORBED, F), or None
+    absorbed : ndarray, shape (ABSORBED [+ 2], F), or None
         What the table (rad, mm) and the TCP in the flange [mm] took of the angle errors per
         coefficient, where they were fitted beside it (``calib.absorbed_angles``): added back, less
         the rigid move of the base frame (rad, mm) it makes of the calibration's rows (a frame the
-        lines and the anchor fitted with the table alone stay in).
-    absorbed_offset : ndarray, shape (ABSORBED,), or None
+        lines and the anchor fitted with the table alone stay in); then the compliances of joints 2
+        and 3 fitted with them (``calib.compliance``, rad per m; a map stored without them has none).
+    absorbed_offset : ndarray, shape like ``absorbed``'s rows, or None
         As ``absorbed``, the change at no angle error: least squares' table where the calibration's
         robust weights (rows the angle errors made large) or its weighing left it, added with the
         angle errors.
@@ -500,7 +502,9 @@ class ResidualMap:
         p, jac = tcp_jacobian(self.dh, q, self.tool_mm)
         joints = jac[:, :, [4 * j + THETA for j in range(MAP_JOINTS)]]
         response = table_response(self.dh, q, p, jac)
-        offset = np.zeros(ABSORBED) if self.absorbed_offset is None else self.absorbed_offset
+        if self.absorbed.shape[0] > ABSORBED:  # the compliances beside the table
+            response = np.concatenate([response, compliance_response(self.dh, q, self.tool_mm, jac)], axis=2)
+        offset = np.zeros(self.absorbed.shape[0]) if self.absorbed_offset is None else self.absorbed_offset
         return features(q, joints) + response @ self.absorbed, response @ offset
 
 

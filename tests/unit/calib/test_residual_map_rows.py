@@ -259,3 +259,23 @@ def test_with_the_true_angle_errors_the_map_leaves_what_a_calibration_without_th
 def rms(error: np.ndarray) -> float:
     """3-D RMS [mm] of error vectors (N, 3)."""
     return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
+
+
+def test_a_map_stored_before_the_compliances_predicts_as_one_fitted_without_them(model_maps):
+    # a map whose angle stage holds no compliances of joints 2 and 3 (rows ABSORBED..) is read as
+    # one whose compliances are nil
+    _, _, _, found, new = model_maps[0]
+    assert found.absorbed.shape[0] == residual_map.ABSORBED + 2
+    nil = dataclasses.replace(
+        found, absorbed=found.absorbed.copy(), absorbed_offset=found.absorbed_offset.copy()
+    )
+    nil.absorbed[residual_map.ABSORBED :] = 0.0
+    nil.absorbed_offset[residual_map.ABSORBED :] = 0.0
+    rows = slice(0, residual_map.ABSORBED)
+    before = dataclasses.replace(
+        found, absorbed=found.absorbed[rows], absorbed_offset=found.absorbed_offset[rows]
+    )
+    q = np.radians(new.q_deg)
+    for got, want in zip(before.predict(q), nil.predict(q), strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    assert rms(found.predict(q)[0] - nil.predict(q)[0]) > 1e-4  # the compliances fitted do move it

@@ -19,7 +19,8 @@ def plan_and_program():
 @pytest.fixture(scope="module")
 def cells(plan_and_program):
     plan, program = plan_and_program
-    return {u: sim.one_cell(1, u, plan, program, ("tracker", "ideal", "drawstring")) for u in (True, False)}
+    kinds = ("tracker", "ideal", "drawstring")
+    return {u: sim.one_cell(1, sim.UR10_LIKE if u else None, plan, program, kinds) for u in (True, False)}
 
 
 def test_the_plan_reaches_every_program_pose(cells):
