@@ -31,7 +31,7 @@ class SweepLimits:
 
     tcp_mm_s: float = 40.0
     turn_deg_s: float = 20.0
-    row_hz: float = 60.0
+    row_hz: float = 240.0
 
 
 def rotation_angle(r0: np.ndarray, r1: np.ndarray) -> np.ndarray:

@@ -153,7 +153,7 @@ class SweepConfig(Section):
     dial_latency_s: float = Field(0.010, ge=0, le=1)
     max_speed_mm_s: float = Field(150.0, gt=0, le=1e5)
     max_gap_s: float = Field(0.1, gt=0, le=10)
-    rows_per_s: float = Field(60.0, gt=0, le=1e4)
+    rows_per_s: float = Field(240.0, gt=0, le=1e4)
     latency_tolerance_s: float = Field(0.0025, gt=0, le=1)
     timing_share: float = Field(1.0, gt=0, le=100)
 

@@ -28,7 +28,7 @@ SHAPE = PassShape()
 """A pass: 6 waypoints end to end, the tool tilted up to 25 deg and rolled up to 60 deg at each."""
 SWEEP = SweepLimits()
 """The speeds a sweep keeps to (``calib.sweep.SweepLimits``): 40 mm/s along the edge, 20 deg/s of
-tool turn, rows recorded at 60 Hz."""
+tool turn, rows recorded at 240 Hz."""
 SCORE_HZ = 5.0
 """Rows a second the choice scores a pass by (each weighing ``row_hz / SCORE_HZ`` recorded rows)."""
 CANDIDATES = 8
