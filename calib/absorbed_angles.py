@@ -70,7 +70,7 @@ from calib.compliance import (
 )
 from calib.kinematics import N_DH, THETA, tcp_jacobian
 from calib.map_rows import model_observations
-from calib.models import spread_rows
+from calib.models import thinned
 from calib.residual_map import (
     ABSORBED,
     TOOL,
@@ -277,13 +277,6 @@ def turn_rad(weights: np.ndarray, q: np.ndarray, joint: int) -> np.ndarray:
     return np.cos(angle) @ w[:HARMONICS] + np.sin(angle) @ w[HARMONICS:]
 
 
-def thinned(model):
-    """``model`` on ``MAP_ROWS`` of its sample rows (``calib.models.spread_rows``: every k-th row
-    took 42 of a 210-pose session's configurations at 100,000 rows), itself if it has no more."""
-    n = model.samples.q.shape[0]
-    return model if n <= MAP_ROWS else model.with_samples(model.samples.subset(spread_rows(n, MAP_ROWS)))
-
-
 def fit_model_map(model, x: np.ndarray, free: np.ndarray) -> ResidualMap | None:
     """The residual map of a calibration's ``model`` at its solution ``x`` with its ``free`` (n,)
     unknowns (``Calibration.identified``): the angle errors fitted beside the table they bend
@@ -296,7 +289,7 @@ def fit_model_map(model, x: np.ndarray, free: np.ndarray) -> ResidualMap | None:
         return fit_rows_map(rows, model.dh(x), model.tcp_in_flange(x))
     if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
         return None
-    model = thinned(model)
+    model = thinned(model, MAP_ROWS)  # the errors are smooth over each joint's turn
     rows = model_observations(model, x)
     table = rms3(rows.value_mm[:, None])
     found = fit_absorbed_angle_errors(model, x, free)

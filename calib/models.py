@@ -49,6 +49,12 @@ def spread_rows(n: int, k: int) -> np.ndarray:
     return np.sort(np.random.default_rng(0).choice(n, k, replace=False))
 
 
+def thinned(model: MeasurementModel, k: int) -> MeasurementModel:
+    """``model`` on ``k`` of its sample rows (``spread_rows``), itself if it has no more."""
+    n = len(model.samples)
+    return model if n <= k else model.with_samples(model.samples.subset(spread_rows(n, k)))
+
+
 class MeasurementModel(Protocol):
     """What every measurement model provides.
 

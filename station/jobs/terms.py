@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib import calibrate as calibrate_module
 from calib.calibrate import Calibration, CalibrationOptions, WithPrior
 from calib.joint_terms import (
     COMPLIANCE,
@@ -38,7 +39,7 @@ from calib.joint_terms import (
 )
 from calib.kinematics import N_JOINTS, dh_table
 from calib.methods import TERM_MODELS
-from calib.models import MeasurementModel
+from calib.models import MeasurementModel, thinned
 from calib.selection import TermSelection, blocked_folds, fitted_errors, nominal_errors, rms, select_terms
 
 MODELS = TERM_MODELS
@@ -58,6 +59,7 @@ WORSE_THAN_NOMINAL = (
     "table ({rmse:.3f} mm against {nominal:.3f} mm, cross-validated on {scheme}): do not use this "
     "table; measure configurations spread over every joint's range"
 )
+DRAWN = ", on {k} of the {n} rows (a fixed draw spread over all of them)"
 TOO_FEW = (
     "--model auto: {n} samples leave too few per fold ({per_fold}) for the {needed} unknowns of "
     "every candidate term: the table alone is fitted"
@@ -102,28 +104,36 @@ class TermChoice:
     selection: TermSelection | None
     held: dict[str, str]
     warning: str | None = None
+    drawn: bool = False
+    """Whether ``auto`` chose on a draw of the rows (``choose_terms``), not on all of them."""
 
     @property
     def calibration(self) -> Calibration | None:
         """The white calibration of ``model`` (no discrepancy) where ``auto`` already ran it."""
-        return self.selection.calibration if self.selection is not None else None
+        return self.selection.calibration if self.selection is not None and not self.drawn else None
 
 
 def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, unknowns: int) -> TermChoice:
     """The terms of ``--model kind`` on the training ``model`` (``unknowns``: what the table and
-    setup alone leave to determine); ``auto`` cross-validates on these rows only."""
+    setup alone leave to determine); ``auto`` cross-validates on these rows only, and on more than
+    ``calib.calibrate.COARSE_ROWS`` of them on that many (``calib.models.thinned``: the fixed draw
+    spread over every configuration that the robust fits start from), the chosen terms then fitted
+    on all rows: a term's cross-validated gain is a model check, the same on the draw."""
     offer = candidates(kind, model, links)
     every = [t for g in offer.groups for t in g.terms]
     if kind != "auto":
         return TermChoice(model.with_terms(offer.pool.subset(every)), None, offer.held)
+    everyone, model = model, thinned(model, calibrate_module.COARSE_ROWS)
     n = len(model.samples)
     folds, scheme = blocked_folds(model.samples.q)
+    if model is not everyone:
+        scheme += DRAWN.format(k=n, n=len(everyone.samples))
     per_fold = n - max(len(f) for f in folds)
     if per_fold < unknowns + len(every):
         warning = TOO_FEW.format(n=n, per_fold=per_fold, needed=unknowns + len(every))
-        return TermChoice(model, None, offer.held, warning)
+        return TermChoice(everyone, None, offer.held, warning)
     compliances = [g for g in offer.groups if all(t.key == COMPLIANCE for t in g.terms)]
-    turns = [harmonic_group(j, 1) for j in whole_turn_joints(model.samples.q)]
+    turns = [harmonic_group(j, 1) for j in whole_turn_joints(everyone.samples.q)]
     prior = (compliances, [g for g in offer.groups if g in turns])
     others = [g for g in offer.groups if g not in compliances + prior[1]]
     white = CalibrationOptions(correlated=False)  # the rule was chosen on white fits
@@ -143,7 +153,8 @@ def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, u
             )
         )
         held.update(dict.fromkeys((t.name for t in by_label[label].terms), reason))
-    return TermChoice(model.with_terms(offer.pool.subset(kept)), selection, held)
+    drawn = model is not everyone  # its calibration is the draw's, not the model's
+    return TermChoice(everyone.with_terms(offer.pool.subset(kept)), selection, held, drawn=drawn)
 
 
 def carry_over_warnings(model: MeasurementModel, cal: Calibration) -> list[str]:

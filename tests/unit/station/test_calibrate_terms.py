@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import configs
+from calib import calibrate as calibrate_module
 from calib.joint_terms import JointTerms, Term
 from calib.kinematics import tcp_position
 from calib.params import dh_from_degrees
@@ -261,3 +262,22 @@ def test_a_harmonic_that_cuts_the_error_but_is_not_determined_is_held_for_that(t
     assert undetermined and all("must cut" not in r for r in undetermined)
     gains = [float(r.split("error by ")[1].split("%")[0]) for r in reasons if "it cuts" in r]
     assert min(gains) >= 5.0  # every "it cuts" reason is a cut of at least the 5 % asked
+
+
+def test_auto_chooses_on_a_draw_of_many_rows_what_it_chooses_on_all(tmp_path, monkeypatch):
+    """Above ``COARSE_ROWS`` rows ``auto`` cross-validates on that many, the draw the robust fits
+    start from, then fits the chosen terms on all rows: on a compliant UR10 with J1's eccentric
+    encoder (300 poses, the threshold lowered to 150) the same terms kept and held, each stage's
+    candidates the same, the terms' values within the coarse-to-fine fit's tolerance of each other."""
+    write_compliant_set(tmp_path / "e.csv", 300, seed=5, eccentric=True)
+    samples, robot = load_samples(tmp_path / "e.csv"), load_robot(ROBOT)
+    full = calibration.calibrate_samples(samples, robot, None, terms="auto").report
+    monkeypatch.setattr(calibrate_module, "COARSE_ROWS", 150)
+    drawn = calibration.calibrate_samples(samples, robot, None, terms="auto").report
+    assert "on 150 of the 300 rows" in drawn.cross_validation.scheme
+    assert set(drawn.terms) == set(full.terms) >= {"J2.compliance_urad_per_Nm", "J1.sin1_deg"}
+    assert [h.param for h in drawn.held] == [h.param for h in full.held]
+    stages = [[(r.round, r.added, r.kept) for r in t.cross_validation.rows] for t in (full, drawn)]
+    assert stages[0] == stages[1]
+    for key, estimate in full.terms.items():
+        assert abs(drawn.terms[key].value - estimate.value) < 0.1 * estimate.sigma
