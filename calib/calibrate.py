@@ -36,7 +36,7 @@ from calib.lm import (
     row_blocks,
     weighted_blocks,
 )
-from calib.models import GROUP_PRIOR, MeasurementModel, spread_rows
+from calib.models import GROUP_PRIOR, MeasurementModel, thinned
 from calib.params import display_unit
 from calib.serial import block_covariance, pass_blocks
 
@@ -52,6 +52,13 @@ the previous round's solution on all rows, without its subset's run first (``rob
 DOWNWEIGHTED_BELOW = 0.25
 """A residual row whose squared robust weight falls below this counts as down-weighted (a gross
 reading): for the Cauchy loss at 3 noise scales, beyond 5.2 of them."""
+
+
+def coarse_draw(model: MeasurementModel) -> MeasurementModel:
+    """``model`` on ``COARSE_ROWS`` of its sample rows, a fixed draw spread over all of them
+    (``calib.models.thinned``), itself if it has no more: where many rows' model checks (the term
+    choice's cross-validation, the dial check) run, on the rows the robust fits start from."""
+    return thinned(model, COARSE_ROWS)
 
 
 class WithPrior:
@@ -87,8 +94,7 @@ class WithPrior:
         samples = getattr(self.model, "samples", None)
         if samples is None or len(samples) <= COARSE_ROWS:
             return None
-        rows = spread_rows(len(samples), COARSE_ROWS)
-        return WithPrior(self.model.with_samples(samples.subset(rows)), self.x_ref)
+        return WithPrior(coarse_draw(self.model), self.x_ref)
 
     def residuals_and_jacobian(self, x: np.ndarray, jacobian: bool = True):
         """The model's whitened residuals and Jacobian at ``x`` (n,), the prior rows appended: into

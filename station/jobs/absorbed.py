@@ -14,7 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.accuracy import predicted_workspace_rmse, workspace_error_modes
-from calib.calibrate import DOWNWEIGHTED_BELOW, Calibration, CalibrationOptions, WithPrior, robust_steps
+from calib.calibrate import (
+    DOWNWEIGHTED_BELOW,
+    Calibration,
+    CalibrationOptions,
+    WithPrior,
+    coarse_draw,
+    robust_steps,
+)
 from calib.consistency import DialGain, dial_gain
 from calib.kinematics import dh_table
 from calib.models import GROUP_LENGTH, MeasurementModel
@@ -99,10 +106,11 @@ def line_dials(model, cal: Calibration) -> list[LineDial]:
     the TCPs of a fit that does not use them: the calibration ``cal`` of ``model`` moved to the
     rows without their dial readings by ``DIAL_FREE_STEPS`` robust Gauss-Newton steps (the same
     robust cost as a refit's, from next to its optimum: a wrong dial moves the solution by a
-    fraction of a millimetre, over which the model is linear)."""
+    fraction of a millimetre, over which the model is linear); on more than ``COARSE_ROWS`` rows the
+    steps on that many (``coarse_draw``), the gain on all."""
     if not judged_lines(model):
         return []
-    free = dial_free(model)
+    free = dial_free(coarse_draw(model))
     x = robust_steps(WithPrior(free, free.x0), cal.x, cal.identified, DIAL_FREE_STEPS, CalibrationOptions())
     return judge_dials(model, x)
 

@@ -24,8 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib import calibrate as calibrate_module
-from calib.calibrate import Calibration, CalibrationOptions, WithPrior
+from calib.calibrate import Calibration, CalibrationOptions, WithPrior, coarse_draw
 from calib.joint_terms import (
     COMPLIANCE,
     JointTerms,
@@ -39,7 +38,7 @@ from calib.joint_terms import (
 )
 from calib.kinematics import N_JOINTS, dh_table
 from calib.methods import TERM_MODELS
-from calib.models import MeasurementModel, thinned
+from calib.models import MeasurementModel, spread_rows
 from calib.selection import TermSelection, blocked_folds, fitted_errors, nominal_errors, rms, select_terms
 
 MODELS = TERM_MODELS
@@ -116,14 +115,14 @@ class TermChoice:
 def choose_terms(kind: str, model: MeasurementModel, links: LinkMasses | None, unknowns: int) -> TermChoice:
     """The terms of ``--model kind`` on the training ``model`` (``unknowns``: what the table and
     setup alone leave to determine); ``auto`` cross-validates on these rows only, and on more than
-    ``calib.calibrate.COARSE_ROWS`` of them on that many (``calib.models.thinned``: the fixed draw
-    spread over every configuration that the robust fits start from), the chosen terms then fitted
+    ``calib.calibrate.COARSE_ROWS`` of them on that many (``coarse_draw``: the fixed draw spread
+    over every configuration that the robust fits start from), the chosen terms then fitted
     on all rows: a term's cross-validated gain is a model check, the same on the draw."""
     offer = candidates(kind, model, links)
     every = [t for g in offer.groups for t in g.terms]
     if kind != "auto":
         return TermChoice(model.with_terms(offer.pool.subset(every)), None, offer.held)
-    everyone, model = model, thinned(model, calibrate_module.COARSE_ROWS)
+    everyone, model = model, coarse_draw(model)
     n = len(model.samples)
     folds, scheme = blocked_folds(model.samples.q)
     if model is not everyone:
@@ -162,16 +161,30 @@ def carry_over_warnings(model: MeasurementModel, cal: Calibration) -> list[str]:
     worse than the nominal table does on the same blocked folds. Both are scored on the rows the
     calibration kept (its down-weighted gross readings left out, as its fit left them out): a few
     per cent of 2-5 mm readings otherwise decide the comparison and called good tables worse than
-    the nominal one."""
-    folds, scheme = blocked_folds(model.samples.q)
-    if len(model.samples) - max(len(f) for f in folds) < int(cal.identified.sum()):
-        return []
+    the nominal one. On more than ``COARSE_ROWS`` rows both on that many (``coarse_draw``'s)."""
     weights, kept = None, np.ones(len(model.samples), bool)
     if cal.after.weights.size == len(WithPrior(model, model.x0).rows):  # not a subset's fit (MCS)
         weights = cal.after.weights
         kept[cal.downweighted] = False
+    model, weights, kept = _drawn(model, weights, kept)
+    folds, scheme = blocked_folds(model.samples.q)
+    if len(model.samples) - max(len(f) for f in folds) < int(cal.identified.sum()):
+        return []
     mine = rms(fitted_errors(model, cal, folds, weights)[kept])
     nominal = rms(nominal_errors(model, cal, folds)[kept])
     if mine < nominal:
         return []
     return [WORSE_THAN_NOMINAL.format(rmse=mine, nominal=nominal, scheme=scheme)]
+
+
+def _drawn(model: MeasurementModel, weights: np.ndarray | None, kept: np.ndarray):
+    """``coarse_draw(model)`` with its residual rows' ``weights`` (the model's rows', then the prior
+    rows'; None: none) and its sample rows' ``kept`` (N,) flags."""
+    drawn = coarse_draw(model)
+    if drawn is model:
+        return model, weights, kept
+    pick = spread_rows(len(model.samples), len(drawn.samples))
+    if weights is not None:
+        mine = np.isin(model.rows, pick)  # the drawn model's residual rows, in its order
+        weights = np.concatenate([weights[: model.rows.size][mine], weights[model.rows.size :]])
+    return drawn, weights, kept[pick]

@@ -6,6 +6,7 @@ import dataclasses
 import numpy as np
 
 import configs
+from calib import calibrate as calibrate_module
 from calib.calibrate import CalibrationOptions, WithPrior, calibrate, robust_steps, robust_weights
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
@@ -159,3 +160,32 @@ def test_a_line_of_a_few_rows_leaves_its_dial_unjudged(three_lines):
     check = outcome.report.fit_check
     assert [d.verdict for d in check.dial_lines] == ["agrees", "agrees", "inconclusive"]
     assert check.refusal is None or "dial" not in check.refusal
+
+
+def test_the_dial_check_on_a_draw_of_many_rows_gives_the_verdicts_of_all(three_lines, monkeypatch):
+    """Above ``COARSE_ROWS`` rows the dial-free steps run on that many (the robust fits' draw), the
+    gain on all rows: line 0's dial flipped and line 2's shuffled, the threshold lowered to half the
+    rows, the same verdicts, the gains within a tenth of the tolerance a verdict allows."""
+    setup = load_setup(three_lines.setup)
+    flip = [
+        ln.model_copy(update={"dial_axis": [-v for v in ln.dial_axis]}) if ln.id == 0 else ln
+        for ln in setup.lines
+    ]
+    samples = load_samples(three_lines.samples)
+    rows = np.flatnonzero(samples.line == 2)
+    dial = samples.dial_mm.copy()
+    dial[rows] = np.random.default_rng(0).permutation(dial[rows])
+    model = calibration.build_model(
+        dataclasses.replace(samples, dial_mm=dial),
+        load_robot(three_lines.robot),
+        setup.model_copy(update={"lines": flip}),
+        "",
+    )
+    cal = calibrate(model, CalibrationOptions())
+    full = absorbed.line_dials(model, cal)
+    monkeypatch.setattr(calibrate_module, "COARSE_ROWS", len(samples) // 2)
+    drawn = absorbed.line_dials(model, cal)
+    assert [d.verdict for d in full] == ["flipped", "agrees", "does not follow"]
+    assert [d.verdict for d in drawn] == [d.verdict for d in full]
+    for a, b in zip(full, drawn, strict=True):
+        assert np.linalg.norm(np.subtract(a.gain, b.gain)) < 0.1 * absorbed.DIAL_GAIN_TOLERANCE

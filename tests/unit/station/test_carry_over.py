@@ -7,11 +7,15 @@ import numpy as np
 import pytest
 
 import configs
+from calib import calibrate as calibrate_module
+from calib.calibrate import WithPrior
 from calib.kinematics import tcp_position
+from calib.models import spread_rows
 from calib.params import dh_from_degrees
-from station.formats.samples import Samples
-from station.formats.tables import load_robot
-from station.jobs.calibration import calibrate_samples
+from station.formats.samples import Samples, load_samples
+from station.formats.tables import load_robot, load_setup
+from station.jobs.calibration import build_model, calibrate_samples
+from station.jobs.terms import _drawn
 
 ROBOT = load_robot(configs.path("robots/ur10.toml"))
 
@@ -43,3 +47,25 @@ def test_a_table_worse_than_nominal_away_from_its_poses_is_named(terms):
 def test_no_warning_where_the_table_had_errors_to_correct():
     report = calibrate_samples(tracker_set(0.15, 0.02, 90.0, 150), ROBOT, None, terms="geometric").report
     assert not [w for w in report.warnings if "worse than the nominal table" in w]
+
+
+@pytest.mark.parametrize("kind", ["position", "drawstring"])
+def test_the_check_on_a_draw_keeps_each_rows_weight_and_flag(kind, three_lines, monkeypatch):
+    """Above ``COARSE_ROWS`` rows the check scores the robust fits' draw: each of the drawn model's
+    residual rows carries the weight its row had in the whole model's (the residuals of a row in
+    the draw, in the drawn model's order), each sample row its kept flag."""
+    if kind == "position":
+        model = build_model(tracker_set(0.15, 0.02, 90.0, 150), ROBOT, None, "")
+    else:
+        files = [three_lines.samples, three_lines.robot, three_lines.setup]
+        model = build_model(load_samples(files[0]), load_robot(files[1]), load_setup(files[2]), "")
+    monkeypatch.setattr(calibrate_module, "COARSE_ROWS", 60)
+    prior = WithPrior(model, model.x0)
+    key = prior.rows * 10.0 + prior.groups  # a weight that names its residual's row and group
+    kept = np.arange(len(model.samples)) % 3 > 0
+    drawn, weights, flags = _drawn(model, key, kept)
+    drawn_prior = WithPrior(drawn, drawn.x0)
+    pick = spread_rows(len(model.samples), 60)
+    assert len(drawn.samples) == 60 and np.array_equal(flags, kept[pick])
+    rows = np.where(drawn_prior.rows >= 0, pick[drawn_prior.rows], -1)
+    np.testing.assert_array_equal(weights, rows * 10.0 + drawn_prior.groups)
