@@ -266,3 +266,14 @@ class JointTerms:
         """
         p, jac = (tcp_jacobian_by_axes if by_axes else tcp_jacobian)(dh, self.link_angles(q, c, basis), tool)
         return p, jac, jac[:, :, THETA + 4 * self.joints] * basis[:, None, :]
+
+    def tcp_derivatives(
+        self, dh: np.ndarray, q: np.ndarray, tool: np.ndarray, c: np.ndarray, basis: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``tcp_jacobian(..., by_axes=True)``'s TCPs (N, 3) [mm] and derivatives by the table, then
+        by the terms, coordinate-major (3, N, 24 + K), written in place: the same numbers without
+        a second copy of them (a million rows' are some 600 MB)."""
+        dp = np.empty((3, q.shape[0], dh.size + len(self.terms)))
+        p, _ = tcp_jacobian_by_axes(dh, self.link_angles(q, c, basis), tool, out=dp)
+        np.multiply(dp[:, :, THETA + 4 * self.joints], basis, out=dp[:, :, dh.size :])
+        return p, dp

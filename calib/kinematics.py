@@ -218,21 +218,25 @@ def _flange_point(x, y, z, o, tool) -> np.ndarray:
     return x[N_JOINTS] * t[0] + y[N_JOINTS] * t[1] + z[N_JOINTS] * t[2] + o[N_JOINTS]
 
 
-def tcp_jacobian_by_axes(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def tcp_jacobian_by_axes(
+    dh: np.ndarray, q: np.ndarray, tool: np.ndarray, out: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``tcp_jacobian`` composed by ``frame_axes``, ``KINEMATICS_ROWS`` rows at a time: TCPs (N, 3)
-    [mm] and their derivatives (N, 3, N_DH) by ``dh.ravel()``."""
+    [mm] and their derivatives (N, 3, N_DH) by ``dh.ravel()``, a view of ``out[:, :, :N_DH]``
+    (``out`` (3, N, >= N_DH), coordinate-major, as a model's chain rule reads them; default new)."""
     q = np.atleast_2d(q)
     p = np.empty((3, q.shape[0]))
-    jac = np.empty((3, N_JOINTS, len(DH_COLUMNS), q.shape[0]))  # coordinate, joint, column, row
+    out = np.empty((3, q.shape[0], N_DH)) if out is None else out
+    jac = out[:, :, :N_DH].reshape(3, q.shape[0], N_JOINTS, len(DH_COLUMNS))  # coordinate, row, joint, column
     for s in range(0, q.shape[0], KINEMATICS_ROWS):
         e = s + KINEMATICS_ROWS
         x, y, z, o = frame_axes(dh, q[s:e])
         p[:, s:e] = pb = _flange_point(x, y, z, o, tool)
-        jac[:, :, THETA, s:e] = _cross(z[:N_JOINTS], pb - o[:N_JOINTS]).transpose(1, 0, 2)
-        jac[:, :, D, s:e] = z[:N_JOINTS].transpose(1, 0, 2)
-        jac[:, :, A, s:e] = x[1:].transpose(1, 0, 2)
-        jac[:, :, ALPHA, s:e] = _cross(x[1:], pb - o[1:]).transpose(1, 0, 2)
-    return p.T, jac.transpose(3, 0, 1, 2).reshape(q.shape[0], 3, N_DH)
+        jac[:, s:e, :, THETA] = _cross(z[:N_JOINTS], pb - o[:N_JOINTS]).transpose(1, 2, 0)
+        jac[:, s:e, :, D] = z[:N_JOINTS].transpose(1, 2, 0)
+        jac[:, s:e, :, A] = x[1:].transpose(1, 2, 0)
+        jac[:, s:e, :, ALPHA] = _cross(x[1:], pb - o[1:]).transpose(1, 2, 0)
+    return p.T, out[:, :, :N_DH].transpose(1, 0, 2)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

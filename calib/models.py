@@ -328,17 +328,19 @@ CHAIN_ROWS = 2048
 (on 100,000 rows twice as fast as whole-array products)."""
 
 
-def _combine(out: np.ndarray, c: np.ndarray, dp: np.ndarray, columns, weigh, weight) -> None:
+def _combine(out: np.ndarray, c: np.ndarray, dp: np.ndarray, columns, weigh, weight, rows=None) -> None:
     """The chain rule through the TCP: ``out[:, to] = weigh(sum_k c[:, k] dp[k][:, of], weight)`` for
     each ``(to, of)`` pair of ``columns``, with the derivatives by the TCP ``c`` (M, 3), the TCP's
     derivatives ``dp`` (3, M, r) by the robot's r unknowns and the whitening ``weigh`` (``np.divide``
     by a noise, ``np.multiply`` by a weight (M, 1)), in that order: an ``einsum`` over k, then the
-    whitening, to the last digit; ``out`` (M, n) by ``x``."""
+    whitening, to the last digit; ``out`` (M, n) by ``x``. ``rows`` (M,): which of ``dp``'s rows
+    (default its first M), taken a block at a time (no copy of a line's rows' derivatives)."""
     weight = np.broadcast_to(weight, (len(out), 1))
     for s in range(0, len(out), CHAIN_ROWS):
         e = s + CHAIN_ROWS
+        part = dp[:, s:e] if rows is None else dp[:, rows[s:e]]
         for to, of in columns:
-            block, d = out[s:e, to], dp[:, s:e, of]
+            block, d = out[s:e, to], part[:, :, of]
             np.multiply(d[0], c[s:e, 0, None], out=block)
             block += d[1] * c[s:e, 1, None]
             block += d[2] * c[s:e, 2, None]
@@ -600,6 +602,10 @@ class DrawstringLineModel:
 
     def _robot_jacobian(self, x) -> tuple[np.ndarray, np.ndarray]:
         """TCPs (N, 3) and their derivatives (3, N, 24 + K) by the table and the terms."""
+        if self._by_axes:
+            return self.terms.tcp_derivatives(
+                self.dh(x), self.samples.q, self.tool, self.term_values(x), self._basis
+            )
         p, jac_table, jac_terms = self.terms.tcp_jacobian(
             self.dh(x), self.samples.q, self.tool, self.term_values(x), self._basis, self._by_axes
         )
@@ -657,10 +663,9 @@ class DrawstringLineModel:
         if jac is not None:
             j = jac[at:end].reshape(rows.size, 2, x.size)
             if dp is not None and rows.size:  # a line may hold none of these rows (a subset)
-                dp_rows = dp[:, rows]
                 for i in range(2):  # dr_dp is the line's, the same on every row
                     c = np.broadcast_to(dr_dp[0, i], (rows.size, 3))
-                    _combine(j[:, i], c, dp_rows, self._robot_columns, np.multiply, w_line[:, i, None])
+                    _combine(j[:, i], c, dp, self._robot_columns, np.multiply, w_line[:, i, None], rows)
             j[:, :, self._line_cols[lid]] = w_line[:, :, None] * dr_dl
         return end
 
