@@ -164,9 +164,16 @@ def tcp_position(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray, shape (N, 3)
-        TCP positions [mm].
+        TCP positions [mm]; ``KINEMATICS_ROWS`` rows at a time (the same products, row by row,
+        without every row's seven frames at once: a million rows' are some 900 MB).
     """
-    return tool_point(base_from_frames(dh, q)[:, N_JOINTS], tool)
+    q = np.atleast_2d(q)
+    p = np.empty((q.shape[0], 3))
+    for s in range(0, q.shape[0], KINEMATICS_ROWS):
+        p[s : s + KINEMATICS_ROWS] = tool_point(
+            base_from_frames(dh, q[s : s + KINEMATICS_ROWS])[:, N_JOINTS], tool
+        )
+    return p
 
 
 def tcp_jacobian(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
