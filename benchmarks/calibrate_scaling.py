@@ -39,6 +39,15 @@ Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, l
   263.6 CPU s, 5,134 MB on main against 191.2 CPU s, 5,272 MB (542 s wall at load 8.6); 20,000
   rows the same code (13.3 and 11.9 CPU s: the load's spread). Same answers within the solver's
   tolerance (docs/results/speed.md). The targets are not met.
+- ``--model auto``'s choice, the carry-over check and the dial check's dial-free steps on the robust
+  fits' draw of 20,000 rows above ``COARSE_ROWS``, the TCP derivatives written in place and
+  ``tcp_position`` in blocks (``--rows 20000 100000 1000000``, main's tree first in the same session,
+  load 4.4-8.2): 20,000 rows 11.7 against 12.0 CPU s (the report identical); 100,000 rows 22.9 CPU s,
+  1,315 MB on main against 18.0 CPU s, 1,339 MB; 1,000,000 rows 203.3 CPU s, 5,112 MB (682 s wall)
+  against 80.8 CPU s, 4,516 MB (340 s wall; 74 CPU s and 3,687 MB at load about 4, the peak moving
+  3.6-4.5 GB from run to run). The same terms, held parameters and corrected table as main at 100,000
+  and 1,000,000 rows (the cross-validation table's figures are the draw's). The memory target is met
+  on a lightly loaded machine; the time targets are not.
 """
 
 from __future__ import annotations
