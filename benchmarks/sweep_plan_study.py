@@ -1,7 +1,7 @@
 """Sweep plans compared offline (issue 37): a plan's true workspace error over seeds in a minute.
 
     python benchmarks/sweep_plan_study.py [--passes 2] [--extra 2] [--tilt 25] [--roll 60]
-        [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed]
+        [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed] [--static]
 
 ``station plan --sweep`` on the demo's robot and setup (``--passes`` a line, ``--extra`` more,
 ``--tilt`` / ``--roll`` the largest tool turns [deg]); then per seed the demo's simulated cell
@@ -13,6 +13,8 @@ What ``benchmarks/demo_sweep.py`` measures, less the stream's timing and flags: 
 ``--late-ms D``: the drawstring's lengths true ``D`` ms after the rows' stamps (a device measuring
 earlier in its round trip than the station assumes); ``--untimed``: the rows without their
 ``pass`` and ``t_s`` columns, so the calibration fits no timing (``calib.models.TIMING_NAME``).
+``--static``: the static demo's plan instead (``station plan``, each pose read 5 times and
+averaged), through the same pipeline: the comparison over draws that one demo run cannot give.
 ``--draws K``: the rows read K times with fresh noise (the first draw is the one-draw run's), each
 calibrated; their true errors, mean and range (one seed's error moves by a factor 2-3 between
 draws of the noise alone, so a single draw compares plans poorly).
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import sys
 import tempfile
 from pathlib import Path
@@ -33,14 +36,57 @@ sys.path.insert(0, str(ROOT))
 import configs  # noqa: E402
 from calib.methods import DEFAULT_TERM_MODEL  # noqa: E402
 from calib.sweep import PassShape  # noqa: E402
-from sim_fixtures.station_sim import sweep_cell, sweep_robot  # noqa: E402
+from sim_fixtures.station_sim import planned_cell, sweep_cell, sweep_robot  # noqa: E402
 from sim_fixtures.sweep_program import swept_rows, write_swept  # noqa: E402
 from sim_fixtures.world import Noise  # noqa: E402
 from station.commands.demo import HOLDOUT_PER_LINE, demo_config, truth_line  # noqa: E402
 from station.config import StationConfig  # noqa: E402
 from station.formats.samples import load_samples  # noqa: E402
 from station.formats.tables import load_robot, load_setup  # noqa: E402
-from station.jobs import calibration, sweeping  # noqa: E402
+from station.jobs import calibration, planning, sweeping  # noqa: E402
+
+READINGS = 5
+"""Readings a static pose averages (the demo's ``[session] readings``)."""
+
+
+def sweep_reads(args, robot_file, setup, setup_path):
+    """The sweep plan's ``(promise line, per seed: world, rows written per draw, rows, robot time)``."""
+    shape = PassShape(max_tilt_deg=args.tilt, max_roll_deg=args.roll)
+    design = sweeping.sweep_design(
+        robot_file, setup, str(setup_path), passes=args.passes, extra=args.extra, shape=shape
+    )
+    plan, config = design.plan, StationConfig.model_validate(demo_config(0, sweep=True))
+    promise = design.report["predicted"]["plan"]["predicted_rmse_mm"]
+
+    def cells(seed):
+        cell, paths = sweep_cell(seed, plan.q_deg, plan.line, plan.sweep_pass)
+        robot = sweep_robot(config, paths)
+        rows = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz, args.late_ms / 1e3)
+        world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
+        write = functools.partial(write_swept, world, rows, timed=not args.untimed)
+        return world, write, len(rows.q), f"{robot.cycle_s:.1f}"
+
+    return f"{len(design.report['passes'])} passes, promising {promise:.3f} mm", cells
+
+
+def static_reads(args, robot_file, setup, setup_path):
+    """The static demo's plan (``station plan`` as the demo runs it), each pose read ``READINGS``
+    times and averaged, as :func:`sweep_reads`."""
+    design = planning.design(
+        robot_file, setup, str(setup_path), n_select=None, suggest=False, readings=READINGS
+    )
+    plan, promise = design.plan, design.report["predicted"]["plan"]["predicted_rmse_mm"]
+
+    def cells(seed):
+        cell = planned_cell(seed, plan.q_deg, plan.line)
+        world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
+
+        def write(rng, path):
+            world.measure(cell.plan_deg, cell.plan_lines, rng, readings=READINGS).to_csv(path)
+
+        return world, write, len(cell.plan_deg), "-"
+
+    return f"{len(plan)} static poses, promising {promise:.3f} mm", cells
 
 
 def main() -> None:
@@ -53,31 +99,23 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=1)
     parser.add_argument("--late-ms", type=float, default=0.0)
     parser.add_argument("--untimed", action="store_true")
+    parser.add_argument("--static", action="store_true")
     args = parser.parse_args()
     robot_file, setup_path = (
         load_robot(configs.path("robots/hsr_jr680.toml")),
         configs.path("setups/sim.toml"),
     )
     setup = load_setup(setup_path)
-    shape = PassShape(max_tilt_deg=args.tilt, max_roll_deg=args.roll)
-    design = sweeping.sweep_design(
-        robot_file, setup, str(setup_path), passes=args.passes, extra=args.extra, shape=shape
-    )
-    plan, config = design.plan, StationConfig.model_validate(demo_config(0, sweep=True))
-    promise = design.report["predicted"]["plan"]["predicted_rmse_mm"]
-    print(f"{len(design.report['passes'])} passes, promising {promise:.3f} mm")
+    said, cells = (static_reads if args.static else sweep_reads)(args, robot_file, setup, setup_path)
+    print(said)
     print("seed | robot time [s] | rows | true error [mm]")
     folder = Path(tempfile.mkdtemp(prefix="sweep-plan-study-"))
     for seed in args.seeds:
-        cell, paths = sweep_cell(seed, plan.q_deg, plan.line, plan.sweep_pass)
-        robot = sweep_robot(config, paths)
-        rows = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz, args.late_ms / 1e3)
-        world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
+        world, write, n_rows, robot_time = cells(seed)
         world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([seed, 4])).to_csv(folder / "holdout.csv")
         trues = []
         for draw in range(args.draws):
-            rng = np.random.default_rng([seed, 1] + ([draw] if draw else []))
-            write_swept(world, rows, rng, folder / "rows.csv", timed=not args.untimed)
+            write(np.random.default_rng([seed, 1] + ([draw] if draw else [])), folder / "rows.csv")
             outcome = calibration.calibrate_samples(
                 load_samples(folder / "rows.csv"),
                 robot_file,
@@ -89,8 +127,8 @@ def main() -> None:
             )
             trues.append(float(truth_line(world, outcome).split("->")[1].split()[0]))
         spread = f" (mean {np.mean(trues):.3f}, {min(trues):.3f}-{max(trues):.3f})" if args.draws > 1 else ""
-        said = " / ".join(f"{v:.3f}" for v in trues)
-        print(f"{seed} | {robot.cycle_s:.1f} | {len(rows.q)} | {said}{spread}", flush=True)
+        listed = " / ".join(f"{v:.3f}" for v in trues)
+        print(f"{seed} | {robot_time} | {n_rows} | {listed}{spread}", flush=True)
 
 
 if __name__ == "__main__":
