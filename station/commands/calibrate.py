@@ -211,6 +211,11 @@ def summary(report: CalibrationReport) -> str:
         f"(95 %: below {ws.predicted_rmse_95_mm:.3f} mm)"
     )
     lines += dial_summary(report)
+    if (timing := getattr(report.setup, "timing_ms", None)) is not None:
+        lines.append(
+            f"drawstring timing: the swept rows' lengths were true {timing:+.3f} ms after their stamps "
+            "(fitted: a device measures somewhere inside its round trip)"
+        )
     mode = report.fit_check.dial_mode if report.fit_check else None
     if mode and not any(mode in w for w in report.warnings):
         lines.append(f"dial-less: {mode}")

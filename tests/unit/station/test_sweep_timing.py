@@ -14,6 +14,7 @@ from calib.models import TIMING_NAME
 from sim_fixtures.station_sim import sweep_cell, sweep_robot
 from sim_fixtures.sweep_program import swept_rows, write_swept
 from sim_fixtures.world import Noise
+from station.commands.calibrate import summary
 from station.commands.demo import HOLDOUT_PER_LINE, demo_config, truth_line
 from station.config import StationConfig
 from station.formats.samples import load_samples
@@ -60,5 +61,7 @@ def test_a_late_drawstring_is_fitted_and_leaves_the_table_as_on_time(cell):
     sigma_ms = 1e3 * world.noise.length_mm / np.sqrt(np.sum(rate**2))  # the timing's noise alone
     assert abs(fitted - LATE_MS) <= 4 * sigma_ms
     assert late.report.setup.timing_ms == pytest.approx(fitted)
+    assert f"lengths were true {fitted:+.3f} ms after their stamps" in summary(late.report)
+    assert "drawstring timing" not in summary(_calibrate(cell, 0.0, timed=False)[0].report)
     assert true_late <= 1.1 * true_on_time  # the same rows, the same noise: only the timing differs
     assert true_untimed >= 2 * true_late  # what the timing costs a fit that does not know it
