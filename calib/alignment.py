@@ -183,6 +183,4 @@ def interpolation_error(t_known, values, t) -> np.ndarray:
     k = np.clip(np.searchsorted(t_known, t, side="right") - 1, 0, len(h) - 1)
     before = np.abs(slope[k] - slope[np.maximum(k - 1, 0)])
     after = np.abs(slope[np.minimum(k + 1, len(h) - 1)] - slope[k])
-    change = np.fmax(before, after)  # NaN only where both are
-    change[np.isnan(before) | np.isnan(after)] = np.inf
-    return change * h[k] / 8
+    return np.nan_to_num(np.maximum(before, after), nan=np.inf) * h[k] / 8

@@ -535,7 +535,12 @@ class DrawstringLineModel:
 
     def model_length(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
         """The length each row's reading should show (N,) [mm] with its TCP at ``p`` (N, 3)."""
-        length = np.linalg.norm(p - self.anchor(x), axis=1) - self.length_offset(x)
+        return self._reading(x, np.linalg.norm(p - self.anchor(x), axis=1))
+
+    def _reading(self, x: np.ndarray, dist: np.ndarray) -> np.ndarray:
+        """The readings (N,) [mm] of cable lengths ``dist`` (N,) [mm]: less the offset, plus what
+        the timing moves a swept row's."""
+        length = dist - self.length_offset(x)
         if self._timing_at is not None:
             length += self._rate * x[self._timing_at] / 1e3
         return length
@@ -643,9 +648,10 @@ class DrawstringLineModel:
         """The drawstring rows' residuals into ``r`` and Jacobian into ``jac``; returns the next row."""
         st, n_rows = self.setup_values, len(self.samples)
         rel = p - self.anchor(x)
-        r[:n_rows] = (self.model_length(x, p) - self.samples.length) / st.sigma_length
+        dist = np.linalg.norm(rel, axis=1)
+        r[:n_rows] = (self._reading(x, dist) - self.samples.length) / st.sigma_length
         if jac is not None:
-            u = rel / np.linalg.norm(rel, axis=1)[:, None]
+            u = rel / dist[:, None]
             if dp is not None:
                 _combine(jac[:n_rows], u, dp, self._robot_columns, np.divide, st.sigma_length)
             jac[:n_rows, N_DH : N_DH + 3] = -(u @ self.frame.anchor_basis) / st.sigma_length

@@ -438,14 +438,14 @@ class SweepSession:
         if "dial" not in self.streams.sensors:
             return np.full(len(t), np.nan)
         td, value, _ = self.streams.sensors["dial"].arrays()
-        dial, ok = interpolate(td - self.rules.latency_s["dial"], value, t, self.rules.max_gap_s)
+        td = td - self.rules.latency_s["dial"]  # when each reading was true
+        dial, ok = interpolate(td, value, t, self.rules.max_gap_s)
         dial = dial[:, 0]
         low, high = self.rules.dial_range_mm
         _flag(reason, ~ok, "no dial reading")
         _flag(reason, ok & ~np.isfinite(dial), "dial off the edge")
         _flag(reason, np.isfinite(dial) & ((dial < low) | (dial > high)), "dial outside its gate")
-        shifted = td - self.rules.latency_s["dial"]
-        _flag(reason, interpolation_error(shifted, value, t) > self.rules.dial_limit_mm, "dial changing fast")
+        _flag(reason, interpolation_error(td, value, t) > self.rules.dial_limit_mm, "dial changing fast")
         return dial
 
     def _check_devices(self) -> None:
