@@ -21,8 +21,9 @@ from sim_fixtures.station_sim import OPCUA_CYCLE_S, SimStation
 from sim_fixtures.world import World
 from station.acquire import runner
 from station.acquire.session import State
+from station.acquire.sweep import SIGMAS
 from station.commands.sim import publish_plan
-from station.config import StationConfig
+from station.config import StationConfig, SweepConfig
 from station.formats.base import read_toml
 from station.formats.plan import Plan
 from station.formats.samples import load_samples
@@ -131,10 +132,15 @@ def test_the_live_view_shows_the_tool_sliding_and_each_pass_stored(session):
 
 
 def test_the_drawstring_latency_as_stated_is_confirmed(session):
+    """Not named wrong; whether it is called "as stated" or "too uncertain to check" follows the
+    estimate's standard error, which a loaded machine widens (a CI run's, and here with a CPU
+    kept busy: 2.9 +- 0.8 ms, rows' timing lost to the scheduler)."""
     folder, _, _, said = session
-    assert "as stated (4.0 ms)" in said
     latency = read_toml(folder / "session.toml")["latency"]["drawstring"]
-    assert not latency["named"]
+    assert not latency["named"] and latency["stated_s"] == pytest.approx(0.004)
+    certain = SIGMAS * latency["sigma_s"] <= SweepConfig().latency_tolerance_s
+    assert ("as stated (4.0 ms)" in said) is certain
+    assert ("too uncertain to check the stated 4.0 ms" in said) is not certain
 
 
 def test_the_dial_latency_is_not_estimated_and_the_session_says_how_little_it_matters(session):
