@@ -135,7 +135,7 @@ def fit_absorbed_angle_errors(
         np.vstack([design, np.zeros((len(prior), design.shape[1]))]),
         np.append(r, np.zeros(len(prior))),
         np.vstack([columns[:, used] / scale[used], prior]),
-        np.append(model.rows % FOLDS, np.full(len(prior), -1)),
+        np.append(model.rows, np.full(len(prior), -1)),
     )
     angles = angle_errors_of(folds)
     if angles is None:
@@ -208,11 +208,12 @@ class ProfiledFolds:
         The whitened residuals.
     jac : ndarray, shape (m, k)
         Their derivatives by the free table, tool and setup unknowns (columns of unit norm).
-    fold : ndarray, shape (m,)
-        Each residual's fold (its row's).
+    row : ndarray, shape (m,)
+        Each residual's row (row ``i`` in fold ``i mod FOLDS``; -1: a prior's, in no fold).
     """
 
-    def __init__(self, design: np.ndarray, r: np.ndarray, jac: np.ndarray, fold: np.ndarray):
+    def __init__(self, design: np.ndarray, r: np.ndarray, jac: np.ndarray, row: np.ndarray):
+        fold = np.where(row >= 0, row % FOLDS, -1)
         self.change, self.shift, self.seen, self.left = profiled(jac, design, r)
         self.noise = float(np.mean(self.left**2))
         self.gram, self.moment = self.seen.T @ self.seen, -self.seen.T @ self.left
@@ -221,18 +222,29 @@ class ProfiledFolds:
             train, held = fold != f, fold == f
             change, shift, seen, left = profiled(jac[train], design[train], r[train])
             response = design[held] - jac[held] @ change
-            self.parts.append((seen.T @ seen, -seen.T @ left, response, jac[held] @ shift - r[held]))
+            value = jac[held] @ shift - r[held]
+            self.parts.append((seen.T @ seen, -seen.T @ left, response, value, row[held]))
         self.size = int(np.sum(fold >= 0))
-        self.table_error = float(np.sqrt(3.0 * sum(np.sum(v**2) for *_, v in self.parts) / self.size))
+        self.table_error = float(np.sqrt(3.0 * sum(np.sum(v**2) for *_, v, _ in self.parts) / self.size))
 
     def error(self, length_deg: float, sigma_deg: float) -> float:
         """``calib.angle_errors.Folds.error`` (whitened units)."""
         prior = prior_variance(length_deg, sigma_deg)
         squares = 0.0
-        for gram, moment, response, value in self.parts:
+        for gram, moment, response, value, _ in self.parts:
             weights = posterior_mean(gram, moment, self.noise, prior)
             squares += np.sum((value - response @ weights) ** 2)
         return float(np.sqrt(3.0 * squares / self.size))
+
+    def gains(self, length_deg: float, sigma_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """``calib.angle_errors.Folds.gains`` (whitened units)."""
+        prior = prior_variance(length_deg, sigma_deg)
+        gain, rows = [], []
+        for gram, moment, response, value, row in self.parts:
+            weights = posterior_mean(gram, moment, self.noise, prior)
+            gain.append(value**2 - (value - response @ weights) ** 2)
+            rows.append(row)
+        return np.concatenate(gain), np.concatenate(rows)
 
 
 def absorbed_of(model, x: np.ndarray, change: np.ndarray, offset: np.ndarray) -> np.ndarray:

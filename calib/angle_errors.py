@@ -16,7 +16,8 @@ others did; at angles no row visited it falls back to zero within a few ``l``.
 
 ``l`` and ``sigma`` are those of least cross-validated error on ``FOLDS`` interleaved folds
 (coordinate descent over ``LENGTHS_DEG`` x ``SIGMAS_DEG``); the errors are used only where they cut
-the table's fold error by ``MIN_GAIN`` (``fit_angle_errors`` returns None).
+the table's fold error by ``MIN_GAIN`` and by more than the held-out rows' own scatter could by
+chance (``clear_gain``; ``fit_angle_errors`` returns None).
 """
 
 from __future__ import annotations
@@ -41,6 +42,21 @@ FOLDS = 5
 """Interleaved cross-validation folds (row ``i`` in fold ``i mod FOLDS``)."""
 MIN_GAIN = 0.05
 """Cut of the cross-validated RMS error against the table alone the errors must bring."""
+GAIN_SIGMAS = 2.0
+"""Standard errors of the held-out rows' mean gain in squared error (``clear_gain``) a fit's gain
+must clear besides ``MIN_GAIN``: with few rows a 5 % cut comes by chance (a clean simulated 36-row
+session's map came on in 2 draws of 40, from the angle errors and from the shared error, a
+gain within 1 standard error each)."""
+
+
+def clear_gain(gain: np.ndarray, row: np.ndarray) -> bool:
+    """Is the mean over rows of the held-out ``gain`` (K,) (each observation's squared error with the
+    table alone minus with the fit, summed over each row's observations by ``row`` (K,)) more than
+    ``GAIN_SIGMAS`` of its standard errors above zero?"""
+    per_row = np.bincount(np.unique(row, return_inverse=True)[1], gain)
+    if per_row.size < 2:
+        return False
+    return bool(np.mean(per_row) > GAIN_SIGMAS * np.std(per_row, ddof=1) / np.sqrt(per_row.size))
 
 
 def joint_jacobian(dh: np.ndarray, q: np.ndarray, tool_mm: np.ndarray) -> np.ndarray:
@@ -150,11 +166,13 @@ class Folds:
         order (``design_rows`` of a whole design).
     value_mm : ndarray, shape (K,)
         The observed residuals [mm].
-    fold : ndarray, shape (K,)
-        The fold of each observation (its row's).
+    row : ndarray, shape (K,)
+        The row of each observation (row ``i`` in fold ``i mod FOLDS``).
     """
 
-    def __init__(self, design_blocks, value_mm: np.ndarray, fold: np.ndarray):
+    def __init__(self, design_blocks, value_mm: np.ndarray, row: np.ndarray):
+        self.design_blocks, self.value, self.row = design_blocks, value_mm, row
+        self.fold = fold = row % FOLDS
         self.noise = float(np.mean(value_mm**2))
         self.grams, self.moments, self.squares = [0.0] * FOLDS, [0.0] * FOLDS, [0.0] * FOLDS
         for at, a_block in design_blocks():
@@ -178,6 +196,22 @@ class Folds:
             weights = posterior_mean(self.gram - g, self.moment - m, self.noise, prior)
             squares += ee - 2.0 * weights @ m + weights @ g @ weights
         return float(np.sqrt(3.0 * max(squares, 0.0) / self.count))
+
+    def gains(self, length_deg: float, sigma_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each observation's squared error [mm^2] predicted from the other folds with the table
+        alone minus with the errors (K,), and its row (K,) (``clear_gain``): one more pass over
+        the design."""
+        prior = prior_variance(length_deg, sigma_deg)
+        weights = [
+            posterior_mean(self.gram - g, self.moment - m, self.noise, prior)
+            for g, m in zip(self.grams, self.moments, strict=True)
+        ]
+        predicted = np.empty_like(self.value)
+        for at, a_block in self.design_blocks():
+            out, f_block = predicted[at], self.fold[at]
+            for f in range(FOLDS):
+                out[f_block == f] = a_block[f_block == f] @ weights[f]
+        return self.value**2 - (self.value - predicted) ** 2, self.row
 
 
 def search(folds) -> dict[tuple[float, float], float]:
@@ -203,8 +237,7 @@ def fit_angle_errors(q: np.ndarray, jacobian: np.ndarray, error_mm: np.ndarray) 
     if q.shape[0] < 2 * FOLDS:
         return None
     design = features(q, jacobian).reshape(-1, ANGLE_JOINTS * 2 * HARMONICS)
-    fold = np.repeat(np.arange(q.shape[0]) % FOLDS, 3)
-    return fit_observed_angle_errors(design, error_mm.ravel(), fold)
+    return fit_observed_angle_errors(design, error_mm.ravel(), np.repeat(np.arange(q.shape[0]), 3))
 
 
 def observed_features(q: np.ndarray, jacobian: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -216,27 +249,27 @@ def observed_features(q: np.ndarray, jacobian: np.ndarray, direction: np.ndarray
 
 
 def fit_observed_angle_errors(
-    design: np.ndarray, value_mm: np.ndarray, fold: np.ndarray
+    design: np.ndarray, value_mm: np.ndarray, row: np.ndarray
 ) -> AngleErrors | None:
     """Angle errors of joints 1-3 from observations ``value_mm`` (K,) [mm] of the TCP's error with
-    responses ``design`` (K, F) [mm/rad] (``features``, ``observed_features``), each in the
-    interleaved ``fold`` (K,) of its row; None unless they cut the table's fold error by
-    ``MIN_GAIN``."""
-    return fit_angle_errors_in_blocks(lambda: design_rows(design), value_mm, fold)
+    responses ``design`` (K, F) [mm/rad] (``features``, ``observed_features``), each of ``row``
+    (K,) (row ``i`` in interleaved fold ``i mod FOLDS``); None unless they cut the table's fold
+    error by ``MIN_GAIN`` and by a ``clear_gain``."""
+    return fit_angle_errors_in_blocks(lambda: design_rows(design), value_mm, row)
 
 
-def fit_angle_errors_in_blocks(design_blocks, value_mm: np.ndarray, fold: np.ndarray) -> AngleErrors | None:
+def fit_angle_errors_in_blocks(design_blocks, value_mm: np.ndarray, row: np.ndarray) -> AngleErrors | None:
     """``fit_observed_angle_errors`` with the design given a block of observations at a time
     (``Folds``' ``design_blocks``): a million rows' responses are never whole."""
-    return angle_errors_of(Folds(design_blocks, value_mm, fold))
+    return angle_errors_of(Folds(design_blocks, value_mm, row))
 
 
 def angle_errors_of(folds) -> AngleErrors | None:
     """The angle errors of least fold error over the grid (``search``) from ``folds`` (``Folds``'
-    ``noise``, ``gram``, ``moment``, ``error`` and ``table_error``); None unless they cut the
-    table's fold error by ``MIN_GAIN``."""
+    ``noise``, ``gram``, ``moment``, ``error``, ``gains`` and ``table_error``); None unless they cut
+    the table's fold error by ``MIN_GAIN`` and by a ``clear_gain``."""
     (length, sigma), best = min(search(folds).items(), key=lambda item: item[1])
-    if best > (1.0 - MIN_GAIN) * folds.table_error:
+    if best > (1.0 - MIN_GAIN) * folds.table_error or not clear_gain(*folds.gains(length, sigma)):
         return None
     prior = prior_variance(length, sigma)
     weights = posterior_mean(folds.gram, folds.moment, folds.noise, prior)

@@ -1,7 +1,8 @@
 """The residual map: the error a calibrated table leaves, predicted at any pose from the
 calibration's own rows, with its uncertainty. Two stages, each used only where it cuts the error of
-rows predicted from the other folds by ``MIN_GAIN`` (a cell of table and white noise keeps the
-table; ``fit_map`` returns None):
+rows predicted from the other folds by ``MIN_GAIN`` and by more than those rows' scatter could by
+chance (``calib.angle_errors.clear_gain``; a cell of table and white noise keeps the table;
+``fit_map`` returns None):
 
 1. **Joint angle errors** (``calib.angle_errors``): joints 1-3 turning by a smooth function of their
    own angle (a gear's cyclic error, many cycles a turn), seen through the Jacobian; learnt wherever
@@ -34,6 +35,7 @@ import numpy as np
 from calib.angle_errors import (
     DESIGN_ROWS,
     AngleErrors,
+    clear_gain,
     features,
     fit_angle_errors_in_blocks,
     joint_jacobian,
@@ -312,6 +314,8 @@ class Folds:
         index = neighbours(points[self.rows], points, NEIGHBOURS, fold, fold[self.rows])
         self.distances, self.values = local_distances(points[self.rows], points, index), error_mm[index]
         self.error = error_mm[self.rows]
+        self.row = np.arange(self.rows.size)
+        """The held-out row of each of ``error``'s entries."""
         self.total = float(np.mean(error_mm**2))
         """The rows' mean square per component [mm^2]."""
 
@@ -352,6 +356,8 @@ class ObservedFolds:
         self.correlations = {}
         self.values = value_mm[index]
         self.error = value_mm[asked, None]
+        self.row = at
+        """The held-out row of each of ``error``'s entries."""
         self.total = float(np.mean(value_mm**2))
         """The observations' mean square [mm^2]."""
 
@@ -405,10 +411,12 @@ def variance_scale(folds: Folds | ObservedFolds, length_deg: float, share: float
 def best_kernel(folds: Folds | ObservedFolds) -> tuple[float, ...] | None:
     """The grid point of least cross-validated error: length [deg], shared and noise variance
     [mm^2] (scaled by ``variance_scale``), its fold error and the table's [mm]; None where it does
-    not cut the table's fold error by ``MIN_GAIN``."""
+    not cut the table's fold error by ``MIN_GAIN`` and by a ``clear_gain``."""
     (length, share), best = min(search(folds).items(), key=lambda item: item[1])
     table = rms3(folds.error)
-    if best > (1.0 - MIN_GAIN) * table:
+    mean = folds.predict(length, share)[0]
+    gain = np.sum(folds.error**2 - (folds.error - mean) ** 2, axis=1)
+    if best > (1.0 - MIN_GAIN) * table or not clear_gain(gain, folds.row):
         return None
     scale = variance_scale(folds, length, share) * folds.total
     return length, share * scale, (1 - share) * scale, best, table
@@ -541,7 +549,7 @@ def fit_rows_map(rows: Observations, dh: np.ndarray, tool_mm: np.ndarray) -> Res
     if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
         return None
     design = observation_design(rows, joint_jacobian(dh, rows.q, tool_mm))
-    angles = fit_angle_errors_in_blocks(design, rows.value_mm, rows.row % FOLDS)
+    angles = fit_angle_errors_in_blocks(design, rows.value_mm, rows.row)
     left = rows.value_mm.copy()
     for at, a in design() if angles is not None else ():
         left[at] -= a @ angles.weights

@@ -63,7 +63,7 @@ def fit_table_map(
     else:
         found = fit_model_map(model, x, free)
     if found is None:
-        why = f"the rows left out in turn show no gain of {MIN_GAIN:.0%} over the table alone"
+        why = f"the rows left out in turn show no clear gain of {MIN_GAIN:.0%} over the table alone"
         return None, MapReport(False, why, rows)
     why = (
         f"the rows left out in turn: {found.table_cv_rmse_mm:.3f} mm RMS with the table alone, "

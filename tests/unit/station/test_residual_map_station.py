@@ -108,7 +108,7 @@ def test_no_map_writes_the_table_alone(tmp_path, capsys):
     keeps its map off by itself and writes no map file either."""
     files, _ = cell_files(tmp_path, None, seed=3)
     argv = ["calibrate", files["samples.csv"], "--robot", files["robot.toml"], "--setup", files["setup.toml"]]
-    for flag, why in (("--no-map", "--no-map"), ("--no-history", "no gain")):
+    for flag, why in (("--no-map", "--no-map"), ("--no-history", "no clear gain")):
         out, rep = tmp_path / "t.toml", tmp_path / "r.json"
         code, text, _ = _cli(capsys, *argv, "--out", out, "--report", rep, "--no-history", flag)
         assert code == 0
