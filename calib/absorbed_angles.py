@@ -145,7 +145,7 @@ def fit_absorbed_angle_errors(
     angles = dataclasses.replace(angles, covariance=covariance)
     change, offset = np.zeros((scale.size, design.shape[1])), np.zeros(scale.size)
     change[used], offset[used] = folds.change / scale[used, None], folds.shift / scale[used]
-    in_sample = float(np.mean((folds.left + folds.seen @ angles.weights) ** 2))
+    in_sample = folds.in_sample(angles.weights)
     return angles, -change, -offset, max(angles.rest_mm2 / max(in_sample, 1e-300), 1.0)
 
 
@@ -186,19 +186,32 @@ def refit_step(model, x: np.ndarray, free: np.ndarray) -> np.ndarray:
     return step
 
 
-def profiled(jac: np.ndarray, design: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The unknowns' change per coefficient (k, F) and for the residuals (k,) that the columns
-    ``jac`` (m, k) take of ``design`` (m, F) and ``r`` (m,) (least squares), and what is left of
-    each."""
-    change, shift = (np.linalg.lstsq(jac, v, rcond=RCOND)[0] for v in (design, r))
-    return change, shift, design - jac @ change, r - jac @ shift
+def gram_lstsq(jj: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Least squares solutions (k, p) of columns whose Gram matrix is ``jj`` (k, k) for right-hand
+    sides whose products with them are ``rhs`` (k, p): the columns' singular values below ``RCOND``
+    times the largest dropped, as ``numpy.linalg.lstsq(rcond=RCOND)`` does (the Gram's eigenvalues
+    are their squares)."""
+    w, v = np.linalg.eigh(jj)
+    keep = w > RCOND**2 * w.max()
+    return v[:, keep] @ ((v[:, keep].T @ rhs) / w[keep, None])
+
+
+def profiled(gram: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """From the Gram matrix (k + p, k + p) of columns ``[jac | rest]`` (the unknowns' k, then the
+    design's and the residuals' p): the unknowns' change (k, p) that least squares takes of each
+    of the rest, and the Gram matrix (p, p) of what is left of them."""
+    change = gram_lstsq(gram[:k, :k], gram[:k, k:])
+    left = gram[k:, k:] - gram[:k, k:].T @ change
+    return change, (left + left.T) / 2.0
 
 
 class ProfiledFolds:
     """``calib.angle_errors.Folds`` of whitened residuals whose table, tool and setup are refitted
     with the angle errors: each fold's residuals predicted from the other folds' rows, the
     unknowns' change fitted on those rows too (so the table alone's fold error is a refit's, not
-    the calibration's in-sample residual).
+    the calibration's in-sample residual). Each refit from the Gram matrices of the columns
+    ``[jac | design | r]`` (one pass over the rows, per fold; a training set's is the whole's less
+    its fold's), not from the rows again.
 
     Parameters
     ----------
@@ -214,18 +227,29 @@ class ProfiledFolds:
 
     def __init__(self, design: np.ndarray, r: np.ndarray, jac: np.ndarray, row: np.ndarray):
         fold = np.where(row >= 0, row % FOLDS, -1)
-        self.change, self.shift, self.seen, self.left = profiled(jac, design, r)
-        self.noise = float(np.mean(self.left**2))
-        self.gram, self.moment = self.seen.T @ self.seen, -self.seen.T @ self.left
+        k, f = jac.shape[1], design.shape[1]
+        held = [np.flatnonzero(fold == g) for g in range(-1, FOLDS)]
+        columns = [np.hstack([jac[h], design[h], r[h, None]]) for h in held]
+        grams = [c.T @ c for c in columns]
+        whole = sum(grams)
+        change, left = profiled(whole, k)
+        self.change, self.shift = change[:, :f], change[:, f]
+        self.gram, self.moment, self.squares = left[:f, :f], -left[:f, f], float(left[f, f])
+        self.count = r.size
+        self.noise = self.squares / self.count
         self.parts = []
-        for f in range(FOLDS):
-            train, held = fold != f, fold == f
-            change, shift, seen, left = profiled(jac[train], design[train], r[train])
-            response = design[held] - jac[held] @ change
-            value = jac[held] @ shift - r[held]
-            self.parts.append((seen.T @ seen, -seen.T @ left, response, value, row[held]))
+        for h, c, g in zip(held[1:], columns[1:], grams[1:], strict=True):
+            change, left = profiled(whole - g, k)
+            response = c[:, k : k + f] - c[:, :k] @ change[:, :f]
+            value = c[:, :k] @ change[:, f] - c[:, k + f]
+            self.parts.append((left[:f, :f], -left[:f, f], response, value, row[h]))
         self.size = int(np.sum(fold >= 0))
         self.table_error = float(np.sqrt(3.0 * sum(np.sum(v**2) for *_, v, _ in self.parts) / self.size))
+
+    def in_sample(self, weights: np.ndarray) -> float:
+        """Mean square (whitened) of what the refitted unknowns and the coefficients ``weights``
+        (F,) leave of the residuals, the rows' and the prior's."""
+        return (self.squares - 2.0 * weights @ self.moment + weights @ self.gram @ weights) / self.count
 
     def error(self, length_deg: float, sigma_deg: float) -> float:
         """``calib.angle_errors.Folds.error`` (whitened units)."""
