@@ -320,13 +320,12 @@ def fit_model_map(model, x: np.ndarray, free: np.ndarray) -> ResidualMap | None:
     leave of the rows' observations (``calib.map_rows``; ``calib.residual_map.fit_rows_map``'s
     second stage; a drawstring cell's on at most ``MAP_ROWS`` of its rows); None where neither cuts
     the folds' error."""
-    rows = model_observations(model, x)
-    if rows.positions:  # the table's change does not fall back far from the rows (module notes)
-        return fit_rows_map(rows, model.dh(x), model.tcp_in_flange(x))
-    if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
-        return None
+    if model.kind == "position":  # the table's change does not fall back far from the rows (module notes)
+        return fit_rows_map(model_observations(model, x), model.dh(x), model.tcp_in_flange(x))
     model = thinned(model, MAP_ROWS)  # the errors are smooth over each joint's turn
     rows = model_observations(model, x)
+    if rows.q.shape[0] < 2 * FOLDS or not np.any(rows.value_mm):
+        return None
     table = rms3(rows.value_mm[:, None])
     found = fit_absorbed_angle_errors(model, x, free)
     angles = absorbed = offset = None
