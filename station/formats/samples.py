@@ -11,7 +11,15 @@ from pathlib import Path
 import numpy as np
 
 from errors import InputError
-from station.formats.base import MAX_DIAL_MM, MAX_JOINT_DEG, MAX_LENGTH_MM, folder_kind, id_cell, number_cell
+from station.formats.base import (
+    MAX_DIAL_MM,
+    MAX_ID,
+    MAX_JOINT_DEG,
+    MAX_LENGTH_MM,
+    folder_kind,
+    id_cell,
+    number_cell,
+)
 from station.formats.units import check_joints_in_degrees
 
 Q_COLUMNS = tuple(f"q{i}_deg" for i in range(1, 7))
@@ -40,40 +48,105 @@ class Samples:
 
 
 def load_samples(path) -> Samples:
-    """Read a contract sample CSV (columns in any order, unknown columns ignored)."""
+    """Read a contract sample CSV (columns in any order, unknown columns ignored).
+
+    A file of numbers only is read whole by numpy's C parser (a million rows in about a second;
+    Python's ``csv`` and ``float`` took five); any other (an empty cell, a quoted one, a word, a
+    ragged row, a number out of range) is read cell by cell, so that its error names the cell."""
     path = Path(path)
+    plain = _plain_table(path)
+    if plain is not None:
+        try:
+            return _samples(path, plain[0], _Table(plain[1]))
+        except _NotPlain:
+            pass
     header, body = read_csv(path, "samples")
+    return _samples(path, header, _Cells(path, body))
+
+
+def _samples(path: Path, header: list[str], cells) -> Samples:
+    """The sample set of a file's ``header`` and its ``cells`` (``_Table`` or ``_Cells``)."""
     kind = _kind(path, header)
     missing = [c for c in Q_COLUMNS if c not in header]
     if missing:
         raise InputError(f"{path}: missing column {missing[0]}")
-    if not body:
+    if not cells.rows:
         raise InputError(f"{path}: no samples after the header row")
     col = {name: header.index(name) for name in header}
-    q = parse_numbers(path, body, [col[c] for c in Q_COLUMNS], Q_COLUMNS)
+    q = cells.numbers([col[c] for c in Q_COLUMNS], Q_COLUMNS)
     if kind == "drawstring":
-        measured = parse_numbers(path, body, [col["length_mm"]], ["length_mm"])[:, 0]
+        measured = cells.numbers([col["length_mm"]], ["length_mm"])[:, 0]
     else:
-        measured = parse_numbers(path, body, [col[c] for c in XYZ_COLUMNS], XYZ_COLUMNS)
-    dial = (
-        parse_numbers(path, body, [col["dial_mm"]], ["dial_mm"], allow_empty=True)[:, 0]
-        if "dial_mm" in col
-        else None
-    )
-    line = _line_ids(path, body, col.get("line"))
+        measured = cells.numbers([col[c] for c in XYZ_COLUMNS], XYZ_COLUMNS)
+    dial = cells.numbers([col["dial_mm"]], ["dial_mm"], allow_empty=True)[:, 0] if "dial_mm" in col else None
+    line = np.zeros(cells.rows, int) if "line" not in col else cells.ids(col["line"], "line", "a line id")
     check_joints_in_degrees(str(path), q, "rows")
-    n = len(body)
     swept = "pass" in col and "t_s" in col
     return Samples(
         str(path),
         kind,
         q,
         measured,
-        np.full(n, np.nan) if dial is None else dial,
+        np.full(cells.rows, np.nan) if dial is None else dial,
         line,
-        _ids(path, body, col["pass"], "pass", "a pass id") if swept else None,
-        parse_numbers(path, body, [col["t_s"]], ["t_s"])[:, 0] if swept else None,
+        cells.ids(col["pass"], "pass", "a pass id") if swept else None,
+        cells.numbers([col["t_s"]], ["t_s"])[:, 0] if swept else None,
     )
+
+
+class _NotPlain(Exception):
+    """A cell of a ``_Table`` fails its column's check: the file is read again cell by cell."""
+
+
+def _plain_table(path: Path) -> tuple[list[str], np.ndarray] | None:
+    """The header and every cell of a CSV file of numbers only (N, columns) [float]; None where
+    it is not one (a missing or unreadable file, an empty, quoted or word cell, a ragged row)."""
+    try:
+        with path.open(newline="") as fh:
+            header = next(csv.reader(fh), None)
+            if not header or not any(h.strip() for h in header):
+                return None
+            table = np.loadtxt(fh, delimiter=",", comments=None, ndmin=2, quotechar=None)
+    except (OSError, ValueError, csv.Error):  # UnicodeDecodeError is a ValueError
+        return None
+    if table.shape[1] != len(header) or not table.shape[0]:
+        return None
+    return [h.strip() for h in header], table
+
+
+class _Table:
+    """``_Cells`` of a ``_plain_table``: the same checks on whole columns, ``_NotPlain`` where one
+    fails."""
+
+    def __init__(self, table: np.ndarray):
+        self.table, self.rows = table, table.shape[0]
+
+    def numbers(self, cols, names, allow_empty=False) -> np.ndarray:
+        out = self.table[:, cols]
+        limit = np.array([_LIMITS.get(name, (MAX_LENGTH_MM, "mm"))[0] for name in names])
+        if not np.all(np.isfinite(out) & (np.abs(out) <= limit)):
+            raise _NotPlain
+        return out
+
+    def ids(self, c: int, name: str, what: str) -> np.ndarray:
+        out = self.table[:, c]
+        if not np.all((out >= 0) & (out <= MAX_ID) & (out == np.round(out))):
+            raise _NotPlain
+        return out.astype(int)
+
+
+class _Cells:
+    """The rows of a CSV file as text, each column checked as it is read: ``numbers`` (N, len(cols))
+    and ``ids`` (N,), an ``InputError`` naming the first bad cell."""
+
+    def __init__(self, path: Path, body: list[list[str]]):
+        self.path, self.body, self.rows = path, body, len(body)
+
+    def numbers(self, cols, names, allow_empty=False) -> np.ndarray:
+        return parse_numbers(self.path, self.body, cols, names, allow_empty)
+
+    def ids(self, c: int, name: str, what: str) -> np.ndarray:
+        return _ids(self.path, self.body, c, name, what)
 
 
 def read_csv(path: Path, what: str) -> tuple[list[str], list[list[str]]]:
@@ -163,10 +236,6 @@ def _parse_cells(path, body, cols, names, allow_empty) -> np.ndarray:
             except ValueError as exc:
                 raise InputError(f"{path}: row {i} (line {i + 2}): {name}: {exc}") from None
     return out
-
-
-def _line_ids(path, body, c) -> np.ndarray:
-    return np.zeros(len(body), int) if c is None else _ids(path, body, c, "line", "a line id")
 
 
 def _ids(path, body, c: int, name: str, what: str) -> np.ndarray:
