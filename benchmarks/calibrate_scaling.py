@@ -48,6 +48,11 @@ Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, l
   3.6-4.5 GB from run to run). The same terms, held parameters and corrected table as main at 100,000
   and 1,000,000 rows (the cross-validation table's figures are the draw's). The memory target is met
   on a lightly loaded machine; the time targets are not.
+- The drawstring map's refits from per-fold Gram matrices, its rows thinned before their
+  observations are taken, a plain CSV read whole by ``numpy.loadtxt`` (``--rows 100000 1000000``,
+  ``--tree`` a worktree of 83d8bba first, then this tree, one session, load 1.0): 100,000 rows 21.2
+  CPU s, 1,612 MB against 13.5 CPU s, 991 MB; 1,000,000 rows 79.2 CPU s, 3,601 MB against 66.7 CPU s,
+  4,515 MB (three runs of the command alone on the same rows: 61.1-62.5 CPU s, 3,709 MB each). Not met.
 """
 
 from __future__ import annotations
