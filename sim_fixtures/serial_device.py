@@ -258,6 +258,7 @@ class LinkedPtyPair:
         self.a = PtyPort(link_device)
         self.b = PtyPort(link)
         self._unplug = threading.Event()
+        self._ends = threading.Lock()  # held while the ends are selected on, read, written or changed
         self._loop = _Loop(f"sim-cable-{self.b.link.name}", self._pump)
 
     def unplug(self) -> None:
@@ -265,9 +266,15 @@ class LinkedPtyPair:
         self._unplug.set()
 
     def replug(self) -> None:
-        """Plug the station's end back in, at the same link on a new ``/dev/pts/N``."""
-        if not self.b.plugged:
-            self.b.replug()
+        """Plug the station's end back in, at the same link on a new ``/dev/pts/N``; an unplugging
+        the pump thread has not done yet is done first (on a busy machine the replug can come
+        before it: the cable stayed pulled for good and a fault soak's session never ended)."""
+        with self._ends:
+            if self._unplug.is_set():
+                self._unplug.clear()
+                self.b.unplug()
+            if not self.b.plugged:
+                self.b.replug()
 
     def start(self) -> None:
         self._loop.start()
@@ -278,17 +285,18 @@ class LinkedPtyPair:
         self.b.unplug()
 
     def _pump(self) -> None:
-        if self._unplug.is_set():
-            self._unplug.clear()
-            self.b.unplug()
-        ends = [p.master for p in (self.a, self.b) if p.plugged]
-        if len(ends) < 2:
-            self._loop.idle()
-            return
-        try:
-            ready, _, _ = select.select(ends, [], [], POLL_S)
-            for fd in ready:
-                data = os.read(fd, 4096)
-                os.write(self.b.master if fd == self.a.master else self.a.master, data)
-        except OSError:  # one end unplugged meanwhile: the bytes in flight are lost, as on a wire
-            return
+        with self._ends:
+            if self._unplug.is_set():
+                self._unplug.clear()
+                self.b.unplug()
+            ends = [p.master for p in (self.a, self.b) if p.plugged]
+            if len(ends) == 2:
+                try:
+                    ready, _, _ = select.select(ends, [], [], POLL_S)
+                    for fd in ready:
+                        data = os.read(fd, 4096)
+                        os.write(self.b.master if fd == self.a.master else self.a.master, data)
+                    return
+                except OSError:  # an end closed (the station's port shut): the bytes in flight are lost
+                    pass
+        self._loop.idle()  # outside the lock: a replug waits at most one transfer
