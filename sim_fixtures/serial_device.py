@@ -270,11 +270,15 @@ class LinkedPtyPair:
         the pump thread has not done yet is done first (on a busy machine the replug can come
         before it: the cable stayed pulled for good and a fault soak's session never ended)."""
         with self._ends:
-            if self._unplug.is_set():
-                self._unplug.clear()
-                self.b.unplug()
+            self._pull_if_asked()
             if not self.b.plugged:
                 self.b.replug()
+
+    def _pull_if_asked(self) -> None:
+        """Do an asked-for unplugging (the ends' lock held)."""
+        if self._unplug.is_set():
+            self._unplug.clear()
+            self.b.unplug()
 
     def start(self) -> None:
         self._loop.start()
@@ -286,9 +290,7 @@ class LinkedPtyPair:
 
     def _pump(self) -> None:
         with self._ends:
-            if self._unplug.is_set():
-                self._unplug.clear()
-                self.b.unplug()
+            self._pull_if_asked()
             ends = [p.master for p in (self.a, self.b) if p.plugged]
             if len(ends) == 2:
                 try:
