@@ -158,11 +158,13 @@ class Injector:
 
     sim: SimStation
     rng: random.Random
+    opening: list[str] = field(default_factory=list)
+    """Kinds (of ``MENU``) struck first, in this order, before the random draws."""
     strikes: list[Strike] = field(default_factory=list)
     _busy: set = field(default_factory=set)
 
     def strike(self) -> None:
-        kind = self.rng.choice(MENU)
+        kind = self.opening.pop(0) if self.opening else self.rng.choice(MENU)
         if kind in self._busy:
             return
         if kind.endswith("request"):
@@ -332,8 +334,9 @@ class Soak:
     t0: float
 
 
-def soak(targets: int, seed: int, interval_s: float, timeout_s: float) -> Soak:
-    """Run one session under faults (see the module notes) and audit it."""
+def soak(targets: int, seed: int, interval_s: float, timeout_s: float, opening: tuple[str, ...] = ()) -> Soak:
+    """Run one session under faults (see the module notes) and audit it; ``opening``: the kinds
+    (of ``MENU``) struck first, whatever the seed draws."""
     per_line = max(targets // 3, 2)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -342,7 +345,7 @@ def soak(targets: int, seed: int, interval_s: float, timeout_s: float) -> Soak:
         stops = protective_stops(np.random.default_rng([seed, 7]), timeout_s * TIME_SCALE)
         sim = SimStation(cfg, faults=stops)
         publish_plan(folder / "plan.csv", Plan.of(sim.plan_deg, sim.plan_lines))
-        injector = Injector(sim, random.Random(seed))
+        injector = Injector(sim, random.Random(seed), list(opening))
         sim.start()
         plans = {name: sim.devices[name].faults for name in ("drawstring", "dial")}
         t0 = time.monotonic()

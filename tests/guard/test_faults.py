@@ -7,7 +7,11 @@ interface) after a few targets whenever the machine was busy.
 
 Not asserted here: the soak's ``unlogged`` count. On a loaded machine a device may take a request
 only after the station has given up on it (the station says "no reply", the device's fault goes
-unseen), which the benchmark's audit counts as a fault missing from the log."""
+unseen), which the benchmark's audit counts as a fault missing from the log.
+
+The first strike is the controller going away, whatever the seed draws: drawn (one strike in ten),
+a short session on a fast machine could end before one came (seed 2 in a CI run: 15 targets, no
+controller gone among its faults)."""
 
 import pytest
 
@@ -39,7 +43,7 @@ def busy():
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_a_session_under_faults_on_a_busy_machine_measures_every_target_and_ends_by_itself(busy, seed):
-    run = fault_soak.soak(TARGETS, seed, interval_s=1.0, timeout_s=TIMEOUT_S)
+    run = fault_soak.soak(TARGETS, seed, interval_s=1.0, timeout_s=TIMEOUT_S, opening=("controller gone",))
     r = run.result
     tail = "".join(line for _, line in run.log[-25:])
     assert r["exit"] == 0, f"seed {seed}: the session ended with exit {r['exit']}:\n{tail}"
