@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from calib.blocks import each_block
+
 DH_COLUMNS = ("theta", "d", "a", "alpha")
 THETA, D, A, ALPHA = range(4)
 N_JOINTS = 6
@@ -214,8 +216,11 @@ def tcp_position_by_axes(dh: np.ndarray, q: np.ndarray, tool: np.ndarray) -> np.
     """``tcp_position`` composed by ``frame_axes``, ``KINEMATICS_ROWS`` rows at a time (N, 3) [mm]."""
     q = np.atleast_2d(q)
     p = np.empty((3, q.shape[0]))
-    for s in range(0, q.shape[0], KINEMATICS_ROWS):
-        p[:, s : s + KINEMATICS_ROWS] = _flange_point(*frame_axes(dh, q[s : s + KINEMATICS_ROWS]), tool)
+
+    def block(s: int, e: int) -> None:
+        p[:, s:e] = _flange_point(*frame_axes(dh, q[s:e]), tool)
+
+    each_block(q.shape[0], KINEMATICS_ROWS, block)
     return p.T
 
 
@@ -235,14 +240,16 @@ def tcp_jacobian_by_axes(
     p = np.empty((3, q.shape[0]))
     out = np.empty((3, q.shape[0], N_DH)) if out is None else out
     jac = out[:, :, :N_DH].reshape(3, q.shape[0], N_JOINTS, len(DH_COLUMNS))  # coordinate, row, joint, column
-    for s in range(0, q.shape[0], KINEMATICS_ROWS):
-        e = s + KINEMATICS_ROWS
+
+    def block(s: int, e: int) -> None:
         x, y, z, o = frame_axes(dh, q[s:e])
         p[:, s:e] = pb = _flange_point(x, y, z, o, tool)
         jac[:, s:e, :, THETA] = _cross(z[:N_JOINTS], pb - o[:N_JOINTS]).transpose(1, 2, 0)
         jac[:, s:e, :, D] = z[:N_JOINTS].transpose(1, 2, 0)
         jac[:, s:e, :, A] = x[1:].transpose(1, 2, 0)
         jac[:, s:e, :, ALPHA] = _cross(x[1:], pb - o[1:]).transpose(1, 2, 0)
+
+    each_block(q.shape[0], KINEMATICS_ROWS, block)
     return p.T, out[:, :, :N_DH].transpose(1, 0, 2)
 
 

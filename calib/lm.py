@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calib.blocks import each_block
+
 TERMINATION_MESSAGES = {
     -1: "no step reduces the cost: the minimum is reached to machine precision",
     0: "the maximum number of iterations was reached",
@@ -394,16 +396,20 @@ def normal_equations(
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(W J)^T W J`` (k, k) and ``(W J)^T W r`` (k,) of the ``free`` columns (k) of ``jac`` (m, n)
     with row weights ``w`` (m,) and weighted residuals ``wr`` (m,), over ``rows`` (indices; default
-    all), summed ``NORMAL_ROWS`` rows at a time instead of from a weighted copy of the Jacobian."""
+    all), summed ``NORMAL_ROWS`` rows at a time instead of from a weighted copy of the Jacobian (the
+    blocks shared by ``each_block``'s threads)."""
     cols = np.flatnonzero(free)
-    normal, gradient = np.zeros((cols.size, cols.size)), np.zeros(cols.size)
-    for s in range(0, len(jac) if rows is None else rows.size, NORMAL_ROWS):
-        block = slice(s, s + NORMAL_ROWS) if rows is None else rows[s : s + NORMAL_ROWS]
+
+    def block_products(s: int, e: int) -> tuple[np.ndarray, np.ndarray]:
+        block = slice(s, e) if rows is None else rows[s:e]
         wj = jac[block, cols] if rows is None else jac[np.ix_(block, cols)]
         wj *= w[block, None]
-        normal += wj.T @ wj
-        gradient += wr[block] @ wj
-    return normal, gradient
+        return wj.T @ wj, wr[block] @ wj
+
+    halves = each_block(len(jac) if rows is None else rows.size, NORMAL_ROWS, block_products)
+    if not halves:
+        return np.zeros((cols.size, cols.size)), np.zeros(cols.size)
+    return block_sum(h[0] for h in halves), block_sum(h[1] for h in halves)
 
 
 def fold_normal_equations(

@@ -15,6 +15,7 @@ from typing import ClassVar, Protocol
 import numpy as np
 
 from calib.alignment import pass_rates
+from calib.blocks import each_block
 from calib.identifiability import structural_holds, tolerance
 from calib.joint_terms import JointTerms
 from calib.kinematics import N_DH, dh_table, tcp_position, tcp_position_by_axes
@@ -334,17 +335,20 @@ def _combine(out: np.ndarray, c: np.ndarray, dp: np.ndarray, columns, weigh, wei
     derivatives ``dp`` (3, M, r) by the robot's r unknowns and the whitening ``weigh`` (``np.divide``
     by a noise, ``np.multiply`` by a weight (M, 1)), in that order: an ``einsum`` over k, then the
     whitening, to the last digit; ``out`` (M, n) by ``x``. ``rows`` (M,): which of ``dp``'s rows
-    (default its first M), taken a block at a time (no copy of a line's rows' derivatives)."""
+    (default its first M), taken a block at a time (no copy of a line's rows' derivatives), the blocks
+    shared by ``each_block``'s threads."""
     weight = np.broadcast_to(weight, (len(out), 1))
-    for s in range(0, len(out), CHAIN_ROWS):
-        e = s + CHAIN_ROWS
+
+    def block(s: int, e: int) -> None:
         part = dp[:, s:e] if rows is None else dp[:, rows[s:e]]
         for to, of in columns:
-            block, d = out[s:e, to], part[:, :, of]
-            np.multiply(d[0], c[s:e, 0, None], out=block)
-            block += d[1] * c[s:e, 1, None]
-            block += d[2] * c[s:e, 2, None]
-            weigh(block, weight[s:e], out=block)
+            cols, d = out[s:e, to], part[:, :, of]
+            np.multiply(d[0], c[s:e, 0, None], out=cols)
+            cols += d[1] * c[s:e, 1, None]
+            cols += d[2] * c[s:e, 2, None]
+            weigh(cols, weight[s:e], out=cols)
+
+    each_block(len(out), CHAIN_ROWS, block)
 
 
 def least_aligned_direction(directions: np.ndarray) -> np.ndarray:
