@@ -61,6 +61,7 @@ from calib.angle_errors import (
     posterior_mean,
     prior_variance,
 )
+from calib.blocks import each_block
 from calib.compliance import (
     COMPLIANCE_PRIOR,
     COMPLIANT_JOINTS,
@@ -131,12 +132,7 @@ def fit_absorbed_angle_errors(
     scale = np.linalg.norm(columns, axis=0)
     used = np.append(refitted(model, free, scale[: x.size]), scale[x.size :] > 0)
     prior = compliance_prior(scale[x.size :][used[x.size :]], int(used.sum()))
-    folds = ProfiledFolds(
-        np.vstack([design, np.zeros((len(prior), design.shape[1]))]),
-        np.append(r, np.zeros(len(prior))),
-        np.vstack([columns[:, used] / scale[used], prior]),
-        np.append(model.rows, np.full(len(prior), -1)),
-    )
+    folds = ProfiledFolds(design, r, columns[:, used] / scale[used], model.rows, prior)
     angles = angle_errors_of(folds)
     if angles is None:
         return None
@@ -222,28 +218,42 @@ class ProfiledFolds:
     jac : ndarray, shape (m, k)
         Their derivatives by the free table, tool and setup unknowns (columns of unit norm).
     row : ndarray, shape (m,)
-        Each residual's row (row ``i`` in fold ``i mod FOLDS``; -1: a prior's, in no fold).
+        Each residual's row (row ``i`` in fold ``i mod FOLDS``).
+    prior : ndarray, shape (c, k)
+        Rows of a prior on the unknowns (their residuals and responses zero), in no fold.
     """
 
-    def __init__(self, design: np.ndarray, r: np.ndarray, jac: np.ndarray, row: np.ndarray):
-        fold = np.where(row >= 0, row % FOLDS, -1)
+    def __init__(
+        self, design: np.ndarray, r: np.ndarray, jac: np.ndarray, row: np.ndarray, prior: np.ndarray
+    ):
         k, f = jac.shape[1], design.shape[1]
-        held = [np.flatnonzero(fold == g) for g in range(-1, FOLDS)]
-        columns = [np.hstack([jac[h], design[h], r[h, None]]) for h in held]
-        grams = [c.T @ c for c in columns]
+        held = [np.flatnonzero(row % FOLDS == g) for g in range(FOLDS)]
+        columns = [np.hstack([prior, np.zeros((len(prior), f + 1))])] + [None] * FOLDS
+        grams = [columns[0].T @ columns[0]] + [None] * FOLDS
+
+        def fold(g: int, _: int) -> None:  # [jac | design | r] of fold g and its Gram matrix
+            h, c = held[g], np.empty((held[g].size, k + f + 1))
+            c[:, :k], c[:, k : k + f], c[:, -1] = jac[h], design[h], r[h]
+            columns[g + 1], grams[g + 1] = c, c.T @ c
+
+        each_block(FOLDS, 1, fold)
         whole = sum(grams)
         change, left = profiled(whole, k)
         self.change, self.shift = change[:, :f], change[:, f]
         self.gram, self.moment, self.squares = left[:f, :f], -left[:f, f], float(left[f, f])
-        self.count = r.size
+        self.count = r.size + len(prior)
         self.noise = self.squares / self.count
-        self.parts = []
-        for h, c, g in zip(held[1:], columns[1:], grams[1:], strict=True):
-            change, left = profiled(whole - g, k)
+        self.parts = [None] * FOLDS
+
+        def part(g: int, _: int) -> None:  # fold g's refit from the other folds' Gram matrix
+            c = columns[g + 1]
+            change, left = profiled(whole - grams[g + 1], k)
             response = c[:, k : k + f] - c[:, :k] @ change[:, :f]
             value = c[:, :k] @ change[:, f] - c[:, k + f]
-            self.parts.append((left[:f, :f], -left[:f, f], response, value, row[h]))
-        self.size = int(np.sum(fold >= 0))
+            self.parts[g] = (left[:f, :f], -left[:f, f], response, value, row[held[g]])
+
+        each_block(FOLDS, 1, part)
+        self.size = r.size
         self.table_error = float(np.sqrt(3.0 * sum(np.sum(v**2) for *_, v, _ in self.parts) / self.size))
 
     def in_sample(self, weights: np.ndarray) -> float:

@@ -26,12 +26,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.blocks import each_block
 from calib.kinematics import THETA, tcp_jacobian
 
 ANGLE_JOINTS = 3
 """Joints 1-3 carry an angle error."""
 HARMONICS = 60
 """Highest order [cycles per turn] of a joint's angle error."""
+FEATURE_ROWS = 1024
+"""Rows per block of ``features``: a block's responses (1,024 x 3 x 360) stay 9 MB."""
 LENGTHS_DEG = (3.0, 4.0, 6.0, 10.0)
 """Kernel lengths tried [deg]: from 3 deg, where the 60th harmonic's weight is 0.7 % of the first's,
 so the truncated kernel still falls off as a Gaussian (to -2 %, the zero mean over a turn, beyond
@@ -70,15 +73,18 @@ def features(q: np.ndarray, jacobian: np.ndarray, rows: np.ndarray | None = None
     """The TCP's response (M, 3, F) [mm/rad] to each coefficient (F = ANGLE_JOINTS x 2 HARMONICS:
     per joint the cosines, then the sines) at readings ``q`` (N, 6) [rad] with ``jacobian``
     (M, 3, ANGLE_JOINTS), row i of it at the readings ``q[rows[i]]`` (default: M = N, the same
-    rows; several residuals of a row share its harmonics, computed once)."""
-    order = np.arange(1, HARMONICS + 1)
-    out = []
-    for j in range(ANGLE_JOINTS):
-        angle = q[:, j, None] * order
-        basis = np.concatenate([np.cos(angle), np.sin(angle)], axis=1)
-        basis = basis if rows is None else basis[rows]
-        out.append(jacobian[:, :, j, None] * basis[:, None, :])
-    return np.concatenate(out, axis=2)
+    rows; several residuals of a row share its harmonics, computed once), written a block of rows
+    at a time (``calib.blocks``)."""
+    angle = q[:, :ANGLE_JOINTS, None] * np.arange(1, HARMONICS + 1)
+    basis = np.concatenate([np.cos(angle), np.sin(angle)], axis=2)  # (N, ANGLE_JOINTS, 2 HARMONICS)
+    out = np.empty(jacobian.shape[:2] + (ANGLE_JOINTS, 2 * HARMONICS))
+
+    def block(s: int, e: int) -> None:
+        at = basis[s:e] if rows is None else basis[rows[s:e]]
+        np.multiply(jacobian[s:e, :, :, None], at[:, None], out=out[s:e])
+
+    each_block(len(out), FEATURE_ROWS, block)
+    return out.reshape(out.shape[0], out.shape[1], -1)
 
 
 def prior_variance(length_deg: float, sigma_deg: float) -> np.ndarray:

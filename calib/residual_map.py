@@ -41,6 +41,7 @@ from calib.angle_errors import (
     joint_jacobian,
     observed_features,
 )
+from calib.blocks import each_block
 from calib.compliance import compliance_response
 from calib.kinematics import N_DH, THETA, tcp_jacobian, tcp_position
 from calib.map_rows import Observations
@@ -59,6 +60,8 @@ FOLDS = 5
 """Interleaved cross-validation folds."""
 CV_ROWS = 2000
 """At most this many rows (evenly spaced) are predicted in the cross-validation."""
+POSTERIOR_ROWS = 256
+"""Queries per block of the posteriors' solves (``calib.blocks``: two threads)."""
 MIN_GAIN = 0.05
 """Cut of the cross-validated RMS error against the table alone the map must bring to be used."""
 TOOL = 3
@@ -249,11 +252,16 @@ def local_posterior(
         Of the shared error (without the noise) per component [mm^2].
     """
     among, to_query = distances
-    cov = shared * np.exp(-among / (2.0 * length_rad**2)) + noise * np.eye(among.shape[1])
-    cross = shared * np.exp(-to_query / (2.0 * length_rad**2))
-    solved = np.linalg.solve(cov, np.concatenate([values, cross[:, :, None]], axis=2))
-    mean = np.einsum("mk,mkc->mc", cross, solved[:, :, :-1])
-    variance = shared - np.einsum("mk,mk->m", cross, solved[:, :, -1])
+    mean, variance = np.empty((values.shape[0], values.shape[2])), np.empty(values.shape[0])
+
+    def block(s: int, e: int) -> None:
+        cov = shared * np.exp(-among[s:e] / (2.0 * length_rad**2)) + noise * np.eye(among.shape[1])
+        cross = shared * np.exp(-to_query[s:e] / (2.0 * length_rad**2))
+        solved = np.linalg.solve(cov, np.concatenate([values[s:e], cross[:, :, None]], axis=2))
+        mean[s:e] = np.einsum("mk,mkc->mc", cross, solved[:, :, :-1])
+        variance[s:e] = shared - np.einsum("mk,mk->m", cross, solved[:, :, -1])
+
+    each_block(len(mean), POSTERIOR_ROWS, block)
     return mean, np.maximum(variance, 0.0)
 
 
@@ -281,10 +289,15 @@ def observed_posterior(
     variance [mm^2]: the mean (M, c) [mm] of the error along each direction asked about and the
     variance (M, c) [mm^2] of the shared error along it (without the noise)."""
     among, cross = correlations
-    cov = shared * among + noise * np.eye(among.shape[1])
-    solved = np.linalg.solve(cov, np.concatenate([values[:, :, None], shared * cross], axis=2))
-    mean = shared * np.einsum("mkc,mk->mc", cross, solved[:, :, 0])
-    variance = shared - shared * np.einsum("mkc,mkc->mc", cross, solved[:, :, 1:])
+    mean, variance = np.empty((cross.shape[0], cross.shape[2])), np.empty((cross.shape[0], cross.shape[2]))
+
+    def block(s: int, e: int) -> None:
+        cov = shared * among[s:e] + noise * np.eye(among.shape[1])
+        solved = np.linalg.solve(cov, np.concatenate([values[s:e, :, None], shared * cross[s:e]], axis=2))
+        mean[s:e] = shared * np.einsum("mkc,mk->mc", cross[s:e], solved[:, :, 0])
+        variance[s:e] = shared - shared * np.einsum("mkc,mkc->mc", cross[s:e], solved[:, :, 1:])
+
+    each_block(len(mean), POSTERIOR_ROWS, block)
     return mean, np.maximum(variance, 0.0)
 
 
