@@ -325,30 +325,23 @@ class DrawstringSetupEstimate:
 
 
 CHAIN_ROWS = 2048
-"""Rows per block of the chain rule through the TCP: a block's products stay in the CPU's cache
-(on 100,000 rows twice as fast as whole-array products)."""
+"""Rows per block of the Jacobian's rows (the chain rule through the TCP and the setup's columns,
+``calib.blocks``' threads sharing the blocks): a block's products stay in the CPU's cache (on
+100,000 rows twice as fast as whole-array products)."""
 
 
-def _combine(out: np.ndarray, c: np.ndarray, dp: np.ndarray, columns, weigh, weight, rows=None) -> None:
-    """The chain rule through the TCP: ``out[:, to] = weigh(sum_k c[:, k] dp[k][:, of], weight)`` for
-    each ``(to, of)`` pair of ``columns``, with the derivatives by the TCP ``c`` (M, 3), the TCP's
-    derivatives ``dp`` (3, M, r) by the robot's r unknowns and the whitening ``weigh`` (``np.divide``
-    by a noise, ``np.multiply`` by a weight (M, 1)), in that order: an ``einsum`` over k, then the
-    whitening, to the last digit; ``out`` (M, n) by ``x``. ``rows`` (M,): which of ``dp``'s rows
-    (default its first M), taken a block at a time (no copy of a line's rows' derivatives), the blocks
-    shared by ``each_block``'s threads."""
-    weight = np.broadcast_to(weight, (len(out), 1))
-
-    def block(s: int, e: int) -> None:
-        part = dp[:, s:e] if rows is None else dp[:, rows[s:e]]
-        for to, of in columns:
-            cols, d = out[s:e, to], part[:, :, of]
-            np.multiply(d[0], c[s:e, 0, None], out=cols)
-            cols += d[1] * c[s:e, 1, None]
-            cols += d[2] * c[s:e, 2, None]
-            weigh(cols, weight[s:e], out=cols)
-
-    each_block(len(out), CHAIN_ROWS, block)
+def _combine(out: np.ndarray, c: np.ndarray, dp: np.ndarray, columns, weigh, weight) -> None:
+    """The chain rule through the TCP on a block of rows: ``out[:, to] = weigh(sum_k c[:, k]
+    dp[k][:, of], weight)`` for each ``(to, of)`` pair of ``columns``, with the derivatives by the
+    TCP ``c`` (M, 3), the TCP's derivatives ``dp`` (3, M, r) by the robot's r unknowns and the
+    whitening ``weigh`` (``np.divide`` by a noise, ``np.multiply`` by a weight (M, 1)), in that
+    order: an ``einsum`` over k, then the whitening, to the last digit; ``out`` (M, n) by ``x``."""
+    for to, of in columns:
+        cols, d = out[:, to], dp[:, :, of]
+        np.multiply(d[0], c[:, 0, None], out=cols)
+        cols += d[1] * c[:, 1, None]
+        cols += d[2] * c[:, 2, None]
+        weigh(cols, weight, out=cols)
 
 
 def least_aligned_direction(directions: np.ndarray) -> np.ndarray:
@@ -656,12 +649,17 @@ class DrawstringLineModel:
         r[:n_rows] = (self._reading(x, dist) - self.samples.length) / st.sigma_length
         if jac is not None:
             u = rel / dist[:, None]
-            if dp is not None:
-                _combine(jac[:n_rows], u, dp, self._robot_columns, np.divide, st.sigma_length)
-            jac[:n_rows, N_DH : N_DH + 3] = -(u @ self.frame.anchor_basis) / st.sigma_length
-            jac[:n_rows, N_DH + 3] = -1.0 / st.sigma_length
-            if self._timing_at is not None:
-                jac[:n_rows, self._timing_at] = self._rate / 1e3 / st.sigma_length
+
+            def block(s: int, e: int) -> None:
+                out = jac[s : min(e, n_rows)]
+                if dp is not None:
+                    _combine(out, u[s:e], dp[:, s:e], self._robot_columns, np.divide, st.sigma_length)
+                out[:, N_DH : N_DH + 3] = -(u[s:e] @ self.frame.anchor_basis) / st.sigma_length
+                out[:, N_DH + 3] = -1.0 / st.sigma_length
+                if self._timing_at is not None:
+                    out[:, self._timing_at] = self._rate[s:e] / 1e3 / st.sigma_length
+
+            each_block(n_rows, CHAIN_ROWS, block)
         return n_rows
 
     def _line_block(self, x, lid, p, dp, r, jac, at: int) -> int:
@@ -672,11 +670,17 @@ class DrawstringLineModel:
         r[at:end] = (w_line * r_line).ravel()
         if jac is not None:
             j = jac[at:end].reshape(rows.size, 2, x.size)
-            if dp is not None and rows.size:  # a line may hold none of these rows (a subset)
-                for i in range(2):  # dr_dp is the line's, the same on every row
-                    c = np.broadcast_to(dr_dp[0, i], (rows.size, 3))
-                    _combine(j[:, i], c, dp, self._robot_columns, np.multiply, w_line[:, i, None], rows)
-            j[:, :, self._line_cols[lid]] = w_line[:, :, None] * dr_dl
+
+            def block(s: int, e: int) -> None:
+                part = j[s:e]
+                if dp is not None:
+                    chain = dp[:, rows[s:e]]  # the block's rows' derivatives, once for both offsets
+                    for i in range(2):  # dr_dp is the line's, the same on every row
+                        c = np.broadcast_to(dr_dp[0, i], (len(part), 3))
+                        _combine(part[:, i], c, chain, self._robot_columns, np.multiply, w_line[s:e, i, None])
+                part[:, :, self._line_cols[lid]] = w_line[s:e, :, None] * dr_dl[s:e]
+
+            each_block(rows.size, CHAIN_ROWS, block)  # a line may hold none of these rows (a subset)
         return end
 
     def line_sigma(self, lid: int) -> np.ndarray:
