@@ -53,6 +53,11 @@ Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, l
   ``--tree`` a worktree of 83d8bba first, then this tree, one session, load 1.0): 100,000 rows 21.2
   CPU s, 1,612 MB against 13.5 CPU s, 991 MB; 1,000,000 rows 79.2 CPU s, 3,601 MB against 66.7 CPU s,
   4,515 MB (three runs of the command alone on the same rows: 61.1-62.5 CPU s, 3,709 MB each). Not met.
+- The fits' row loops on both cores (``calib/blocks.py``; the tree of 8d119ae first, then this tree,
+  one session, quiet, load 1.0-1.5; wall s, CPU s, peak MB): 100,000 rows 13.1-13.3 s, 969-988 MB
+  against 9.1-12.7 s (7 runs, median 10.1; 12.7-17.7 CPU s), 805-808 MB; 1,000,000 rows 62.0-64.1
+  s, 3,644 MB against 43.6-57.6 s (4 runs, median 47.6; 63.6-84.0 CPU s), 3,712-3,739 MB. The
+  million-row targets met on this quiet machine, the 100,000-row one in 3 runs of 7.
 """
 
 from __future__ import annotations
