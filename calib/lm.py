@@ -417,19 +417,25 @@ def fold_normal_equations(
 ) -> tuple[np.ndarray, np.ndarray]:
     """``normal_equations`` of each set of rows: ``(W J)^T W J`` (labels, k, k) and ``(W J)^T W r``
     (labels, k) over the rows of each ``label`` (m,) (0 to ``labels - 1``), in one pass over the
-    Jacobian (cross-validation's folds: all rows less a fold's, without a pass per fold)."""
+    Jacobian (cross-validation's folds: all rows less a fold's, without a pass per fold), its blocks
+    shared by ``each_block``'s threads."""
     cols = np.flatnonzero(free)
-    normal, gradient = np.zeros((labels, cols.size, cols.size)), np.zeros((labels, cols.size))
-    for s in range(0, len(jac), NORMAL_ROWS):
-        block = slice(s, s + NORMAL_ROWS)
-        wj = jac[block, cols]
-        wj *= w[block, None]
-        for lab in np.unique(label[block]):
-            on = label[block] == lab
+
+    def block_products(s: int, e: int) -> tuple[np.ndarray, np.ndarray]:
+        normal, gradient = np.zeros((labels, cols.size, cols.size)), np.zeros((labels, cols.size))
+        wj = jac[s:e, cols]
+        wj *= w[s:e, None]
+        for lab in np.unique(label[s:e]):
+            on = label[s:e] == lab
             part = wj[on]
             normal[lab] += part.T @ part
-            gradient[lab] += wr[block][on] @ part
-    return normal, gradient
+            gradient[lab] += wr[s:e][on] @ part
+        return normal, gradient
+
+    halves = each_block(len(jac), NORMAL_ROWS, block_products)
+    if not halves:
+        return np.zeros((labels, cols.size, cols.size)), np.zeros((labels, cols.size))
+    return block_sum(h[0] for h in halves), block_sum(h[1] for h in halves)
 
 
 def _damped_step(hess: np.ndarray, grad: np.ndarray, mu: float) -> np.ndarray:
