@@ -1,10 +1,12 @@
-"""Row blocks on two cores: the long per-row loops of a fit (kinematics, chain rule, normal
-equations) split into halves, one worked by a second thread while the caller works the other.
+"""Row blocks on two cores: the long per-row loops of a fit (kinematics, Jacobian rows, normal
+equations; the residual map's responses and solves) split into halves, one worked by a second
+thread while the caller works the other.
 
-numpy's element-wise loops and BLAS products release the GIL, and a block is thousands of rows, so
-the two halves run at once; each block is computed as it would be alone (the same numbers to the last
-digit wherever blocks write their own rows). On 100,000 rows ``station calibrate`` took 13.6 s
-against 15.3 s in one thread (``benchmarks/calibrate_scaling.py``, a quiet 2-core machine).
+numpy's element-wise loops, BLAS products and batched solves release the GIL, and a block is
+thousands of rows, so the two halves run at once; each block is computed as it would be alone (the
+same numbers to the last digit wherever blocks write their own rows; sums of the two halves add in
+another order). What it buys: docs/results/speed.md (a million rows 62-64 s -> 44-58 s wall on the
+2-core machine).
 """
 
 from __future__ import annotations
