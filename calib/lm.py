@@ -321,6 +321,9 @@ def _solve(fun_jac, x, r, jac, free, scale, options: LMOptions, callback) -> LMR
         )
         x, w, cost = x_new, w_new, cost_new
         del jac  # not alive beside the next one
+        if status != 0 or nit == options.max_iter:
+            r = r_new  # the run ends here: its residuals are the trial's, no Jacobian needed
+            break
         r, jac = fun_jac(x)
     return LMResult(
         x=x,
