@@ -86,6 +86,8 @@ class WithPrior:
         self.tool_mask = model.tool_mask
         self.groups = np.concatenate([model.groups, np.full(self._k.size, GROUP_PRIOR)])
         self.rows = np.concatenate([model.rows, np.full(self._k.size, -1)])
+        self.prior_names = tuple(self.names[k] for k in self._k)
+        """The unknown of each prior row, in their order after the model's rows."""
 
     def coarse(self) -> WithPrior | None:
         """This model on ``COARSE_ROWS`` of its sample rows, a fixed draw spread over all of them
@@ -433,8 +435,30 @@ class SetupFit:
     held: dict[str, str]
     scale: np.ndarray
 
+    def before_of(self, prior: WithPrior) -> LMResult:
+        """``before`` as the setup-only fit of ``prior`` (started at its model's ``x0``): the same rows
+        and setup with other joint-space terms, those this fit lacks at zero. Terms at zero move no
+        row, so the fit is the same: its solution, residuals and weights by unknown (a new term's
+        prior row: residual 0, weight 1). Raises ``ValueError`` for another model."""
+        mine, before = self.prior, self.before
+        at = {name: i for i, name in enumerate(mine.names)}
+        new = np.array([name not in at for name in prior.names])
+        m = mine.model.rows.size
+        if prior.model.rows.size != m or np.any(prior.x0[new] != 0.0) or np.any(prior.setup_mask[new]):
+            raise ValueError("before_of: not the same rows and setup with other joint-space terms at zero")
+        shared = [at[name] for name in np.asarray(prior.names)[~new]]
+        x, free = prior.x0.copy(), np.zeros(new.size, bool)
+        x[~new], free[~new] = before.x[shared], before.free[shared]
+        rows = dict(zip(mine.prior_names, range(m, before.residuals.size), strict=True))
+        pick = [rows.get(name, -1) for name in prior.prior_names]
+        residuals = np.concatenate([before.residuals, [0.0]])[np.r_[np.arange(m), pick]]
+        weights = np.concatenate([before.weights, [1.0]])[np.r_[np.arange(m), pick]]
+        return replace(before, x=x, residuals=residuals, weights=weights, free=free)
 
-def fit_setup(model: MeasurementModel, options: CalibrationOptions = CalibrationOptions()) -> SetupFit:
+
+def fit_setup(
+    model: MeasurementModel, options: CalibrationOptions = CalibrationOptions(), held: SetupFit | None = None
+) -> SetupFit:
     """Steps 1-2 of the pipeline: fit the setup unknowns with the nominal table, then identify.
 
     Parameters
@@ -443,6 +467,9 @@ def fit_setup(model: MeasurementModel, options: CalibrationOptions = Calibration
         The data's model, started at the nominal table.
     options : CalibrationOptions
         Loss, rank tolerance and solver options.
+    held : SetupFit, optional
+        The same rows' steps 1-2 with other joint-space terms (``model``'s others at zero): their
+        setup-only fit is this model's (``SetupFit.before_of``), only the identification is redone.
 
     Returns
     -------
@@ -450,9 +477,13 @@ def fit_setup(model: MeasurementModel, options: CalibrationOptions = Calibration
     """
     gauges = model.gauges()
     free_setup = setup_unknowns(model)
-    prior, before, scale = hold_robot(model, model.x0, options)
-    table, held = identify(model, before.x, free_setup, gauges, options.rank_rtol, options.hold_weak)
-    return SetupFit(prior, before, free_setup | table, held, scale)
+    if held is None:
+        prior, before, scale = hold_robot(model, model.x0, options)
+    else:
+        prior = WithPrior(model, model.x0)
+        before, scale = held.before_of(prior), held.scale
+    table, held_names = identify(model, before.x, free_setup, gauges, options.rank_rtol, options.hold_weak)
+    return SetupFit(prior, before, free_setup | table, held_names, scale)
 
 
 def setup_unknowns(model: MeasurementModel) -> np.ndarray:
@@ -472,7 +503,10 @@ def hold_robot(
 
 
 def calibrate(
-    model: MeasurementModel, options: CalibrationOptions = CalibrationOptions(), callback=None
+    model: MeasurementModel,
+    options: CalibrationOptions = CalibrationOptions(),
+    callback=None,
+    start: SetupFit | None = None,
 ) -> Calibration:
     """Run the whole pipeline on ``model`` (see the module docstring).
 
@@ -484,6 +518,9 @@ def calibrate(
         Loss, rank tolerance and solver options.
     callback : callable, optional
         Called by the solver after each trial step of the full fit.
+    start : SetupFit, optional
+        Steps 1-2 already run on ``model`` with ``options`` (``fit_setup``; the fits run on its
+        ``prior``); default: run them.
 
     Returns
     -------
@@ -491,7 +528,7 @@ def calibrate(
         Fitted on ``model.by_axes()`` (the faster frame composition; planning keeps the products).
     """
     model = model.by_axes()
-    start = fit_setup(model, options)
+    start = fit_setup(model, options) if start is None else start
     after, scale = robust_fit(start.prior, start.before.x, start.free, options, callback, start.scale)
     sigma, cov, robot_cov = _uncertainty(start.prior, after, start.free, scale)
     full_sigma = np.full(len(model.names), np.nan)

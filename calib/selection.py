@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.calibrate import Calibration, CalibrationOptions, WithPrior, calibrate
+from calib.calibrate import Calibration, CalibrationOptions, SetupFit, WithPrior, calibrate, fit_setup
 from calib.joint_terms import COMPLIANCE, COMPLIANCE_PRIOR, JointTerms, TermGroup
 from calib.kmeans import REGION_JOINTS, region_folds
 from calib.lm import fold_normal_equations
@@ -118,7 +118,10 @@ def blocked_folds(q: np.ndarray) -> tuple[list[np.ndarray], str]:
 
 
 def cross_validated_errors(
-    model: MeasurementModel, folds: list[np.ndarray], options: CalibrationOptions
+    model: MeasurementModel,
+    folds: list[np.ndarray],
+    options: CalibrationOptions,
+    held: SetupFit | None = None,
 ) -> tuple[np.ndarray, Calibration]:
     """Each row's error [mm] predicted by the calibration of the other folds.
 
@@ -135,6 +138,8 @@ def cross_validated_errors(
         Left-out rows of each fold (``kfold``).
     options : CalibrationOptions
         The pipeline's options.
+    held : SetupFit, optional
+        The same rows' setup fit with other terms (``calib.calibrate.fit_setup``'s ``held``).
 
     Returns
     -------
@@ -143,7 +148,8 @@ def cross_validated_errors(
     calibration : Calibration
         The calibration of all rows the steps start from.
     """
-    cal = calibrate(model, options)
+    model = model.by_axes()
+    cal = calibrate(model, options, start=fit_setup(model, options, held))
     return _fold_errors(model, cal.x, cal.identified, cal.after.weights, folds), cal
 
 
@@ -338,16 +344,18 @@ def prior_groups(
     folds: list[np.ndarray],
     base: np.ndarray,
     round_: int,
+    held: SetupFit | None = None,
 ) -> tuple[list[TermGroup], tuple[np.ndarray, Calibration] | None, list[CandidateScore]]:
     """Physically grounded groups entering together on top of the ``kept`` ones: each implausible
     compliance is dropped (``implausible``) and the rest refitted; what is left is kept when its
     values are determined (chi-square p below ``DETERMINED_P``) and the cross-validated errors stay
     ``not_harmful`` beside ``base`` (N,), the kept model's. Returns the groups kept, their errors and
-    calibration (None if none kept) and the table's lines (``round_``)."""
+    calibration (None if none kept) and the table's lines (``round_``). ``held``: the rows' setup
+    fit (``cross_validated_errors``)."""
     current, scores = list(groups), []
     while current:
         wide = model.with_terms(_terms(pool, kept + current))
-        err, cal = cross_validated_errors(wide, folds, options)
+        err, cal = cross_validated_errors(wide, folds, options, held)
         gain = 1.0 - rms(err) / rms(base)
         value, sigma, _ = term_estimates(wide, cal)
         at = np.cumsum([len(_terms(pool, kept))] + [len(g.terms) for g in current])[:-1]
@@ -419,7 +427,8 @@ def select_terms(
     folds = kfold(model.placement_ids(), k) if folds is None else folds
     model = model.by_axes()  # every fit and fold step below on the faster frame composition
     kept: list[TermGroup] = []
-    err, cal = cross_validated_errors(model.with_terms(_terms(pool, kept)), folds, options)
+    held = fit_setup(model.with_terms(_terms(pool, kept)), options)  # every fit's below: terms at zero
+    err, cal = cross_validated_errors(model.with_terms(_terms(pool, kept)), folds, options, held)
     nominal = rms(nominal_errors(model.with_terms(_terms(pool, kept)), cal, folds))
     current = rms(err)
     table = [CandidateScore(0, None, current, 0.0, True)]
@@ -427,7 +436,7 @@ def select_terms(
         if not stage:
             continue
         found, fit, lines = prior_groups(
-            model, kept, list(stage), pool, options, folds, err, table[-1].round + 1
+            model, kept, list(stage), pool, options, folds, err, table[-1].round + 1, held
         )
         table += lines
         if fit is not None:
@@ -443,7 +452,7 @@ def select_terms(
         why = None
         if accept:  # the screen's pick, refitted from the nominal robot, must still earn its place
             wide = model.with_terms(_terms(pool, kept + [best]))
-            err, refit = cross_validated_errors(wide, folds, options)
+            err, refit = cross_validated_errors(wide, folds, options, held)
             score[best.label] = rms(err)
             # the best of len(left) screened: its p must pass for all of them (Bonferroni)
             p, need = determined_p(wide, refit, len(best.terms)), DISCOVERY_P / len(left)

@@ -8,10 +8,12 @@ import pytest
 import configs
 from calib import calibrate as calibrate_module
 from calib import lm
-from calib.calibrate import CalibrationOptions, column_geometry, identify
+from calib.calibrate import CalibrationOptions, column_geometry, fit_setup, identify
 from calib.identifiability import select_columns, structural_holds
+from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
+from calib.models import thinned
 from calib.params import DH_NAMES, dh_from_degrees
 from sim_fixtures.scenario import setup_dict, write_scenario
 from sim_fixtures.world import Noise, World
@@ -261,3 +263,26 @@ def test_a_run_hands_on_only_a_smaller_damping():
     assert calibrate_module._carried(options, ended_at(1e-7)).damping == 1e-7
     assert calibrate_module._carried(options, ended_at(1e17)).damping == 1e-3
     assert calibrate_module._carried(options, ended_at(None)) is options
+
+
+def test_a_setup_fit_with_other_terms_at_zero_is_the_one_run_again(three_lines):
+    """``fit_setup(..., held=)`` (the term choice's fits sharing one setup-only fit) lands where the
+    fit run again on the model with the terms lands, and refuses other rows."""
+    sc = three_lines
+    model = calibration.build_model(load_samples(sc.samples), load_robot(sc.robot), load_setup(sc.setup), "")
+    model = model.by_axes()
+    groups = [compliance_group(1), harmonic_group(2, 1)]
+    links = load_robot(configs.path("robots/ur10.toml")).link_masses()  # any masses will do
+    terms = JointTerms([t for g in groups for t in g.terms], model.dh(model.x0), links)
+    wide = model.with_terms(terms)
+    reused, again = fit_setup(wide, held=fit_setup(model)), fit_setup(wide)
+    assert len(reused.before.x) == len(model.x0) + len(terms)
+    np.testing.assert_allclose(reused.before.x, again.before.x, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(reused.before.residuals, again.before.residuals, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(reused.before.weights, again.before.weights, rtol=1e-12)
+    np.testing.assert_array_equal(reused.before.free, again.before.free)
+    np.testing.assert_array_equal(reused.free, again.free)
+    np.testing.assert_allclose(reused.scale, again.scale, rtol=1e-9)
+    assert reused.held == again.held, (reused.held, again.held)
+    with pytest.raises(ValueError, match="before_of"):
+        fit_setup(thinned(wide, 40), held=again)
