@@ -23,7 +23,9 @@ A gear's error concentrates on one order (its tooth mesh: the UR10's 17 cycles a
 kernel spreads over its neighbours; where rows see each joint's error through one projection only
 (a drawstring cell's), that spread leaves the error partly unseen in 3-D. ``sharpened`` then picks,
 joint by joint on the same folds, the kernel, the kernel with ``LINE_SHARES`` of its prior moved to
-the joint's strongest order, or the joint quiet (``QUIET``).
+the joint's strongest order, or the joint quiet (``QUIET``); the drawstring map uses it
+(``calib.absorbed_angles``), a tracker's rows, which see the error whole, keep the kernel (IPA UR10,
+train B test A, C, D: 0.375 -> 0.389 mm with it).
 """
 
 from __future__ import annotations
@@ -276,16 +278,21 @@ def joint_priors(prior: np.ndarray, weights: np.ndarray, sigma_deg: float, joint
 
 
 def sharpened(folds, angles: AngleErrors) -> tuple[np.ndarray, float]:
-    """The prior (F,) [rad^2] of least fold error (``folds.error_of``), joint by joint, among the
-    kernel of ``angles`` and each joint's ``joint_priors`` (a line at its strongest order in
-    ``angles.weights``, or quiet), and its fold error (``folds``' units)."""
+    """The prior (F,) [rad^2] of least fold error (``folds.error_of``) from the kernel of ``angles``,
+    a joint at a time (forward selection: first the joint whose best of ``joint_priors``, a line at
+    its strongest order in ``angles.weights`` or quiet, cuts the folds' error most, kept where it
+    cuts it), and its fold error (``folds``' units)."""
     prior = prior_variance(angles.length_deg, angles.sigma_deg)
-    best = folds.error_of(prior)
-    for joint in range(ANGLE_JOINTS):
-        tried = joint_priors(prior, angles.weights, angles.sigma_deg, joint)
-        errors = [folds.error_of(p) for p in tried]
-        if min(errors) < best:
-            best, prior = min(errors), tried[int(np.argmin(errors))]
+    best, left = folds.error_of(prior), list(range(ANGLE_JOINTS))
+    while left:
+        tried = []
+        for joint in left:
+            priors = joint_priors(prior, angles.weights, angles.sigma_deg, joint)
+            tried += [(folds.error_of(p), joint, p) for p in priors]
+        error, joint, p = min(tried, key=lambda t: t[0])
+        left.remove(joint)
+        if error < best:
+            best, prior = error, p
     return prior, best
 
 
