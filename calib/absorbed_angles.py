@@ -27,6 +27,11 @@ rigid move of the base frame it makes of the calibration's rows: the lines and t
 with the table alone stay where they are. The coefficients' covariance takes the
 folds' mean square for the noise (not the rows' whole, which the angle errors mostly are), and the
 bound the variance along the direction of the largest (the rows see the error along few).
+Each joint's prior is then sharpened by the same folds onto its strongest order, or the joint made
+quiet (``calib.angle_errors.sharpened``): the rows see each joint's error through one projection,
+and the kernel's spread over neighbouring orders leaves part of a gear's one-order error unseen in
+3-D (the simulated cells with ``UR10_LIKE``'s error, 20 seeds: 0.054 -> 0.036 mm at a program's
+poses, 99.75 % inside the bound).
 
 Beside the table, ``dx`` also holds the compliances of joints 2 and 3 under a load at the TCP
 (``calib.compliance``: an arm's sag with its reach), on a prior of ``COMPLIANCE_PRIOR`` (rows of
