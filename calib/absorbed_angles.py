@@ -27,6 +27,11 @@ rigid move of the base frame it makes of the calibration's rows: the lines and t
 with the table alone stay where they are. The coefficients' covariance takes the
 folds' mean square for the noise (not the rows' whole, which the angle errors mostly are), and the
 bound the variance along the direction of the largest (the rows see the error along few).
+Each joint's prior is then sharpened by the same folds onto its strongest order, or the joint made
+quiet (``calib.angle_errors.sharpened``): the rows see each joint's error through one projection,
+and the kernel's spread over neighbouring orders leaves part of a gear's one-order error unseen in
+3-D (the simulated cells with ``UR10_LIKE``'s error, 20 seeds: 0.054 -> 0.036 mm at a program's
+poses, 99.75 % inside the bound).
 
 Beside the table, ``dx`` also holds the compliances of joints 2 and 3 under a load at the TCP
 (``calib.compliance``: an arm's sag with its reach), on a prior of ``COMPLIANCE_PRIOR`` (rows of
@@ -60,6 +65,7 @@ from calib.angle_errors import (
     posterior_covariance,
     posterior_mean,
     prior_variance,
+    sharpened,
 )
 from calib.blocks import each_block
 from calib.compliance import (
@@ -136,9 +142,11 @@ def fit_absorbed_angle_errors(
     angles = angle_errors_of(folds)
     if angles is None:
         return None
-    prior = prior_variance(angles.length_deg, angles.sigma_deg)
-    covariance = posterior_covariance(folds.gram, angles.rest_mm2, prior)
-    angles = dataclasses.replace(angles, covariance=covariance)
+    prior, best = sharpened(folds, angles)
+    rest = best**2 / 3.0
+    weights = posterior_mean(folds.gram, folds.moment, folds.noise, prior)
+    covariance = posterior_covariance(folds.gram, rest, prior)
+    angles = dataclasses.replace(angles, weights=weights, covariance=covariance, rest_mm2=rest)
     change, offset = np.zeros((scale.size, design.shape[1])), np.zeros(scale.size)
     change[used], offset[used] = folds.change / scale[used, None], folds.shift / scale[used]
     in_sample = folds.in_sample(angles.weights)
@@ -263,7 +271,10 @@ class ProfiledFolds:
 
     def error(self, length_deg: float, sigma_deg: float) -> float:
         """``calib.angle_errors.Folds.error`` (whitened units)."""
-        prior = prior_variance(length_deg, sigma_deg)
+        return self.error_of(prior_variance(length_deg, sigma_deg))
+
+    def error_of(self, prior: np.ndarray) -> float:
+        """``error`` of the coefficients' ``prior`` (F,) [rad^2] variance."""
         squares = 0.0
         for gram, moment, response, value, _ in self.parts:
             weights = posterior_mean(gram, moment, self.noise, prior)
