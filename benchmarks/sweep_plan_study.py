@@ -2,9 +2,11 @@
 
     python benchmarks/sweep_plan_study.py [--passes 2] [--extra 2] [--tilt 25] [--roll 60]
         [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed] [--static]
+        [--noise-free]
 
 ``station plan --sweep`` on the demo's robot and setup (``--passes`` a line, ``--extra`` more,
-``--tilt`` / ``--roll`` the largest tool turns [deg]); then per seed the demo's simulated cell
+``--tilt`` / ``--roll`` the largest tool turns [deg], default the demo's
+``calib.sweep.PassShape``); then per seed the demo's simulated cell
 sweeps it as ``station demo --sweep`` does (``sim_fixtures.station_sim.sweep_cell``, the
 ``SweepRobot`` with the demo's speeds and dwells), rows at the plan's rate along every sweep, each
 read once at the simulator's instrument noise with the joints exact (its controller's are), every
@@ -13,6 +15,8 @@ What ``benchmarks/demo_sweep.py`` measures, less the stream's timing and flags: 
 ``--late-ms D``: the drawstring's lengths true ``D`` ms after the rows' stamps (a device measuring
 earlier in its round trip than the station assumes); ``--untimed``: the rows without their
 ``pass`` and ``t_s`` columns, so the calibration fits no timing (``calib.models.TIMING_NAME``).
+``--noise-free``: the drawstring and the dial read without noise (their 1 um resolution kept):
+what the plan's rows cannot tell of the table, whatever its noise: its floor.
 ``--static``: the static demo's plan instead (``station plan``, each pose read 5 times and
 averaged), through the same pipeline: the comparison over draws that one demo run cannot give.
 ``--draws K``: the rows read K times with fresh noise (the first draw is the one-draw run's), each
@@ -49,6 +53,11 @@ READINGS = 5
 """Readings a static pose averages (the demo's ``[session] readings``)."""
 
 
+def read_noise(args) -> Noise:
+    """The simulator's instrument noise, the joints exact; none at all with ``--noise-free``."""
+    return Noise(length_mm=0.0, dial_mm=0.0, q_deg=0.0) if args.noise_free else Noise(q_deg=0.0)
+
+
 def sweep_reads(args, robot_file, setup, setup_path):
     """The sweep plan's ``(promise line, per seed: world, rows written per draw, rows, robot time)``."""
     shape = PassShape(max_tilt_deg=args.tilt, max_roll_deg=args.roll)
@@ -62,7 +71,7 @@ def sweep_reads(args, robot_file, setup, setup_path):
         cell, paths = sweep_cell(seed, plan.q_deg, plan.line, plan.sweep_pass)
         robot = sweep_robot(config, paths)
         rows = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz, args.late_ms / 1e3)
-        world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
+        world = dataclasses.replace(cell.world, noise=read_noise(args))
         write = functools.partial(write_swept, world, rows, timed=not args.untimed)
         return world, write, len(rows.q), f"{robot.cycle_s:.1f}"
 
@@ -79,7 +88,7 @@ def static_reads(args, robot_file, setup, setup_path):
 
     def cells(seed):
         cell = planned_cell(seed, plan.q_deg, plan.line)
-        world = dataclasses.replace(cell.world, noise=Noise(q_deg=0.0))
+        world = dataclasses.replace(cell.world, noise=read_noise(args))
 
         def write(rng, path):
             world.measure(cell.plan_deg, cell.plan_lines, rng, readings=READINGS).to_csv(path)
@@ -93,13 +102,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--passes", type=int, default=2)
     parser.add_argument("--extra", type=int, default=2)
-    parser.add_argument("--tilt", type=float, default=25.0)
-    parser.add_argument("--roll", type=float, default=60.0)
+    parser.add_argument("--tilt", type=float, default=PassShape.max_tilt_deg)
+    parser.add_argument("--roll", type=float, default=PassShape.max_roll_deg)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--draws", type=int, default=1)
     parser.add_argument("--late-ms", type=float, default=0.0)
     parser.add_argument("--untimed", action="store_true")
     parser.add_argument("--static", action="store_true")
+    parser.add_argument("--noise-free", action="store_true")
     args = parser.parse_args()
     robot_file, setup_path = (
         load_robot(configs.path("robots/hsr_jr680.toml")),
