@@ -58,6 +58,11 @@ Figures (``OPENBLAS_NUM_THREADS=1``, ``--model auto``; wall s, CPU s, peak MB, l
   against 9.1-12.7 s (7 runs, median 10.1; 12.7-17.7 CPU s), 805-808 MB; 1,000,000 rows 62.0-64.1
   s, 3,644 MB against 43.6-57.6 s (4 runs, median 47.6; 63.6-84.0 CPU s), 3,712-3,739 MB. The
   million-row targets met on this quiet machine, the 100,000-row one in 3 runs of 7.
+- No Jacobian at a run's last step and one setup-only fit for the term choice's models (the tree of
+  09061db first, then this tree, one session, quiet, load 0.8-1.4, a faster machine than the line
+  above's): 100,000 rows 6.0-6.4 s, 8.4-8.9 CPU s, 846 MB against 5.5-5.6 s, 7.7-7.8 CPU s, 845 MB;
+  1,000,000 rows 28.0-29.1 s, 41.7-43.1 CPU s, 3,707 MB against 26.2-26.5 s, 38.2-38.6 CPU s,
+  3,589 MB (2 runs each). Every target met on this machine.
 """
 
 from __future__ import annotations
