@@ -9,7 +9,8 @@
 - the whole ``station calibrate`` process (lmlc and mcs-lmlc with the table alone, and lmlc with
   ``--model auto``, the default: terms chosen by cross-validation), interpreter start included;
 - responsiveness (issue 15), in the same run: ``station --help``, and ``station calibrate`` on
-  210 samples (3 lines; the default ``--model auto`` and the table alone, ``--model geometric``)
+  210 samples (3 lines; the default ``--model auto``, the table alone, ``--model geometric``, and
+  the default without the residual map, ``--no-map``: what the map costs a small session)
   against a bare ``python -c "import numpy, scipy.optimize, scipy.linalg"`` (medians of
   ``--process-repeats`` runs each, interleaved so that the machine's load hits all alike, after an
   untimed run that leaves the byte-code cached); ``--process-only`` runs this part alone. The
@@ -131,6 +132,7 @@ def responsiveness(folder: Path, repeats: int) -> None:
         "help": [*station, "--help"],
         "calibrate": calibrate,
         "geometric": [*calibrate, "--model", "geometric"],
+        "no-map": [*calibrate, "--no-map"],
     }
     # byte-code cached as for an installed package (pip compiles numpy's and scipy's): a first,
     # untimed run writes it even where PYTHONDONTWRITEBYTECODE is set
@@ -146,7 +148,8 @@ def responsiveness(folder: Path, repeats: int) -> None:
     print(f"medians of {repeats} runs each, interleaved")
     print(f"| `station --help` | {t['help']:.3f} s | <= 0.25 s |")
     print(f"| bare `import numpy, scipy.optimize, scipy.linalg` | {t['bare']:.3f} s | |")
-    for name, what in (("calibrate", "(default: --model auto)"), ("geometric", "--model geometric")):
+    shown = (("calibrate", "(default: --model auto)"), ("geometric", "--model geometric"))
+    for name, what in (*shown, ("no-map", "--no-map")):
         print(f"| `station calibrate {what}` on 210 samples (3 lines) | {t[name]:.3f} s | |")
         print(f"| ratio to the bare import | {t[name] / t['bare']:.2f}x | <= 1.4x |")
 
