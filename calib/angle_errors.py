@@ -154,7 +154,9 @@ def posterior_mean(gram: np.ndarray, moment: np.ndarray, noise: float, prior: np
     """Posterior mean (F,) [rad] of the coefficients from ``gram`` = A^T A, ``moment`` = A^T e, white
     ``noise`` [mm^2] per component and ``prior`` (F,) [rad^2] (numpy's LU solve: scipy.linalg's
     Cholesky would cost every default ``station calibrate`` 0.2 s of import, issue 26)."""
-    return np.linalg.solve(gram / noise + np.diag(1.0 / prior), moment / noise)
+    a = gram / noise
+    a[np.diag_indices_from(a)] += 1.0 / prior  # the prior's precision on the diagonal, no (F, F) copy
+    return np.linalg.solve(a, moment / noise)
 
 
 def posterior_covariance(gram: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:

@@ -21,6 +21,13 @@ THREADS = min(2, os.cpu_count() or 1)
 """Threads that share a long array's blocks (the caller's included)."""
 
 
+def halved(n: int, size: int, least: int = 32) -> int:
+    """Rows per block for ``n`` rows: ``size``, or half of them where that is fewer (a short array's
+    two halves on both threads), never fewer than ``least`` (below that a thread costs more than it
+    saves)."""
+    return max(least, min(size, -(-n // THREADS)))
+
+
 def each_block(n: int, size: int, work: Callable[[int, int], tuple | None]) -> list[tuple]:
     """``work(start, stop)`` for the consecutive blocks of ``size`` of ``n`` rows (``stop`` may pass
     ``n``), the first half of the blocks in a second thread while this one works the rest.

@@ -41,7 +41,7 @@ from calib.angle_errors import (
     joint_jacobian,
     observed_features,
 )
-from calib.blocks import each_block
+from calib.blocks import each_block, halved
 from calib.compliance import compliance_response
 from calib.kinematics import N_DH, THETA, tcp_jacobian, tcp_position
 from calib.map_rows import Observations
@@ -261,7 +261,7 @@ def local_posterior(
         mean[s:e] = np.einsum("mk,mkc->mc", cross, solved[:, :, :-1])
         variance[s:e] = shared - np.einsum("mk,mk->m", cross, solved[:, :, -1])
 
-    each_block(len(mean), POSTERIOR_ROWS, block)
+    each_block(len(mean), halved(len(mean), POSTERIOR_ROWS), block)
     return mean, np.maximum(variance, 0.0)
 
 
@@ -274,8 +274,16 @@ def observed_correlations(
     neighbours' unit ``directions`` (M, k, 3) among themselves and their ``facing`` (M, k, c) (dot
     products with the c unit directions asked about: the base frame's axes, ``directions`` itself;
     an observation's own, (M, k, 1))."""
-    among, to_query = distances
     dots = np.matmul(directions, directions.transpose(0, 2, 1))
+    return correlations_of(distances, dots, facing, length_rad)
+
+
+def correlations_of(
+    distances: tuple[np.ndarray, np.ndarray], dots: np.ndarray, facing: np.ndarray, length_rad: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``observed_correlations`` from the neighbours' directions' dot products ``dots`` (M, k, k)
+    (the same at every length the folds try)."""
+    among, to_query = distances
     return np.exp(-among / (2.0 * length_rad**2)) * dots, np.exp(-to_query / (2.0 * length_rad**2))[
         :, :, None
     ] * facing
@@ -297,7 +305,7 @@ def observed_posterior(
         mean[s:e] = shared * np.einsum("mkc,mk->mc", cross[s:e], solved[:, :, 0])
         variance[s:e] = shared - shared * np.einsum("mkc,mkc->mc", cross[s:e], solved[:, :, 1:])
 
-    each_block(len(mean), POSTERIOR_ROWS, block)
+    each_block(len(mean), halved(len(mean), POSTERIOR_ROWS), block)
     return mean, np.maximum(variance, 0.0)
 
 
@@ -364,9 +372,10 @@ class ObservedFolds:
         queries = embedding(rows.q[picked])
         index = neighbours(queries, points, OBSERVED_NEIGHBOURS, rows.row % FOLDS, picked % FOLDS)
         self.distances = local_distances(queries, points, index)
-        self.directions = rows.direction[index]
-        self.facing = np.einsum("mkc,msc->mks", self.directions, asked_directions)
-        self.correlations = {}
+        directions = rows.direction[index]
+        self.dots = np.matmul(directions, directions.transpose(0, 2, 1))
+        self.facing = np.einsum("mkc,msc->mks", directions, asked_directions)
+        self.correlations, self.posteriors = {}, {}
         self.values = value_mm[index]
         self.error = value_mm[asked, None]
         self.row = at
@@ -375,15 +384,17 @@ class ObservedFolds:
         """The observations' mean square [mm^2]."""
 
     def predict(self, length_deg: float, share: float) -> tuple[np.ndarray, np.ndarray]:
-        """``Folds.predict`` of the held-out observations: mean (M, 1) [mm], variance (M,) [mm^2]."""
+        """``Folds.predict`` of the held-out observations: mean (M, 1) [mm], variance (M,) [mm^2]
+        (kept per grid point: the search's best is asked for again)."""
+        if (length_deg, share) in self.posteriors:
+            return self.posteriors[length_deg, share]
         if length_deg not in self.correlations:
             length = np.radians(length_deg)
-            self.correlations[length_deg] = observed_correlations(
-                self.distances, self.directions, self.facing, length
-            )
+            self.correlations[length_deg] = correlations_of(self.distances, self.dots, self.facing, length)
         shared, noise = share * self.total, (1.0 - share) * self.total
         mean, variance = observed_posterior(self.correlations[length_deg], self.values, shared, noise)
-        return mean[self.held][:, None], variance[self.held]
+        self.posteriors[length_deg, share] = mean[self.held][:, None], variance[self.held]
+        return self.posteriors[length_deg, share]
 
 
 def row_slots(at: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:

@@ -5,6 +5,7 @@ import threading
 import numpy as np
 import pytest
 
+from calib import blocks
 from calib.blocks import each_block
 
 
@@ -50,3 +51,12 @@ def test_an_error_in_the_second_thread_raises_in_the_caller():
 
     with pytest.raises(ValueError, match="block 0"):
         each_block(4000, 1000, work)
+
+
+def test_a_short_array_is_halved_for_both_threads_a_long_one_keeps_its_blocks(monkeypatch):
+    monkeypatch.setattr(blocks, "THREADS", 2)
+    assert blocks.halved(210, 256) == 105  # a 210-row session's posterior: two halves
+    assert blocks.halved(100_000, 256) == 256
+    assert blocks.halved(20, 256) == 32  # too short to be worth a thread: one block
+    monkeypatch.setattr(blocks, "THREADS", 1)
+    assert blocks.halved(210, 256) == 210
