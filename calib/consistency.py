@@ -180,11 +180,15 @@ class DialGain:
         Its standard error (all three components together) [mm/mm].
     dof : int
         Rows less the three coefficients fitted: below a few, ``sigma`` itself is a guess.
+    spread : float
+        The readings' RMS beyond the line's constant and its trend along the line [mm]: what the
+        gain is learnt from (near the readings' own noise, that noise dilutes it towards zero).
     """
 
     gain: np.ndarray
     sigma: float
     dof: int = 0
+    spread: float = np.inf
 
 
 def dial_gain(
@@ -217,4 +221,6 @@ def dial_gain(
     dof = max(len(dial) - 3, 1)
     residual = max(float(np.sum((offset - design @ coef) ** 2)) / dof, 2.0 * noise_mm**2)
     var = np.linalg.pinv(design.T @ design)[2, 2]
-    return DialGain(coef[2], float(np.sqrt(residual * var)), len(dial) - 3)
+    trend = np.linalg.lstsq(design[:, :2], dial, rcond=None)[0]
+    spread = float(np.sqrt(np.mean((dial - design[:, :2] @ trend) ** 2)))
+    return DialGain(coef[2], float(np.sqrt(residual * var)), len(dial) - 3, spread)

@@ -189,3 +189,24 @@ def test_the_dial_check_on_a_draw_of_many_rows_gives_the_verdicts_of_all(three_l
     assert [d.verdict for d in drawn] == [d.verdict for d in full]
     for a, b in zip(full, drawn, strict=True):
         assert np.linalg.norm(np.subtract(a.gain, b.gain)) < 0.1 * absorbed.DIAL_GAIN_TOLERANCE
+
+
+def test_readings_that_barely_move_beyond_the_lines_trend_leave_the_dial_unjudged():
+    """A corrected pass lands a line's 30 targets about 1.1 mm off its edge in a smooth trend: the
+    readings move beyond the line's own constant and trend by their noise alone, which dilutes the
+    gain towards zero (a rehearsed IRB 2600 session: gain 0.05, refused as 'does not follow').
+    Spread across the gate, the same line's readings are judged: right, or not this tool's."""
+    rng = np.random.default_rng(4)
+    direction, axis, noise = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 0.01
+    along = np.linspace(-300.0, 300.0, 30)
+
+    def verdict(true_mm, dial_mm):
+        tcp = np.column_stack([along, true_mm + rng.normal(0, noise, 30), np.zeros(30)])
+        found = absorbed.dial_gain(tcp, np.zeros(3), direction, dial_mm, noise)
+        return absorbed._verdict(found, axis, direction, noise)
+
+    trend = -1.1 + 0.0002 * along
+    assert verdict(trend, trend + rng.normal(0, noise, 30)) == "inconclusive"
+    spread = trend + rng.uniform(-0.8, 0.8, 30)
+    assert verdict(spread, spread + rng.normal(0, noise, 30)) == "agrees"
+    assert verdict(spread, rng.permutation(spread)) == "does not follow"
