@@ -2,7 +2,7 @@
 
     python benchmarks/sweep_plan_study.py [--passes 2] [--extra 2] [--tilt 25] [--roll 60]
         [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed] [--static]
-        [--noise-free]
+        [--noise-free] [--row-hz 240]
 
 ``station plan --sweep`` on the demo's robot and setup (``--passes`` a line, ``--extra`` more,
 ``--tilt`` / ``--roll`` the largest tool turns [deg], default the demo's
@@ -16,7 +16,9 @@ What ``benchmarks/demo_sweep.py`` measures, less the stream's timing and flags: 
 earlier in its round trip than the station assumes); ``--untimed``: the rows without their
 ``pass`` and ``t_s`` columns, so the calibration fits no timing (``calib.models.TIMING_NAME``).
 ``--noise-free``: the drawstring and the dial read without noise (their 1 um resolution kept):
-what the plan's rows cannot tell of the table, whatever its noise: its floor.
+what the plan's rows cannot tell of the table at its stated noise (the fit weighs the rows by the
+setup's stated noise against its prior, so a weak direction stays near the prior's centre): its floor.
+``--row-hz``: rows a second along the sweeps (the planner's and the rows'; default the station's).
 ``--static``: the static demo's plan instead (``station plan``, each pose read 5 times and
 averaged), through the same pipeline: the comparison over draws that one demo run cannot give.
 ``--draws K``: the rows read K times with fresh noise (the first draw is the one-draw run's), each
@@ -61,8 +63,9 @@ def read_noise(args) -> Noise:
 def sweep_reads(args, robot_file, setup, setup_path):
     """The sweep plan's ``(promise line, per seed: world, rows written per draw, rows, robot time)``."""
     shape = PassShape(max_tilt_deg=args.tilt, max_roll_deg=args.roll)
+    limits = dataclasses.replace(sweeping.SWEEP, row_hz=args.row_hz)
     design = sweeping.sweep_design(
-        robot_file, setup, str(setup_path), passes=args.passes, extra=args.extra, shape=shape
+        robot_file, setup, str(setup_path), passes=args.passes, extra=args.extra, shape=shape, sweep=limits
     )
     plan, config = design.plan, StationConfig.model_validate(demo_config(0, sweep=True))
     promise = design.report["predicted"]["plan"]["predicted_rmse_mm"]
@@ -70,7 +73,7 @@ def sweep_reads(args, robot_file, setup, setup_path):
     def cells(seed):
         cell, paths = sweep_cell(seed, plan.q_deg, plan.line, plan.sweep_pass)
         robot = sweep_robot(config, paths)
-        rows = swept_rows(robot, cell.plan_lines, paths, sweeping.SWEEP.row_hz, args.late_ms / 1e3)
+        rows = swept_rows(robot, cell.plan_lines, paths, args.row_hz, args.late_ms / 1e3)
         world = dataclasses.replace(cell.world, noise=read_noise(args))
         write = functools.partial(write_swept, world, rows, timed=not args.untimed)
         return world, write, len(rows.q), f"{robot.cycle_s:.1f}"
@@ -110,6 +113,7 @@ def main() -> None:
     parser.add_argument("--untimed", action="store_true")
     parser.add_argument("--static", action="store_true")
     parser.add_argument("--noise-free", action="store_true")
+    parser.add_argument("--row-hz", type=float, default=240.0)
     args = parser.parse_args()
     robot_file, setup_path = (
         load_robot(configs.path("robots/hsr_jr680.toml")),
