@@ -255,13 +255,12 @@ def local_posterior(
     mean, variance = np.empty((values.shape[0], values.shape[2])), np.empty(values.shape[0])
 
     def block(s: int, e: int) -> None:
+        def shared_covariance(out: np.ndarray) -> None:
+            kernel(among[s:e], length_rad, out)
+            out *= shared
+
         cross = shared * kernel(to_query[s:e], length_rad)
-        y = whitened(
-            kernel(among[s:e], length_rad),
-            shared,
-            noise,
-            np.concatenate([values[s:e], cross[:, :, None]], axis=2),
-        )
+        y = whitened(shared_covariance, noise, np.concatenate([values[s:e], cross[:, :, None]], axis=2))
         mean[s:e] = np.einsum("mk,mkc->mc", y[:, :, -1], y[:, :, :-1])
         variance[s:e] = shared - np.einsum("mk,mk->m", y[:, :, -1], y[:, :, -1])
 
@@ -269,24 +268,23 @@ def local_posterior(
     return mean, np.maximum(variance, 0.0)
 
 
-def kernel(distances: np.ndarray, length_rad: float) -> np.ndarray:
+def kernel(distances: np.ndarray, length_rad: float, out: np.ndarray | None = None) -> np.ndarray:
     """The squared-exponential correlations ``exp(-d / (2 l^2))`` of squared ``distances`` [rad^2]
-    at ``length_rad`` [rad], in one new array (a search's grid of lengths over (M, k, k) arrays:
-    their temporaries cost as much as the exponentials)."""
-    out = np.negative(distances)
-    np.divide(out, 2.0 * length_rad**2, out=out)
+    at ``length_rad`` [rad], into ``out`` (default a new array) without temporaries (a search's grid
+    of lengths over (M, k, k) arrays: they cost as much as the exponentials)."""
+    out = np.divide(distances, -2.0 * length_rad**2, out=out)
     return np.exp(out, out=out)
 
 
-def whitened(correlation: np.ndarray, shared: float, noise: float, rhs: np.ndarray) -> np.ndarray:
-    """``L^-1 rhs`` (M, k, r) for ``L`` the lower Cholesky factor of each ``shared * correlation +
-    noise * I`` (``correlation`` (M, k, k) positive semi-definite, ``noise`` > 0), ``rhs`` (M, k, r):
-    the last r rows of the factor of the bordered matrix ``[[cov, rhs], [rhs^T, d I]]``, ``d`` above
-    ``|L^-1 rhs|^2`` (numpy has no batched triangular solve; a Cholesky of k + r rows costs about
-    half of an LU solve of k)."""
+def whitened(shared_covariance, noise: float, rhs: np.ndarray) -> np.ndarray:
+    """``L^-1 rhs`` (M, k, r) for ``L`` the lower Cholesky factor of each query's covariance, the
+    positive semi-definite part ``shared_covariance(out)`` writes into ``out`` (M, k, k) plus
+    ``noise`` > 0 on the diagonal, ``rhs`` (M, k, r): the last r rows of the factor of the bordered
+    matrix ``[[cov, rhs], [rhs^T, d I]]``, ``d`` above ``|L^-1 rhs|^2`` (numpy has no batched
+    triangular solve; a Cholesky of k + r rows costs about half of an LU solve of k)."""
     m, k, r = rhs.shape
     bordered = np.empty((m, k + r, k + r))
-    np.multiply(correlation, shared, out=bordered[:, :k, :k])
+    shared_covariance(bordered[:, :k, :k])
     diagonal = bordered.reshape(m, -1)[:, :: k + r + 1]  # a view of each matrix's diagonal
     diagonal[:, :k] += noise
     bordered[:, :k, k:] = 0.0
@@ -332,9 +330,8 @@ def observed_posterior(
     mean, variance = np.empty((cross.shape[0], cross.shape[2])), np.empty((cross.shape[0], cross.shape[2]))
 
     def block(s: int, e: int) -> None:
-        y = whitened(
-            among[s:e], shared, noise, np.concatenate([values[s:e, :, None], shared * cross[s:e]], axis=2)
-        )
+        rhs = np.concatenate([values[s:e, :, None], shared * cross[s:e]], axis=2)
+        y = whitened(lambda out: np.multiply(among[s:e], shared, out=out), noise, rhs)
         mean[s:e] = np.einsum("mkc,mk->mc", y[:, :, 1:], y[:, :, 0])
         variance[s:e] = shared - np.einsum("mkc,mkc->mc", y[:, :, 1:], y[:, :, 1:])
 
