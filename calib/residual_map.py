@@ -161,9 +161,10 @@ class ObservedShared:
         index = neighbours(queries, points, OBSERVED_NEIGHBOURS)
         distances = local_distances(queries, points, index)
         near = self.direction[index]
-        correlations = observed_correlations(distances, near, near, np.radians(self.length_scale_deg))
+        dots = np.matmul(near, near.transpose(0, 2, 1))
+        length = np.radians(self.length_scale_deg)
         mean, variance = observed_posterior(
-            correlations, self.value_mm[index], self.shared_mm2, self.noise_mm2
+            distances, dots, near, self.value_mm[index], length, self.shared_mm2, self.noise_mm2
         )
         return mean, np.mean(variance, axis=1) + self.noise_mm2
 
@@ -295,43 +296,54 @@ def whitened(shared_covariance, noise: float, rhs: np.ndarray) -> np.ndarray:
     return np.linalg.cholesky(bordered)[:, k:, :k].transpose(0, 2, 1)
 
 
-def observed_correlations(
-    distances: tuple[np.ndarray, np.ndarray], directions: np.ndarray, facing: np.ndarray, length_rad: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The kernel's correlations among each query's k neighbouring observations (M, k, k) and with
-    the directions asked about at the query (M, k, c): the squared-exponential of ``distances``
-    (``local_distances`` [rad^2]) at ``length_rad`` [rad], times the dot products of the
-    neighbours' unit ``directions`` (M, k, 3) among themselves and their ``facing`` (M, k, c) (dot
-    products with the c unit directions asked about: the base frame's axes, ``directions`` itself;
-    an observation's own, (M, k, 1))."""
-    dots = np.matmul(directions, directions.transpose(0, 2, 1))
-    return correlations_of(distances, dots, facing, length_rad)
-
-
-def correlations_of(
-    distances: tuple[np.ndarray, np.ndarray], dots: np.ndarray, facing: np.ndarray, length_rad: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """``observed_correlations`` from the neighbours' directions' dot products ``dots`` (M, k, k)
-    (the same at every length the folds try)."""
-    among, to_query = distances
-    correlation = kernel(among, length_rad)
-    correlation *= dots
-    return correlation, kernel(to_query, length_rad)[:, :, None] * facing
-
-
 def observed_posterior(
-    correlations: tuple[np.ndarray, np.ndarray], values: np.ndarray, shared: float, noise: float
+    distances: tuple[np.ndarray, np.ndarray],
+    dots: np.ndarray,
+    facing: np.ndarray,
+    values: np.ndarray,
+    length_rad: float,
+    shared: float,
+    noise: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Gaussian-process posterior at each query from its k neighbouring observations of projections
-    (``observed_correlations``), their observed ``values`` (M, k) [mm], the shared and noise
-    variance [mm^2]: the mean (M, c) [mm] of the error along each direction asked about and the
-    variance (M, c) [mm^2] of the shared error along it (without the noise)."""
-    among, cross = correlations
-    mean, variance = np.empty((cross.shape[0], cross.shape[2])), np.empty((cross.shape[0], cross.shape[2]))
+    """Gaussian-process posterior at each query from its k neighbouring observations of projections.
+
+    Two observations covary by the squared-exponential of their poses' ``distances``
+    (``local_distances`` [rad^2]) at ``length_rad`` [rad] times the dot product of their unit
+    directions; an observation and a direction asked about at the query by the kernel times their
+    dot product.
+
+    Parameters
+    ----------
+    distances : tuple of ndarray, shapes (M, k, k), (M, k)
+        ``local_distances`` of the queries' neighbouring observations [rad^2].
+    dots : ndarray, shape (M, k, k)
+        The dot products of the neighbours' directions among themselves.
+    facing : ndarray, shape (M, k, c)
+        Their dot products with the c unit directions asked about at each query (the base frame's
+        axes: the directions themselves; an observation's own, (M, k, 1)).
+    values : ndarray, shape (M, k)
+        What the neighbours observed [mm].
+    length_rad, shared, noise : float
+        Correlation length [rad], shared and noise variance [mm^2].
+
+    Returns
+    -------
+    mean : ndarray, shape (M, c)
+        Of the error along each direction asked about [mm].
+    variance : ndarray, shape (M, c)
+        Of the shared error along it, without the noise [mm^2].
+    """
+    among, to_query = distances
+    mean, variance = np.empty(facing.shape[::2]), np.empty(facing.shape[::2])
 
     def block(s: int, e: int) -> None:
-        rhs = np.concatenate([values[s:e, :, None], shared * cross[s:e]], axis=2)
-        y = whitened(lambda out: np.multiply(among[s:e], shared, out=out), noise, rhs)
+        def shared_covariance(out: np.ndarray) -> None:  # built where it is factorised: no (M, k, k) kept
+            kernel(among[s:e], length_rad, out)
+            out *= dots[s:e]
+            out *= shared
+
+        cross = kernel(to_query[s:e], length_rad)[:, :, None] * facing[s:e]
+        y = whitened(shared_covariance, noise, np.concatenate([values[s:e, :, None], shared * cross], axis=2))
         mean[s:e] = np.einsum("mkc,mk->mc", y[:, :, 1:], y[:, :, 0])
         variance[s:e] = shared - np.einsum("mkc,mkc->mc", y[:, :, 1:], y[:, :, 1:])
 
@@ -405,7 +417,7 @@ class ObservedFolds:
         directions = rows.direction[index]
         self.dots = np.matmul(directions, directions.transpose(0, 2, 1))
         self.facing = np.einsum("mkc,msc->mks", directions, asked_directions)
-        self.correlations, self.posteriors = {}, {}
+        self.posteriors = {}
         self.values = value_mm[index]
         self.error = value_mm[asked, None]
         self.row = at
@@ -418,11 +430,10 @@ class ObservedFolds:
         (kept per grid point: the search's best is asked for again)."""
         if (length_deg, share) in self.posteriors:
             return self.posteriors[length_deg, share]
-        if length_deg not in self.correlations:
-            length = np.radians(length_deg)
-            self.correlations[length_deg] = correlations_of(self.distances, self.dots, self.facing, length)
         shared, noise = share * self.total, (1.0 - share) * self.total
-        mean, variance = observed_posterior(self.correlations[length_deg], self.values, shared, noise)
+        mean, variance = observed_posterior(
+            self.distances, self.dots, self.facing, self.values, np.radians(length_deg), shared, noise
+        )
         self.posteriors[length_deg, share] = mean[self.held][:, None], variance[self.held]
         return self.posteriors[length_deg, share]
 

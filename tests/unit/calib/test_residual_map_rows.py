@@ -111,11 +111,14 @@ def test_the_observation_operator_of_the_three_axes_is_the_component_posterior()
     points = residual_map.embedding(q[rows.row])
     index = residual_map.neighbours(at, points, 36)
     near = rows.direction[index]
-    correlations = residual_map.observed_correlations(
-        residual_map.local_distances(at, points, index), near, near, length
-    )
     got_mean, got_variance = residual_map.observed_posterior(
-        correlations, rows.value_mm[index], shared, noise
+        residual_map.local_distances(at, points, index),
+        near @ near.transpose(0, 2, 1),
+        near,
+        rows.value_mm[index],
+        length,
+        shared,
+        noise,
     )
     np.testing.assert_allclose(got_mean, mean, atol=1e-10)
     np.testing.assert_allclose(got_variance, np.repeat(variance[:, None], 3, axis=1), atol=1e-10)
