@@ -16,8 +16,9 @@ What ``benchmarks/demo_sweep.py`` measures, less the stream's timing and flags: 
 earlier in its round trip than the station assumes); ``--untimed``: the rows without their
 ``pass`` and ``t_s`` columns, so the calibration fits no timing (``calib.models.TIMING_NAME``).
 ``--noise-free``: the drawstring and the dial read without noise (their 1 um resolution kept):
-what the plan's rows cannot tell of the table at its stated noise (the fit weighs the rows by the
-setup's stated noise against its prior, so a weak direction stays near the prior's centre): its floor.
+what the plan's rows cannot tell of the table, whatever its noise: its floor (a direction the rows
+barely determine: on seed 0 the same with the prior weakened a hundredfold or removed, and the
+true table fits the rows no better than the fitted one).
 ``--row-hz``: rows a second along the sweeps (the planner's and the rows'; default the station's).
 ``--static``: the static demo's plan instead (``station plan``, each pose read 5 times and
 averaged), through the same pipeline: the comparison over draws that one demo run cannot give.
