@@ -154,6 +154,27 @@ def test_the_local_solve_is_the_dense_gaussian_process_with_the_discrepancys_ker
     )
 
 
+def test_poses_read_again_and_again_leave_the_local_solve_the_textbook_one():
+    """A session reads each pose several times (five captures at one target): the neighbours'
+    kernel is singular, only a small noise keeps the covariance positive definite, and the bordered
+    Cholesky (``whitened``) must still give the dense posterior."""
+    rng = np.random.default_rng(5)
+    q = np.repeat(rng.uniform(-0.3, 0.3, (6, 6)), 5, axis=0)  # 30 rows, 6 distinct poses
+    queries = rng.uniform(-0.3, 0.3, (7, 6))
+    values = rng.normal(0, 0.1, (30, 3))
+    length, shared, noise = 0.5, 0.02, 1e-7
+    points, at = residual_map.embedding(q), residual_map.embedding(queries)
+    index = residual_map.neighbours(at, points, 30)
+    distances = residual_map.local_distances(at, points, index)
+    mean, variance = residual_map.local_posterior(distances, values[index], length, shared, noise)
+    both = joint_kernel(np.vstack([queries, q]), length)
+    cov, cross = shared * both[7:, 7:] + noise * np.eye(30), shared * both[:7, 7:]
+    np.testing.assert_allclose(mean, cross @ np.linalg.solve(cov, values), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(
+        variance, shared - np.sum(cross * np.linalg.solve(cov, cross.T).T, axis=1), atol=1e-9
+    )
+
+
 def test_the_neighbours_are_the_nearest_rows_of_the_other_folds():
     rng = np.random.default_rng(4)
     points, fold = rng.normal(size=(200, 6)), np.arange(200) % 5
