@@ -114,7 +114,7 @@ def main() -> None:
     parser.add_argument("--untimed", action="store_true")
     parser.add_argument("--static", action="store_true")
     parser.add_argument("--noise-free", action="store_true")
-    parser.add_argument("--row-hz", type=float, default=240.0)
+    parser.add_argument("--row-hz", type=float, default=sweeping.SWEEP.row_hz)
     args = parser.parse_args()
     robot_file, setup_path = (
         load_robot(configs.path("robots/hsr_jr680.toml")),
