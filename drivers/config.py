@@ -23,7 +23,7 @@ from drivers.robot import JOINT_ENCODINGS, RTDE_PORT, JointRegisterMap, ModbusJo
 class Section(BaseModel):
     """A section of the station config: unknown keys, NaN and infinity are refused."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, defer_build=True)
 
 
 Name = Annotated[str, Field(min_length=1, pattern=r"^[^\x00]*$")]

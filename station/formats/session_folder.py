@@ -92,7 +92,7 @@ class SessionHeader(BaseModel):
     """What ``session.toml`` holds that a resumed session uses; other keys are kept as they are.
     The station config (``station``) is validated by the caller, which knows its schema."""
 
-    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False, defer_build=True)
 
     start_wall_s: Annotated[float, Field(ge=0)]
     robot: RobotFile

@@ -22,7 +22,7 @@ SESSION_SETUP = " [setup]"
 class _Open(BaseModel):
     """A report's keys the certificate reads; any others are kept and ignored."""
 
-    model_config = ConfigDict(extra="allow")
+    model_config = ConfigDict(extra="allow", defer_build=True)
 
 
 class Metrics(_Open):
