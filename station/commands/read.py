@@ -17,10 +17,13 @@ from __future__ import annotations
 import json
 import math
 import sys
+from typing import TYPE_CHECKING
 
 import configs
-from drivers.base import Backoff, DeviceReplyError, DeviceUnreachable, Driver, Reading, call_with_reconnect
 from errors import DeviceError
+
+if TYPE_CHECKING:  # the drivers are imported where a device is read: every command builds this parser
+    from drivers.base import Backoff, DeviceReplyError, Driver, Reading
 
 NOT_ALL_READ = 3
 """Exit code of a read in which an instrument answered with an error code (its values are null)."""
@@ -38,6 +41,7 @@ def register(subparsers) -> None:
 
 def read_once(driver: Driver, backoff: Backoff) -> Reading:
     """Open ``driver``, read it once (retrying transient failures), close it."""
+    from drivers.base import call_with_reconnect
 
     def attempt() -> Reading:
         driver.open()
@@ -80,6 +84,7 @@ def _finite_or_none(value):
 
 
 def run(args) -> int:
+    from drivers.base import DeviceReplyError, DeviceUnreachable
     from station.config import load_station_config, resolve, unreachable_hint
     from station.formats.tables import load_robot
 
