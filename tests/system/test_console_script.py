@@ -8,8 +8,9 @@ import sys
 
 import pytest
 
-HEAVY = ("numpy", "scipy.stats", "rerun", "matplotlib", "pymodbus", "sim_fixtures")
-"""Imported only where used: together they take over a second to import (issue 15)."""
+HEAVY = ("numpy", "scipy.stats", "rerun", "matplotlib", "pymodbus", "sim_fixtures", "drivers")
+"""Imported only where used: together they take over a second to import (issue 15), the drivers
+some milliseconds of every command (issue 36)."""
 
 
 def test_console_script_runs_without_traceback(three_lines, tmp_path):
