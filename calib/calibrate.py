@@ -39,6 +39,7 @@ from calib.lm import (
 from calib.models import GROUP_PRIOR, MeasurementModel, thinned
 from calib.params import display_unit
 from calib.serial import block_covariance, pass_blocks
+from calib.special import gammaincc
 
 COARSE_ROWS = 20_000
 """Sample rows above which ``robust_fit`` first fits this many of them (``coarse``) and finishes on
@@ -48,6 +49,11 @@ solver's tolerances, in a few iterations over all rows instead of some twenty.""
 SETTLED_SCALE = 0.01
 """Relative change of every group's loss scale below which a robust round on many rows starts from
 the previous round's solution on all rows, without its subset's run first (``robust_fit``)."""
+
+FREED_P = 5.7e-7
+"""A parameter held at the nominal table and seen at the fitted one (``reidentify``) is freed when
+its refitted values' chi-square against the held ones (their covariance) has a smaller p: five
+sigma, as ``calib.selection.DISCOVERY_P``, for a choice made after looking at the rows."""
 
 DOWNWEIGHTED_BELOW = 0.25
 """A residual row whose squared robust weight falls below this counts as down-weighted (a gross
@@ -530,6 +536,7 @@ def calibrate(
     model = model.by_axes()
     start = fit_setup(model, options) if start is None else start
     after, scale = robust_fit(start.prior, start.before.x, start.free, options, callback, start.scale)
+    start, after, scale = reidentify(model, start, after, scale, options, callback)
     sigma, cov, robot_cov = _uncertainty(start.prior, after, start.free, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[start.free] = sigma
@@ -547,6 +554,43 @@ def calibrate(
         downweighted=_downweighted_rows(start.prior, after, scale, options),
     )
     return correlate(model, cal, options) if options.correlated else cal
+
+
+def reidentify(
+    model: MeasurementModel,
+    start: SetupFit,
+    after: LMResult,
+    scale: np.ndarray,
+    options: CalibrationOptions,
+    callback=None,
+) -> tuple[SetupFit, LMResult, np.ndarray]:
+    """The fit ``after`` (from ``start``, noise ``scale`` per group) again with the robot parameters
+    held at the nominal table that the rows determine at the fitted one, where they demand them.
+
+    At the nominal table a degeneracy (the TCP on joint 6's axis, parallel axes) holds parameters
+    that a real robot's table does not share; what they leave, the free ones cannot absorb. So
+    ``identify`` runs again at ``after.x`` with the structural gauges there, the newly seen
+    parameters are freed and the fit rerun from ``after.x``;
+    the refit is kept where the freed values' chi-square against their held values (the refit's
+    covariance: the noise it found, a sweep's shared errors) has p below ``FREED_P``, else ``after``
+    stays. Returns the setup fit with the freed parameters free and no longer held, the fit and
+    its noise scale.
+    """
+    gauges = model.gauges(after.x)
+    found, _ = identify(model, after.x, setup_unknowns(model), gauges, options.rank_rtol, options.hold_weak)
+    freed = found & ~start.free
+    if not freed.any():
+        return start, after, scale
+    free = start.free | freed
+    refit, refit_scale = robust_fit(start.prior, after.x, free, options, callback, scale)
+    cov = _uncertainty(start.prior, refit, free, refit_scale)[1]
+    at = freed[free]
+    change = refit.x[freed] - after.x[freed]
+    chi2 = float(change @ np.linalg.solve(cov[np.ix_(at, at)], change))
+    if gammaincc(change.size / 2, chi2 / 2) >= FREED_P:
+        return start, after, scale
+    held = {name: why for name, why in start.held.items() if name not in np.asarray(model.names)[freed]}
+    return replace(start, free=free, held=held), refit, refit_scale
 
 
 def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOptions) -> Calibration:
