@@ -7,7 +7,8 @@
    then the joint-space terms) holds whatever else the data cannot tell apart;
 3. "after": LMLC over the identified robot parameters (table and terms) and the setup unknowns,
    first with the linear loss, then with the robust loss whose scale is re-estimated from the
-   residuals (MAD, per group);
+   residuals (MAD, per group); then identifiability again at the fitted table, and the fit again
+   with what the nominal table's degeneracies held and the rows demand (``reidentify``);
 4. where the residuals show an error that neighbouring poses share (``calib.discrepancy``), the
    same fit again by generalised least squares under it, the robust weights kept (``correlate``).
 
@@ -51,9 +52,14 @@ SETTLED_SCALE = 0.01
 the previous round's solution on all rows, without its subset's run first (``robust_fit``)."""
 
 FREED_P = 5.7e-7
-"""A parameter held at the nominal table and seen at the fitted one (``reidentify``) is freed when
-its refitted values' chi-square against the held ones (their covariance) has a smaller p: five
-sigma, as ``calib.selection.DISCOVERY_P``, for a choice made after looking at the rows."""
+"""Parameters held at the nominal table and seen at the fitted one (``reidentify``) are freed when
+their move off the held values is significant (``freed_p``) below this p: five sigma, as
+``calib.selection.DISCOVERY_P``, for a choice made after looking at the rows."""
+
+FREED_STEPS = 3
+"""Gauss-Newton steps (``robust_steps``) from the fit to where ``freed_p`` judges the freed
+parameters: on the sweep plan's noise-free seeds 1 and 9 their chi-square there is the full
+refit's to four digits (one step: a hundredth of it, the residuals still carrying the misfit)."""
 
 DOWNWEIGHTED_BELOW = 0.25
 """A residual row whose squared robust weight falls below this counts as down-weighted (a gross
@@ -569,28 +575,36 @@ def reidentify(
 
     At the nominal table a degeneracy (the TCP on joint 6's axis, parallel axes) holds parameters
     that a real robot's table does not share; what they leave, the free ones cannot absorb. So
-    ``identify`` runs again at ``after.x`` with the structural gauges there, the newly seen
-    parameters are freed and the fit rerun from ``after.x``;
-    the refit is kept where the freed values' chi-square against their held values (the refit's
-    covariance: the noise it found, a sweep's shared errors) has p below ``FREED_P``, else ``after``
-    stays. Returns the setup fit with the freed parameters free and no longer held, the fit and
-    its noise scale.
+    ``identify`` runs again at ``after.x`` with the model's structural gauges there; the newly seen
+    parameters are freed where their move is significant (``freed_p`` below ``FREED_P``) and the
+    fit is rerun from ``after.x`` with them; else ``after`` stays. Returns the setup fit with the
+    freed parameters free and no longer held, the fit and its noise scale.
     """
     gauges = model.gauges(after.x)
     found, _ = identify(model, after.x, setup_unknowns(model), gauges, options.rank_rtol, options.hold_weak)
     freed = found & ~start.free
-    if not freed.any():
+    if not freed.any() or freed_p(start.prior, after, start.free | freed, freed, options) >= FREED_P:
         return start, after, scale
-    free = start.free | freed
-    refit, refit_scale = robust_fit(start.prior, after.x, free, options, callback, scale)
-    cov = _uncertainty(start.prior, refit, free, refit_scale)[1]
-    at = freed[free]
-    change = refit.x[freed] - after.x[freed]
-    chi2 = float(change @ np.linalg.solve(cov[np.ix_(at, at)], change))
-    if gammaincc(change.size / 2, chi2 / 2) >= FREED_P:
-        return start, after, scale
+    refit, refit_scale = robust_fit(start.prior, after.x, start.free | freed, options, callback, scale)
     held = {name: why for name, why in start.held.items() if name not in np.asarray(model.names)[freed]}
-    return replace(start, free=free, held=held), refit, refit_scale
+    return replace(start, free=start.free | freed, held=held), refit, refit_scale
+
+
+def freed_p(
+    model: WithPrior, after: LMResult, free: np.ndarray, freed: np.ndarray, options: CalibrationOptions
+) -> float:
+    """Chi-square p of the ``freed`` parameters (n,) staying where the fit ``after`` held them:
+    ``FREED_STEPS`` Gauss-Newton steps from ``after.x`` over ``free`` (n,) move them by ``dx``, and
+    ``dx^T C^-1 dx`` against their covariance ``C`` there (``_uncertainty``: the noise the steps'
+    residuals show, a sweep's shared errors) is chi-square with as many degrees as parameters."""
+    x = robust_steps(model, after.x, free, FREED_STEPS, options)
+    r = model.residuals_and_jacobian(x, jacobian=False)[0]
+    scale = _scale(r, model.groups)
+    stepped = replace(after, x=x, residuals=r, weights=robust_weights(r, model.groups, scale, options))
+    at = freed[free]
+    cov = _uncertainty(model, stepped, free, scale)[1][np.ix_(at, at)]
+    dx = (x - after.x)[freed]
+    return gammaincc(dx.size / 2, float(dx @ np.linalg.solve(cov, dx)) / 2)
 
 
 def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOptions) -> Calibration:
