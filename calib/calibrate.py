@@ -7,7 +7,8 @@
    then the joint-space terms) holds whatever else the data cannot tell apart;
 3. "after": LMLC over the identified robot parameters (table and terms) and the setup unknowns,
    first with the linear loss, then with the robust loss whose scale is re-estimated from the
-   residuals (MAD, per group);
+   residuals (MAD, per group); then identifiability again at the fitted table, and the fit again
+   with what the nominal table's degeneracies held and the rows demand (``reidentify``);
 4. where the residuals show an error that neighbouring poses share (``calib.discrepancy``), the
    same fit again by generalised least squares under it, the robust weights kept (``correlate``).
 
@@ -39,6 +40,7 @@ from calib.lm import (
 from calib.models import GROUP_PRIOR, MeasurementModel, thinned
 from calib.params import display_unit
 from calib.serial import block_covariance, pass_blocks
+from calib.special import gammaincc
 
 COARSE_ROWS = 20_000
 """Sample rows above which ``robust_fit`` first fits this many of them (``coarse``) and finishes on
@@ -48,6 +50,16 @@ solver's tolerances, in a few iterations over all rows instead of some twenty.""
 SETTLED_SCALE = 0.01
 """Relative change of every group's loss scale below which a robust round on many rows starts from
 the previous round's solution on all rows, without its subset's run first (``robust_fit``)."""
+
+FREED_P = 5.7e-7
+"""Parameters held at the nominal table and seen at the fitted one (``reidentify``) are freed when
+their move off the held values is significant (``freed_p``) below this p: five sigma, as
+``calib.selection.DISCOVERY_P``, for a choice made after looking at the rows."""
+
+FREED_STEPS = 3
+"""Gauss-Newton steps (``robust_steps``) from the fit to where ``freed_p`` judges the freed
+parameters: on the sweep plan's noise-free seeds 1 and 9 their chi-square there is the full
+refit's to four digits (one step: a hundredth of it, the residuals still carrying the misfit)."""
 
 DOWNWEIGHTED_BELOW = 0.25
 """A residual row whose squared robust weight falls below this counts as down-weighted (a gross
@@ -530,6 +542,7 @@ def calibrate(
     model = model.by_axes()
     start = fit_setup(model, options) if start is None else start
     after, scale = robust_fit(start.prior, start.before.x, start.free, options, callback, start.scale)
+    start, after, scale = reidentify(model, start, after, scale, options, callback)
     sigma, cov, robot_cov = _uncertainty(start.prior, after, start.free, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[start.free] = sigma
@@ -547,6 +560,51 @@ def calibrate(
         downweighted=_downweighted_rows(start.prior, after, scale, options),
     )
     return correlate(model, cal, options) if options.correlated else cal
+
+
+def reidentify(
+    model: MeasurementModel,
+    start: SetupFit,
+    after: LMResult,
+    scale: np.ndarray,
+    options: CalibrationOptions,
+    callback=None,
+) -> tuple[SetupFit, LMResult, np.ndarray]:
+    """The fit ``after`` (from ``start``, noise ``scale`` per group) again with the robot parameters
+    held at the nominal table that the rows determine at the fitted one, where they demand them.
+
+    At the nominal table a degeneracy (the TCP on joint 6's axis, parallel axes) holds parameters
+    that a real robot's table does not share; what they leave, the free ones cannot absorb. So
+    ``identify`` runs again at ``after.x`` with the model's structural gauges there; the newly seen
+    parameters are freed where their move is significant (``freed_p`` below ``FREED_P``) and the
+    fit is rerun from ``after.x`` with them; else ``after`` stays. Returns the setup fit with the
+    freed parameters free and no longer held, the fit and its noise scale.
+    """
+    gauges = model.gauges(after.x)
+    found, _ = identify(model, after.x, setup_unknowns(model), gauges, options.rank_rtol, options.hold_weak)
+    freed = found & ~start.free
+    if not freed.any() or freed_p(start.prior, after, start.free | freed, freed, options) >= FREED_P:
+        return start, after, scale
+    refit, refit_scale = robust_fit(start.prior, after.x, start.free | freed, options, callback, scale)
+    held = {name: why for name, why in start.held.items() if name not in np.asarray(model.names)[freed]}
+    return replace(start, free=start.free | freed, held=held), refit, refit_scale
+
+
+def freed_p(
+    model: WithPrior, after: LMResult, free: np.ndarray, freed: np.ndarray, options: CalibrationOptions
+) -> float:
+    """Chi-square p of the ``freed`` parameters (n,) staying where the fit ``after`` held them:
+    ``FREED_STEPS`` Gauss-Newton steps from ``after.x`` over ``free`` (n,) move them by ``dx``, and
+    ``dx^T C^-1 dx`` against their covariance ``C`` there (``_uncertainty``: the noise the steps'
+    residuals show, a sweep's shared errors) is chi-square with as many degrees as parameters."""
+    x = robust_steps(model, after.x, free, FREED_STEPS, options)
+    r = model.residuals_and_jacobian(x, jacobian=False)[0]
+    scale = _scale(r, model.groups)
+    stepped = replace(after, x=x, residuals=r, weights=robust_weights(r, model.groups, scale, options))
+    at = freed[free]
+    cov = _uncertainty(model, stepped, free, scale)[1][np.ix_(at, at)]
+    dx = (x - after.x)[freed]
+    return gammaincc(dx.size / 2, float(dx @ np.linalg.solve(cov, dx)) / 2)
 
 
 def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOptions) -> Calibration:

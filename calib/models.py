@@ -106,8 +106,9 @@ class MeasurementModel(Protocol):
         """Whitened residuals (m,) and their Jacobian (m, n) at ``x`` (None unless ``jacobian``)."""
         ...
 
-    def gauges(self) -> dict[str, str]:
-        """Parameters that no data of this kind can determine, with the reason."""
+    def gauges(self, x: np.ndarray | None = None) -> dict[str, str]:
+        """Parameters that no data of this kind can determine at ``x`` (n,; default the start
+        ``x0``), with the reason."""
         ...
 
     def holding_robot(self) -> MeasurementModel:
@@ -453,10 +454,11 @@ class DrawstringLineModel:
         )
         return pass_rates(dist, s.t_s, s.sweep_pass, s.q, np.radians(RATE_STEP_DEG))
 
-    def gauges(self) -> dict[str, str]:
-        """The table's structural gauges with a free anchor and free lines, and, on one line, the
-        anchor's turn about it."""
-        held = structural_holds(dh_table(self.x0), self.tool, "anchor and the lines")
+    def gauges(self, x: np.ndarray | None = None) -> dict[str, str]:
+        """The table's structural gauges at ``x`` (default the start) with a free anchor and free
+        lines, and, on one line, the anchor's turn about it."""
+        x = self.x0 if x is None else x
+        held = structural_holds(dh_table(x), self.tool, "anchor and the lines")
         if len(self.line_ids) == 1:
             held["anchor.about_line_mm"] = (
                 "a single line: turning the anchor about it keeps every distance to the line"

@@ -217,16 +217,17 @@ class PositionModel:
         sigma[N_DH + N_SETUP :] = self.terms.prior_sigma()
         return sigma
 
-    def gauges(self) -> dict[str, str]:
-        """Table parameters no position data can determine with a free base-to-tracker transform and
-        a free probe offset."""
-        held = structural_holds(self.dh0, self.probe0, "base-to-tracker transform")
+    def gauges(self, x: np.ndarray | None = None) -> dict[str, str]:
+        """Table parameters no position data can determine at ``x`` (default the start) with a free
+        base-to-tracker transform and a free probe offset."""
+        x = self.x0 if x is None else x
+        held = structural_holds(self.dh(x), self.probe(x), "base-to-tracker transform")
         for col in ("theta_deg", "d_mm", "a_mm", "alpha_deg"):
             held[f"J6.{col}"] = (
                 "probe gauge: it moves the probe point rigidly with the flange, which the free probe "
                 "offset absorbs"
             )
-        off_axis = self.probe_axis_distance_mm()
+        off_axis = self.probe_axis_distance_mm(x)
         if off_axis < ON_AXIS_MM:
             why = (
                 f"the probe lies {off_axis:.2f} mm from joint 6's axis: turning that axis about {{}} "
@@ -236,10 +237,11 @@ class PositionModel:
             held["J5.alpha_deg"] = why.format("its common normal with joint 5", "J5.d")
         return held
 
-    def probe_axis_distance_mm(self) -> float:
-        """Distance of the starting probe point from joint 6's axis [mm]."""
-        _, _, a6, alpha6 = self.dh0[5]
-        px, py, pz = self.probe0
+    def probe_axis_distance_mm(self, x: np.ndarray | None = None) -> float:
+        """Distance of the probe point from joint 6's axis at ``x`` (default the start) [mm]."""
+        x = self.x0 if x is None else x
+        _, _, a6, alpha6 = self.dh(x)[5]
+        px, py, pz = self.probe(x)
         return float(np.hypot(a6 + px, np.cos(alpha6) * py - np.sin(alpha6) * pz))
 
     def with_samples(self, samples: PositionSamples) -> PositionModel:

@@ -286,3 +286,60 @@ def test_a_setup_fit_with_other_terms_at_zero_is_the_one_run_again(three_lines):
     assert reused.held == again.held, (reused.held, again.held)
     with pytest.raises(ValueError, match="before_of"):
         fit_setup(thinned(wide, 40), held=again)
+
+
+def _degenerate_cell(offsets: dict[str, float], reidentify: bool, monkeypatch):
+    """70 low-noise rows (the drawstring to 2 um, as in the test above) of seed 0's three-line cell
+    with ``offsets`` [mm, deg] added to its true table; calibrated with or without the
+    re-identification. Returns the calibration and its true workspace error [mm]."""
+    noise = Noise(
+        length_mm=0.002, length_resolution_mm=1e-4, dial_mm=2e-4, dial_resolution_mm=1e-4, q_deg=5e-5
+    )
+    world = dataclasses.replace(World.create(0).changed(offsets), noise=noise)
+    rng = np.random.default_rng(1000)
+    s = world.sample_set(70, rng)
+    setup = SetupFile.model_validate(setup_dict(world, rng))
+    samples = Samples("low-noise", "drawstring", s.q_deg, s.length_mm, s.dial_mm, s.line)
+    if not reidentify:
+        monkeypatch.setattr(calibrate_module, "reidentify", lambda _, start, *fit: (start, *fit[:2]))
+    robot = load_robot(configs.path("robots/hsr_jr680.toml"))
+    cal = calibration.calibrate_samples(samples, robot, setup).calibration
+    monkeypatch.undo()
+    q = world.random_configurations(1000, np.random.default_rng(99))
+    p = tcp_position(dh_table(cal.x), np.radians(q), np.zeros(3))
+    return cal, float(np.sqrt(np.mean(aligned_errors(p, world.true_tcp_mm(q)) ** 2)))
+
+
+NOMINAL_DEGENERACY = ("J5.a_mm", "J5.alpha_deg", "J6.theta_deg")
+"""What the JR680's nominal table holds (its TCP on joint 6's axis, J5's a zero) and a true one may
+not share."""
+
+
+def test_a_true_table_off_the_nominal_degeneracy_frees_what_it_holds(monkeypatch):
+    """J5's a and J6's a 2 mm off (the TCP 2 mm off joint 6's axis): held at the nominal table, the
+    rows cannot be fitted (the drawstring's scale 3.5 stated noises, 0.34 mm true error); decided
+    again at the fitted table, J5's a and alpha and J6's theta are freed, the rows fit to their
+    noise and the true error falls more than threefold (0.10 mm: the 70 rows' own limit, predicted
+    0.08 mm)."""
+    offsets = {"J5.a_mm": 2.0, "J6.a_mm": 2.0}
+    held, held_error = _degenerate_cell(offsets, False, monkeypatch)
+    cal, error = _degenerate_cell(offsets, True, monkeypatch)
+    assert set(NOMINAL_DEGENERACY) <= set(held.held)
+    assert not set(NOMINAL_DEGENERACY) & set(cal.held)
+    assert held.scale[0] > 2.0  # a misfit, not noise: 70 rows' MAD scale is 1 within some 0.15
+    assert cal.scale[0] < 1.5
+    assert error < held_error / 3
+
+
+def test_a_true_table_at_the_nominal_degeneracy_frees_nothing(monkeypatch):
+    """The same cell with J5's a and alpha and J6's theta, d, a and alpha true to the nominal table:
+    the rows determine nothing more at the fitted table than at the nominal one (p of the freed
+    values far above ``FREED_P``), so the calibration is the one without the re-identification."""
+    world = World.create(0)
+    error = (world.true.table_deg - world.nominal.table_deg).ravel()
+    names = NOMINAL_DEGENERACY + ("J6.d_mm", "J6.a_mm", "J6.alpha_deg")
+    offsets = {name: -error[DH_NAMES.index(name)] for name in names}
+    held, _ = _degenerate_cell(offsets, False, monkeypatch)
+    cal, _ = _degenerate_cell(offsets, True, monkeypatch)
+    assert set(NOMINAL_DEGENERACY) <= set(cal.held)
+    np.testing.assert_array_equal(cal.x, held.x)

@@ -7,6 +7,7 @@ from calib.calibrate import WithPrior, covariance
 from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.lines import LineReference, fit_line, line_residual
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.params import DH_NAMES
 from sim_fixtures.world import JR680_FILE, Robot
 from station.formats.tables import load_robot
 
@@ -218,3 +219,13 @@ def test_each_rows_line_noise_is_what_its_dial_reading_says(rng):
     np.testing.assert_array_equal(model.line_sigma(1)[0], [contact, contact])
     np.testing.assert_array_equal(model.line_sigma(2), contact)
     assert [model.dial_mode(lid) for lid in (0, 1, 2)] == ["axis", "gated", "none"]
+
+
+def test_the_gauges_at_a_table_with_the_tcp_on_joint_6s_axis_hold_its_turn(rng):
+    """J6's theta is a gauge where the TCP lies on joint 6's axis: not at the start (the model's
+    TCP 5 mm along the flange's x), at a table whose J6's a is -5 mm."""
+    model = _model(rng, 3)
+    x = model.x0.copy()
+    assert "J6.theta_deg" not in model.gauges() and "J6.theta_deg" not in model.gauges(x)
+    x[DH_NAMES.index("J6.a_mm")] -= 5.0
+    assert "J6.theta_deg" in model.gauges(x)
