@@ -64,6 +64,7 @@ from calib.angle_errors import (
     features,
     posterior_covariance,
     posterior_mean,
+    posterior_means,
     prior_variance,
     sharpened,
 )
@@ -251,18 +252,21 @@ class ProfiledFolds:
         self.gram, self.moment, self.squares = left[:f, :f], -left[:f, f], float(left[f, f])
         self.count = r.size + len(prior)
         self.noise = self.squares / self.count
+        self.trained = np.empty((FOLDS, f, f)), np.empty((FOLDS, f))
+        """Each fold's refit's Gram matrix and moment of the coefficients (from the other folds)."""
         self.parts = [None] * FOLDS
 
         def part(g: int, _: int) -> None:  # fold g's refit from the other folds' Gram matrix
             c = columns[g + 1]
             change, left = profiled(whole - grams[g + 1], k)
+            self.trained[0][g], self.trained[1][g] = left[:f, :f], -left[:f, f]
             response = c[:, k : k + f] - c[:, :k] @ change[:, :f]
             value = c[:, :k] @ change[:, f] - c[:, k + f]
-            self.parts[g] = (left[:f, :f], -left[:f, f], response, value, row[held[g]])
+            self.parts[g] = (response, value, row[held[g]])
 
         each_block(FOLDS, 1, part)
         self.size = r.size
-        self.table_error = float(np.sqrt(3.0 * sum(np.sum(v**2) for *_, v, _ in self.parts) / self.size))
+        self.table_error = float(np.sqrt(3.0 * sum(np.sum(v**2) for _, v, _ in self.parts) / self.size))
 
     def in_sample(self, weights: np.ndarray) -> float:
         """Mean square (whitened) of what the refitted unknowns and the coefficients ``weights``
@@ -275,21 +279,16 @@ class ProfiledFolds:
 
     def error_of(self, prior: np.ndarray) -> float:
         """``error`` of the coefficients' ``prior`` (F,) [rad^2] variance."""
-        squares = 0.0
-        for gram, moment, response, value, _ in self.parts:
-            weights = posterior_mean(gram, moment, self.noise, prior)
-            squares += np.sum((value - response @ weights) ** 2)
+        squares, weights = 0.0, posterior_means(*self.trained, self.noise, prior)
+        for w, (response, value, _) in zip(weights, self.parts, strict=True):
+            squares += np.sum((value - response @ w) ** 2)
         return float(np.sqrt(3.0 * squares / self.size))
 
     def gains(self, length_deg: float, sigma_deg: float) -> tuple[np.ndarray, np.ndarray]:
         """``calib.angle_errors.Folds.gains`` (whitened units)."""
-        prior = prior_variance(length_deg, sigma_deg)
-        gain, rows = [], []
-        for gram, moment, response, value, row in self.parts:
-            weights = posterior_mean(gram, moment, self.noise, prior)
-            gain.append(value**2 - (value - response @ weights) ** 2)
-            rows.append(row)
-        return np.concatenate(gain), np.concatenate(rows)
+        weights = posterior_means(*self.trained, self.noise, prior_variance(length_deg, sigma_deg))
+        gain = [v**2 - (v - a @ w) ** 2 for w, (a, v, _) in zip(weights, self.parts, strict=True)]
+        return np.concatenate(gain), np.concatenate([row for *_, row in self.parts])
 
 
 def absorbed_of(model, x: np.ndarray, change: np.ndarray, offset: np.ndarray) -> np.ndarray:

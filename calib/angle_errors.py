@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.blocks import each_block
+from calib.blocks import each_block, halved
 from calib.kinematics import THETA, tcp_jacobian
 
 ANGLE_JOINTS = 3
@@ -159,6 +159,22 @@ def posterior_mean(gram: np.ndarray, moment: np.ndarray, noise: float, prior: np
     return np.linalg.solve(a, moment / noise)
 
 
+def posterior_means(grams: np.ndarray, moments: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:
+    """``posterior_mean`` (G, F) of each of a stack of ``grams`` (G, F, F) and ``moments`` (G, F)
+    (the folds' training sets), the same numbers, a stack of systems a thread: numpy's batched solve
+    lets the other thread run, its solve of one system does not (measured: five 360 x 360 systems
+    4.0 ms one at a time, 2.6 ms in two stacks)."""
+    out = np.empty(moments.shape)
+
+    def block(s: int, e: int) -> None:
+        a = grams[s:e] / noise
+        a.reshape(len(a), -1)[:, :: a.shape[-1] + 1] += 1.0 / prior
+        out[s:e] = np.linalg.solve(a, moments[s:e, :, None] / noise)[..., 0]
+
+    each_block(len(out), halved(len(out), len(out), least=1), block)
+    return out
+
+
 def posterior_covariance(gram: np.ndarray, noise: float, prior: np.ndarray) -> np.ndarray:
     """Posterior covariance (F, F) [rad^2] of the coefficients (see ``posterior_mean``)."""
     return np.linalg.inv(gram / noise + np.diag(1.0 / prior))
@@ -205,6 +221,8 @@ class Folds:
                 self.squares[f] += float(e @ e)
         self.count = value_mm.size
         self.gram, self.moment = sum(self.grams), sum(self.moments)
+        self.trained = self.gram - np.stack(self.grams), self.moment - np.stack(self.moments)
+        """Each fold's training set's Gram matrix and moment (the other folds'), stacked."""
         self.table_error = float(np.sqrt(3.0 * self.noise))
         """The table alone's fold error [mm] (three components of the mean square)."""
 
@@ -216,20 +234,16 @@ class Folds:
     def error_of(self, prior: np.ndarray) -> float:
         """``error`` of the coefficients' ``prior`` (F,) [rad^2] variance."""
         squares = 0.0
-        for g, m, ee in zip(self.grams, self.moments, self.squares, strict=True):
-            weights = posterior_mean(self.gram - g, self.moment - m, self.noise, prior)
-            squares += ee - 2.0 * weights @ m + weights @ g @ weights
+        weights = posterior_means(*self.trained, self.noise, prior)
+        for w, g, m, ee in zip(weights, self.grams, self.moments, self.squares, strict=True):
+            squares += ee - 2.0 * w @ m + w @ g @ w
         return float(np.sqrt(3.0 * max(squares, 0.0) / self.count))
 
     def gains(self, length_deg: float, sigma_deg: float) -> tuple[np.ndarray, np.ndarray]:
         """Each observation's squared error [mm^2] predicted from the other folds with the table
         alone minus with the errors (K,), and its row (K,) (``clear_gain``): one more pass over
         the design."""
-        prior = prior_variance(length_deg, sigma_deg)
-        weights = [
-            posterior_mean(self.gram - g, self.moment - m, self.noise, prior)
-            for g, m in zip(self.grams, self.moments, strict=True)
-        ]
+        weights = posterior_means(*self.trained, self.noise, prior_variance(length_deg, sigma_deg))
         predicted = np.empty_like(self.value)
         for at, a_block in self.design_blocks():
             out, f_block = predicted[at], self.fold[at]

@@ -266,6 +266,20 @@ def test_a_gears_error_seen_through_one_projection_a_row_is_sharpened_onto_its_o
     assert rms3(error(new) - response @ sharp) < 0.5 * rms3(error(new) - response @ angles.weights)
 
 
+def test_the_folds_stacked_solves_are_each_folds_own():
+    """The folds' posterior means solved as stacks on two threads are, digit for digit, each fold's
+    own solve (the prior's precision on every matrix's diagonal, none elsewhere)."""
+    rng = np.random.default_rng(11)
+    f = angle_errors.ANGLE_JOINTS * 2 * angle_errors.HARMONICS
+    design = rng.normal(size=(5, 2 * f, f))
+    grams, moments = design.transpose(0, 2, 1) @ design, rng.normal(size=(5, f))
+    prior = angle_errors.prior_variance(4.0, 0.02)
+    got = angle_errors.posterior_means(grams, moments, 0.3, prior)
+    for g in range(5):
+        assert np.array_equal(got[g], angle_errors.posterior_mean(grams[g], moments[g], 0.3, prior))
+    assert np.array_equal(grams, design.transpose(0, 2, 1) @ design)  # the inputs left as they were
+
+
 @pytest.mark.parametrize("stages", ["both", "angles", "shared"])
 def test_the_map_as_arrays_predicts_what_the_map_did(stages):
     """Written as named arrays and read back, with either stage or both, the map predicts the same
