@@ -141,17 +141,23 @@ def test_the_local_solve_is_the_dense_gaussian_process_with_the_discrepancys_ker
     rng = np.random.default_rng(3)
     q, queries = rng.uniform(-0.3, 0.3, (30, 6)), rng.uniform(-0.3, 0.3, (7, 6))
     values = rng.normal(0, 0.1, (30, 3))
-    length, shared, noise = 0.1, 0.02, 0.003
+    local, textbook = local_and_textbook(q, queries, values, 0.1, 0.02, 0.003)
+    np.testing.assert_allclose(local[0], textbook[0], atol=1e-10)
+    np.testing.assert_allclose(local[1], textbook[1], atol=1e-10)
+
+
+def local_and_textbook(q, queries, values, length, shared, noise):
+    """``local_posterior`` at ``queries`` (M, 6) with every one of the rows ``q`` (N, 6) a
+    neighbour, and the dense textbook posterior under ``joint_kernel``: (mean, variance) each."""
+    m, n = len(queries), len(q)
     points, at = residual_map.embedding(q), residual_map.embedding(queries)
-    index = residual_map.neighbours(at, points, 30)
+    index = residual_map.neighbours(at, points, n)
     distances = residual_map.local_distances(at, points, index)
-    mean, variance = residual_map.local_posterior(distances, values[index], length, shared, noise)
+    local = residual_map.local_posterior(distances, values[index], length, shared, noise)
     both = joint_kernel(np.vstack([queries, q]), length)
-    cov, cross = shared * both[7:, 7:] + noise * np.eye(30), shared * both[:7, 7:]
-    np.testing.assert_allclose(mean, cross @ np.linalg.solve(cov, values), atol=1e-10)
-    np.testing.assert_allclose(
-        variance, shared - np.sum(cross * np.linalg.solve(cov, cross.T).T, axis=1), atol=1e-10
-    )
+    cov, cross = shared * both[m:, m:] + noise * np.eye(n), shared * both[:m, m:]
+    variance = shared - np.sum(cross * np.linalg.solve(cov, cross.T).T, axis=1)
+    return local, (cross @ np.linalg.solve(cov, values), variance)
 
 
 def test_poses_read_again_and_again_leave_the_local_solve_the_textbook_one():
@@ -162,17 +168,9 @@ def test_poses_read_again_and_again_leave_the_local_solve_the_textbook_one():
     q = np.repeat(rng.uniform(-0.3, 0.3, (6, 6)), 5, axis=0)  # 30 rows, 6 distinct poses
     queries = rng.uniform(-0.3, 0.3, (7, 6))
     values = rng.normal(0, 0.1, (30, 3))
-    length, shared, noise = 0.5, 0.02, 1e-7
-    points, at = residual_map.embedding(q), residual_map.embedding(queries)
-    index = residual_map.neighbours(at, points, 30)
-    distances = residual_map.local_distances(at, points, index)
-    mean, variance = residual_map.local_posterior(distances, values[index], length, shared, noise)
-    both = joint_kernel(np.vstack([queries, q]), length)
-    cov, cross = shared * both[7:, 7:] + noise * np.eye(30), shared * both[:7, 7:]
-    np.testing.assert_allclose(mean, cross @ np.linalg.solve(cov, values), rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(
-        variance, shared - np.sum(cross * np.linalg.solve(cov, cross.T).T, axis=1), atol=1e-9
-    )
+    local, textbook = local_and_textbook(q, queries, values, 0.5, 0.02, 1e-7)
+    np.testing.assert_allclose(local[0], textbook[0], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(local[1], textbook[1], atol=1e-9)
 
 
 def test_the_neighbours_are_the_nearest_rows_of_the_other_folds():
