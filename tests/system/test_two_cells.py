@@ -58,13 +58,29 @@ def test_two_cells_started_at_once_on_the_same_addresses_each_serve_and_read_the
     finally:
         for sim in sims.values():
             sim.stop()
-    # one cell has the configured addresses, the other moved every device and said so
-    assert sorted(len(n) for n in notes.values()) == [0, 3], notes
-    moved = next(name for name in sims if notes[name])
-    assert notes[moved][0].endswith(f"serves {served[moved][0]['host']}:30004")
-    assert served["a"][0]["host"] != served["b"][0]["host"]
-    assert served["a"][1]["port"] != served["b"][1]["port"]
-    assert served["a"][2]["port"] != served["b"][2]["port"]
+    # Neither cell failed and no two serve one address. A cell that kept the configured address
+    # says nothing of it; one that moved says where it serves, device by device. Which moved is not
+    # fixed: the first to bind keeps the address, and another process on the machine (a loaded CI
+    # runner, a leftover server) may hold it so that both move.
+    for device in range(3):
+        a, b = (_where(served[name], device) for name in "ab")
+        assert a != b, (device, a, b)
+    for name in sims:
+        moved = [d for d in range(3) if _where(served[name], d) != _configured(raw, d)]
+        assert len(notes[name]) == len(moved), (name, notes[name], served[name])
+        if 0 in moved:
+            assert notes[name][0].endswith(f"serves {served[name][0]['host']}:30004"), notes[name]
     for name, result in readings.items():
         assert result.returncode == 0, result.stderr
         assert set(json.loads(result.stdout)["devices"]) == {"robot", "drawstring", "dial"}, name
+
+
+def _where(served: list[dict], device: int):
+    """What of device ``device``'s served address (robot, drawstring, dial) two cells could share:
+    the RTDE host (its port is fixed), the Modbus port, the dial's pty link."""
+    return served[device]["host" if device == 0 else "port"]
+
+
+def _configured(raw: dict, device: int):
+    """The configured address of device ``device``, as ``_where`` reads a served one."""
+    return (raw["robot"]["host"], raw["drawstring"]["port"], raw["dial"]["port"])[device]
