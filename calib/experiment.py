@@ -98,6 +98,11 @@ def centre_solutions(
     return q, _valid(dh, tool, limits, q, err)
 
 
+REACHED_MM = 1e-9
+"""Pose error [mm, scaled] at which a turned tool's Newton search stops: reached to far below
+``_valid``'s 1e-3 mm, and each waypoint no longer runs all 60 steps after it is there."""
+
+
 def tool_turned(
     dh: np.ndarray,
     tool: np.ndarray,
@@ -118,7 +123,8 @@ def tool_turned(
     )
     x_start = ik.tool_frames(dh, start[None], tool)[1][0, :, 0]
     rotations = np.stack([_rolled(_orientation(zi, x_start), r) for zi, r in zip(z, roll, strict=True)])
-    q, err = ik.solve(dh, tool, positions, rotations, np.repeat(start[None], len(positions), 0))
+    seeds = np.repeat(start[None], len(positions), 0)
+    q, err = ik.solve(dh, tool, positions, rotations, seeds, tol=REACHED_MM)
     q = _wrap_into(q, limits)
     return q, _valid(dh, tool, limits, q, err)
 
