@@ -25,7 +25,7 @@ from station.jobs.calibration import WORKSPACE_POSES, drawstring_setup
 from station.jobs.planning import Design, contact_poses, placements, promise, robot_arrays
 
 SHAPE = PassShape()
-"""A pass: 6 waypoints end to end, the tool tilted up to 25 deg and rolled up to 60 deg at each."""
+"""A pass: 6 waypoints end to end, the tool tilted up to 45 deg and rolled up to 90 deg at each."""
 SWEEP = SweepLimits()
 """The speeds a sweep keeps to (``calib.sweep.SweepLimits``): 40 mm/s along the edge, 20 deg/s of
 tool turn, rows recorded at 240 Hz."""
