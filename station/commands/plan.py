@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -10,6 +11,8 @@ from errors import InputError
 from station.commands.flags import number, parameters_as_flags, seed
 
 _positive = number(int, "a whole number", lambda v: v >= 1, "{} must be at least 1")
+_tilt = number(float, "a number of degrees", lambda v: 0 <= v < 90, "{} must be from 0 to below 90 deg")
+_roll = number(float, "a number of degrees", lambda v: 0 <= v <= 180, "{} must be from 0 to 180 deg")
 
 FLAGS = {"per_line": "--per-line", "n_select": "--select"}
 """The flag that sets each parameter of the plan design."""
@@ -64,6 +67,19 @@ def register(sub) -> None:
         metavar="K",
         help="with --sweep: K passes more, each on the line where it promises most (default none)",
     )
+    p.add_argument(
+        "--max-tilt",
+        type=_tilt,
+        metavar="DEG",
+        help="with --sweep: the most the tool tilts from the line's approach along a pass (default 45; "
+        "less for a tool that cannot lean so far on the edge)",
+    )
+    p.add_argument(
+        "--max-roll",
+        type=_roll,
+        metavar="DEG",
+        help="with --sweep: the most the tool rolls about its axis from a pass's start (default 90)",
+    )
     p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--no-suggest", action="store_true", help="skip the search for a next line placement")
     p.add_argument("--report", type=Path, help="plan report JSON to write")
@@ -77,6 +93,9 @@ def run(args) -> int:
 
     if args.extra_passes and not args.sweep:
         raise InputError("--extra-passes: only with --sweep (it adds passes to a sweep plan)")
+    for value, flag in ((args.max_tilt, "--max-tilt"), (args.max_roll, "--max-roll")):
+        if value is not None and not args.sweep:
+            raise InputError(f"{flag}: only with --sweep (it shapes a sweep's passes)")
     if args.sweep and args.near is not None:
         raise InputError("--near and --sweep: choose one (a sweep's passes run the whole edge)")
     for path, flag in ((args.out, "--out"), (args.report, "--report"), (args.plot, "--plot")):
@@ -143,8 +162,10 @@ def _sweep(args, robot, setup, where) -> int:
     from station.formats.base import Output, write_outputs
     from station.jobs import sweeping
 
+    turns = {"max_tilt_deg": args.max_tilt, "max_roll_deg": args.max_roll}
+    shape = dataclasses.replace(sweeping.SHAPE, **{k: v for k, v in turns.items() if v is not None})
     design = sweeping.sweep_design(
-        robot, setup, where, passes=args.sweep, extra=args.extra_passes or 0, seed=args.seed
+        robot, setup, where, passes=args.sweep, extra=args.extra_passes or 0, seed=args.seed, shape=shape
     )
     outputs = [Output.text(args.out, "--out", design.plan.csv_text())]
     if args.report:

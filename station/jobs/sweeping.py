@@ -88,7 +88,8 @@ def sweep_design(
         if lids := [lid for lid in pool if pool[lid]]:
             chosen.append(best(chosen, lids))
     chosen = alternating(chosen)
-    return Design(_plan(robot, lines, chosen), _report(dh, tool, limits, chosen, sweep, promised(chosen)))
+    report = _report(dh, tool, limits, chosen, sweep, shape, promised(chosen))
+    return Design(_plan(robot, lines, chosen), report)
 
 
 def alternating(chosen: list) -> list:
@@ -113,8 +114,9 @@ def _plan(robot: RobotFile, lines: dict, chosen: list) -> Plan:
     return Plan(np.arange(len(q)), line, np.degrees(q), contact_poses(robot, q), approach, sweep_pass)
 
 
-def _report(dh, tool, limits, chosen: list, sweep: SweepLimits, promised: dict) -> dict:
-    """What the design promises, per pass its line, waypoints, seconds and rows."""
+def _report(dh, tool, limits, chosen: list, sweep: SweepLimits, shape: PassShape, promised: dict) -> dict:
+    """What the design promises, per pass its line, waypoints, seconds and rows; the speeds and
+    turns it kept to."""
     passes = []
     for k, (lid, w, _) in enumerate(chosen):
         swept = swept_rows(dh, tool, limits, w, sweep, hz=1.0)
@@ -129,7 +131,13 @@ def _report(dh, tool, limits, chosen: list, sweep: SweepLimits, promised: dict) 
         )
     return {
         "sweep": True,
-        "limits": {"tcp_mm_s": sweep.tcp_mm_s, "turn_deg_s": sweep.turn_deg_s, "row_hz": sweep.row_hz},
+        "limits": {
+            "tcp_mm_s": sweep.tcp_mm_s,
+            "turn_deg_s": sweep.turn_deg_s,
+            "row_hz": sweep.row_hz,
+            "max_tilt_deg": shape.max_tilt_deg,
+            "max_roll_deg": shape.max_roll_deg,
+        },
         "passes": passes,
         "swept_s": sum(p["duration_s"] for p in passes),
         "rows": sum(p["rows"] for p in passes),
@@ -143,7 +151,8 @@ def sweep_summary(design: Design) -> str:
     lim = r["limits"]
     out = [
         f"sweep plan: {len(r['passes'])} passes, the tool kept on the edge at up to {lim['tcp_mm_s']:g} "
-        f"mm/s and {lim['turn_deg_s']:g} deg/s of turn, rows recorded at {lim['row_hz']:g} Hz:"
+        f"mm/s and {lim['turn_deg_s']:g} deg/s of turn, tilted up to {lim['max_tilt_deg']:g} deg and "
+        f"rolled up to {lim['max_roll_deg']:g} deg, rows recorded at {lim['row_hz']:g} Hz:"
     ]
     out += [
         f"  pass {p['pass']}: line {p['line']}, {p['waypoints']} waypoints, {p['duration_s']:.1f} s, "

@@ -127,3 +127,51 @@ def test_extra_passes_without_sweep_is_a_one_line_error(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--extra-passes: only with --sweep" in err
     assert not (tmp_path / "p.csv").exists()
+
+
+def _tilts_deg(plan) -> np.ndarray:
+    """Each waypoint's tool axis from its line's approach [deg] (the tool's z, the robot's table)."""
+    from calib import ik
+
+    robot = load_robot(ROBOT)
+    dh = dh_from_degrees(robot.table_deg())
+    z = ik.tool_frames(dh, np.radians(plan.q_deg), np.asarray(robot.tool_mm, float))[1][:, :, 2]
+    return np.degrees(np.arccos(np.clip(np.sum(z * plan.approach, axis=1), -1.0, 1.0)))
+
+
+def test_max_tilt_bounds_every_waypoints_tool_and_is_reported(swept, tmp_path, capsys):
+    # a tool that cannot lean 45 deg on the edge: the plan keeps to what it is told, and says so
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--sweep", "--max-tilt", "10"]
+    out = tmp_path / "plan.csv"
+    assert cli.main(argv + ["--max-roll", "30", "--out", str(out), "--report", str(tmp_path / "r.json")]) == 0
+    assert "tilted up to 10 deg and rolled up to 30 deg" in capsys.readouterr().out
+    limits = json.loads((tmp_path / "r.json").read_text())["limits"]
+    assert (limits["max_tilt_deg"], limits["max_roll_deg"]) == (10.0, 30.0)
+    assert _tilts_deg(load_plan(out)).max() <= 10.0 + 1e-6
+    assert _tilts_deg(swept[0]).max() > 10.0  # the default leans further
+    assert swept[1]["limits"]["max_tilt_deg"] == sweeping.SHAPE.max_tilt_deg
+
+
+def test_the_tools_turns_without_sweep_are_a_one_line_error(tmp_path, capsys):
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--max-tilt", "20"]
+    assert cli.main(argv + ["--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--max-tilt: only with --sweep" in err
+    assert not (tmp_path / "p.csv").exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "said"),
+    [
+        (["--max-tilt", "90"], "argument --max-tilt: 90.0 must be from 0 to below 90 deg"),
+        (["--max-roll", "-5"], "argument --max-roll: -5.0 must be from 0 to 180 deg"),
+        (["--max-roll", "wide"], "argument --max-roll: 'wide' is not a number of degrees"),
+    ],
+)
+def test_turns_a_tool_cannot_take_are_refused_by_the_parser(tmp_path, capsys, extra, said):
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--sweep", *extra]
+    with pytest.raises(SystemExit) as done:
+        cli.main(argv + ["--out", str(tmp_path / "p.csv")])
+    assert done.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].endswith(said)
+    assert not (tmp_path / "p.csv").exists()
