@@ -8,6 +8,7 @@ import pytest
 import tomli_w
 
 import configs
+from calib import ik
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
 from calib.params import dh_from_degrees
@@ -121,18 +122,17 @@ def test_alternating_keeps_round_robin_order_and_splits_a_line_with_most_passes(
     assert [c[1] for c in order if c[0] == 0] == ["a", "d", "e"]
 
 
-def test_extra_passes_without_sweep_is_a_one_line_error(tmp_path, capsys):
-    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--extra-passes", "2"]
+@pytest.mark.parametrize("flag", ["--extra-passes", "--max-tilt"])
+def test_a_sweeps_options_without_sweep_are_a_one_line_error(tmp_path, capsys, flag):
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), flag, "2"]
     assert cli.main(argv + ["--out", str(tmp_path / "p.csv")]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--extra-passes: only with --sweep" in err
+    assert len(err.splitlines()) == 1 and f"{flag}: only with --sweep" in err
     assert not (tmp_path / "p.csv").exists()
 
 
 def _tilts_deg(plan) -> np.ndarray:
     """Each waypoint's tool axis from its line's approach [deg] (the tool's z, the robot's table)."""
-    from calib import ik
-
     robot = load_robot(ROBOT)
     dh = dh_from_degrees(robot.table_deg())
     z = ik.tool_frames(dh, np.radians(plan.q_deg), np.asarray(robot.tool_mm, float))[1][:, :, 2]
@@ -150,14 +150,6 @@ def test_max_tilt_bounds_every_waypoints_tool_and_is_reported(swept, tmp_path, c
     assert _tilts_deg(load_plan(out)).max() <= 10.0 + 1e-6
     assert _tilts_deg(swept[0]).max() > 10.0  # the default leans further
     assert swept[1]["limits"]["max_tilt_deg"] == sweeping.SHAPE.max_tilt_deg
-
-
-def test_the_tools_turns_without_sweep_are_a_one_line_error(tmp_path, capsys):
-    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--max-tilt", "20"]
-    assert cli.main(argv + ["--out", str(tmp_path / "p.csv")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--max-tilt: only with --sweep" in err
-    assert not (tmp_path / "p.csv").exists()
 
 
 @pytest.mark.parametrize(
