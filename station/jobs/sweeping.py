@@ -59,7 +59,8 @@ def sweep_design(
         if len(found) < passes:
             raise InputError(
                 f"{where}: [[lines]] id {lid}: {len(found)} of {passes} passes along the edge stay "
-                "within the joint limits away from singularities; move the gauge block or sweep fewer"
+                "within the joint limits away from singularities; move the gauge block, sweep fewer or let "
+                f"the tool tilt more than {shape.max_tilt_deg:g} deg"
             )
         pool[lid] = [(q, swept_rows(dh, tool, limits, q, sweep, hz=SCORE_HZ).q) for q in found]
     workspace_q = rng.uniform(limits[:, 0], limits[:, 1], (WORKSPACE_POSES, 6))

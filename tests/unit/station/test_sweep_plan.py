@@ -167,3 +167,13 @@ def test_turns_a_tool_cannot_take_are_refused_by_the_parser(tmp_path, capsys, ex
     assert done.value.code == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].endswith(said)
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_a_tool_that_cannot_tilt_is_told_which_line_it_cannot_sweep_and_why(tmp_path, capsys):
+    # with the tool held at its line's approach, line 1's pass runs through the wrist's singularity
+    argv = ["plan", "--robot", str(ROBOT), "--setup", str(SETUP), "--sweep", "--max-tilt", "0"]
+    assert cli.main(argv + ["--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "[[lines]] id 1: 0 of 1 passes" in err and "let the tool tilt more than 0 deg" in err
+    assert not (tmp_path / "p.csv").exists()
