@@ -196,7 +196,7 @@ def summary(report: CalibrationReport) -> str:
             if m is not None:
                 lines.append(error_row(f"{part} {when}", m.rmse_mm, m.mean_mm, m.max_mm))
     from calib.joint_terms import TERM_KINDS
-    from station.jobs.calibration import HOLDOUT_SCOPES
+    from station.jobs.fit_check import HOLDOUT_SCOPES
 
     terms_held = sum(1 for h in report.held if h.param.partition(".")[2] in TERM_KINDS)
     held = ", ".join(h.param for h in report.held if h.param.partition(".")[2] not in TERM_KINDS)

@@ -368,7 +368,7 @@ class SetupFile(Strict):
 
 MAX_NOISE_SCALE = 100.0
 """A calibration whose residual is this many times the stated noise is refused (``station.jobs.
-calibration.OVERWHELMING_RATIO``), so a table's ``noise_scale`` lies below it."""
+fit_check.OVERWHELMING_RATIO``), so a table's ``noise_scale`` lies below it."""
 SAME_ROBOT_MM, SAME_ROBOT_DEG = 50.0, 10.0
 """Largest table difference between a calibrated robot and its nominal model: beyond it the two
 files describe different robots."""

@@ -3,7 +3,7 @@ contradict (flipped, another axis, no dial on that edge), many rows down-weighte
 the lines read without a dial (what is lost), and a calibration no better than the nominal table.
 
 Each check returns the warnings it calls for and, where the evidence leaves no doubt, a refusal
-naming the likely cause and its fix; ``station.jobs.calibration.fit_check`` adds them to its own.
+naming the likely cause and its fix; ``station.jobs.fit_check.fit_check`` adds them to its own.
 """
 
 from __future__ import annotations

@@ -31,14 +31,13 @@ from station.formats.samples import Samples
 from station.formats.tables import RobotFile, SetupFile
 from station.jobs import absorbed
 from station.jobs.calibration import (
-    EXCURSION_OVERWHELMING,
-    NOISE_DOUBT_RATIO,
     build_model,
     check_joint_limits,
     payload_of,
     provenance,
     workspace_configurations,
 )
+from station.jobs.fit_check import EXCURSION_OVERWHELMING, NOISE_DOUBT_RATIO
 from station.jobs.planning import USUALLY_MOVE
 from station.jobs.report import ERROR_HEADER, Provenance, error_row
 from station.jobs.residual_map import mapped_q_deg

@@ -14,7 +14,7 @@ from calib.position import rotation_from_vector
 from station.cli import main
 from station.formats.samples import load_samples
 from station.formats.tables import load_robot
-from station.jobs import calibration
+from station.jobs import calibration, fit_check
 from station.jobs.report import WorkspacePrediction
 
 ROBOT = Path(__file__).resolve().parents[3] / "configs/robots/ur10.toml"
@@ -89,7 +89,7 @@ def test_a_position_set_that_cannot_promise_the_workspace_says_what_to_measure(t
     out = calibration.calibrate_samples(load_samples(samples), load_robot(ROBOT), None)
     fit = out.report.after.train
     far = WorkspacePrediction(20 * fit.rmse_mm + 1.0, 40 * fit.rmse_mm + 2.0, 1000)
-    (warning,) = calibration.workspace_warnings(out.model, out.calibration.x, fit, far)
+    (warning,) = fit_check.workspace_warnings(out.model, out.calibration.x, fit, far)
     assert "fits its 30 poses to" in warning and "more configurations" in warning
 
 
