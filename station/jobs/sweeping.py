@@ -33,6 +33,9 @@ SCORE_HZ = 5.0
 """Rows a second the choice scores a pass by (each weighing ``row_hz / SCORE_HZ`` recorded rows)."""
 CANDIDATES = 8
 """Random passes drawn per line to choose from."""
+ROW_SLACK = 1e-6
+"""Of a row: a pass whose duration times the row rate falls this short of a whole number (12.5 s
+computed as 12.499999999999995) still counts its last row."""
 
 
 def sweep_design(
@@ -127,7 +130,7 @@ def _report(dh, tool, limits, chosen: list, sweep: SweepLimits, shape: PassShape
                 "line": int(lid),
                 "waypoints": len(w),
                 "duration_s": swept.duration_s,
-                "rows": int(swept.duration_s * sweep.row_hz) + 1,
+                "rows": int(swept.duration_s * sweep.row_hz + ROW_SLACK) + 1,
             }
         )
     return {
