@@ -13,7 +13,8 @@
    same fit again by generalised least squares under it, the robust weights kept (``correlate``).
 
 The robot's parameters are everything of ``x`` that is not setup (``~model.setup_mask``): the table,
-then the terms (``calib.joint_terms``).
+then the terms (``calib.joint_terms``). Step 2's selection is ``calib.identifiability.identify``;
+the unknowns' covariance after each fit, ``calib.uncertainty``.
 """
 
 from __future__ import annotations
@@ -22,10 +23,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from calib.accuracy import robot_covariance
 from calib.discrepancy import Blocks, Correlated, Discrepancy, estimate, tcp_rms_mm
-from calib.identifiability import redundancy_partners, select_columns, weakly_determined
-from calib.kinematics import N_DH
+from calib.identifiability import identify
 from calib.lm import (
     NORMAL_ROWS,
     LMOptions,
@@ -38,9 +37,8 @@ from calib.lm import (
     weighted_blocks,
 )
 from calib.models import GROUP_PRIOR, MeasurementModel, thinned
-from calib.params import display_unit
-from calib.serial import block_covariance, pass_blocks
 from calib.special import gammaincc
+from calib.uncertainty import row_noise, uncertainty, workspace_mask
 
 COARSE_ROWS = 20_000
 """Sample rows above which ``robust_fit`` first fits this many of them (``coarse``) and finishes on
@@ -332,97 +330,6 @@ def scaled_least_squares(jac: np.ndarray, free: np.ndarray, w: np.ndarray, wr: n
     return np.linalg.lstsq(r[: cols.size, : cols.size], r[: cols.size, cols.size], rcond=cut)[0] / d
 
 
-def identify(
-    model: MeasurementModel,
-    x: np.ndarray,
-    free_setup: np.ndarray,
-    gauges: dict[str, str],
-    rtol: float,
-    hold_weak: bool = True,
-) -> tuple[np.ndarray, dict[str, str]]:
-    """The robot parameters (table and terms) the data determines at ``x``, and why the others are
-    held.
-
-    Structural ``gauges`` are held first; a rank-revealing selection over the column-scaled
-    Jacobian (setup unknowns first, then the table joint by joint, then the terms) holds what the
-    data cannot tell apart; then a parameter is held where the data pins it down no better than
-    what is known before measuring (``model.prior_sigma()``: a table parameter's manufacturing
-    tolerance, a term's prior).
-
-    Parameters
-    ----------
-    model : MeasurementModel
-        The data's model.
-    x : ndarray, shape (n,)
-        Where to linearise (the setup fit), internal units.
-    free_setup : ndarray of bool, shape (n,)
-        Setup unknowns that are fitted.
-    gauges : dict of str to str
-        Parameters held by structure, with reasons.
-    rtol : float
-        Relative column size below which a scaled column counts as produced by the others.
-    hold_weak : bool
-        Whether to hold what the data determines no better than its prior (else it is estimated,
-        its prior keeping it near where the robot was built).
-
-    Returns
-    -------
-    robot : ndarray of bool, shape (n,)
-        The identified robot parameters.
-    held : dict of str to str
-        Every held parameter of ``model.names`` and why.
-    """
-    jac = column_geometry(model.residuals_and_jacobian(x)[1])
-    names = model.names
-    candidates = [k for k in np.flatnonzero(~model.setup_mask) if names[k] not in gauges]
-    order = np.concatenate([np.flatnonzero(free_setup), candidates]).astype(int)
-    kept = select_columns(jac, order, rtol)
-    held = {n: r for n, r in gauges.items() if n in names}
-    norms = np.linalg.norm(jac, axis=0)
-    for k in candidates:
-        if kept[k]:
-            continue
-        if norms[k] <= 1e-9 * norms.max():
-            held[names[k]] = "it moves none of the measured points"
-        else:
-            partners = ", ".join(redundancy_partners(jac, k, kept, names))
-            held[names[k]] = f"the data cannot tell it apart from {partners}"
-    kept_robot = [k for k in candidates if kept[k]]
-    prior = model.prior_sigma()
-    weak = {}
-    if hold_weak:
-        weak = weakly_determined(jac, np.flatnonzero(free_setup | kept), set(kept_robot), prior)
-    for k, sigma in weak.items():
-        held[names[k]] = weak_reason(
-            names[k], sigma, prior[k], "manufacturing tolerance" if k < N_DH else "prior"
-        )
-    robot = np.zeros(len(names), bool)
-    robot[[k for k in kept_robot if k not in weak]] = True
-    return robot, held
-
-
-def column_geometry(jac: np.ndarray) -> np.ndarray:
-    """``jac`` (m, n) itself on rows that fit one block (``NORMAL_ROWS``: planning's, as before);
-    on more, ``R`` (n, n) of its QR factorisation, built block by block: the same column norms and
-    angles (``R^T R = J^T J``, all ``identify`` looks at) in n rows instead of m."""
-    if len(jac) <= NORMAL_ROWS:
-        return jac
-    r = np.empty((0, jac.shape[1]))
-    for block in row_blocks(jac):
-        r = np.linalg.qr(np.vstack([r, block]), mode="r")
-    return r
-
-
-def weak_reason(name: str, sigma: float, prior: float, what: str) -> str:
-    """Why a parameter is held although the data sees it: its ``sigma`` from the data against its
-    ``prior`` (both internal units), ``what`` the prior is (a tolerance, a prior)."""
-    factor, unit = display_unit(name)
-    return (
-        f"the data determines it only to +-{sigma * factor:.3g} {unit}, no better than its "
-        f"{what} (+-{prior * factor:.3g} {unit})"
-    )
-
-
 @dataclass
 class SetupFit:
     """Steps 1-2 of the pipeline, all a table fit starts from.
@@ -543,7 +450,7 @@ def calibrate(
     start = fit_setup(model, options) if start is None else start
     after, scale = robust_fit(start.prior, start.before.x, start.free, options, callback, start.scale)
     start, after, scale = reidentify(model, start, after, scale, options, callback)
-    sigma, cov, robot_cov = _uncertainty(start.prior, after, start.free, scale)
+    sigma, cov, robot_cov = uncertainty(start.prior, after, start.free, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[start.free] = sigma
     cal = Calibration(
@@ -600,14 +507,15 @@ def freed_p(
 ) -> float:
     """Chi-square p of the ``freed`` parameters (n,) staying where the fit ``after`` held them:
     ``FREED_STEPS`` Gauss-Newton steps from ``after.x`` over ``free`` (n,) move them by ``dx``, and
-    ``dx^T C^-1 dx`` against their covariance ``C`` there (``_uncertainty``: the noise the steps'
-    residuals show, a sweep's shared errors) is chi-square with as many degrees as parameters."""
+    ``dx^T C^-1 dx`` against their covariance ``C`` there (``calib.uncertainty.uncertainty``: the
+    noise the steps' residuals show, a sweep's shared errors) is chi-square with as many degrees as
+    parameters."""
     x = robust_steps(model, after.x, free, FREED_STEPS, options)
     r = model.residuals_and_jacobian(x, jacobian=False)[0]
     scale = _scale(r, model.groups)
     stepped = replace(after, x=x, residuals=r, weights=robust_weights(r, model.groups, scale, options))
     at = freed[free]
-    cov = _uncertainty(model, stepped, free, scale)[1][np.ix_(at, at)]
+    cov = uncertainty(model, stepped, free, scale)[1][np.ix_(at, at)]
     dx = (x - after.x)[freed]
     return gammaincc(dx.size / 2, float(dx @ np.linalg.solve(cov, dx)) / 2)
 
@@ -638,7 +546,7 @@ def correlate(model: MeasurementModel, cal: Calibration, options: CalibrationOpt
         groups=prior.groups,
     )
     scale = _scale(result.residuals, prior.groups)
-    sigma, cov, robot_cov = _uncertainty(weighted, result, cal.identified, scale)
+    sigma, cov, robot_cov = uncertainty(weighted, result, cal.identified, scale)
     full_sigma = np.full(len(model.names), np.nan)
     full_sigma[cal.identified] = sigma
     after = replace(
@@ -669,122 +577,6 @@ def _scale(residuals: np.ndarray, groups: np.ndarray) -> np.ndarray:
     if scale.size > GROUP_PRIOR:
         scale[GROUP_PRIOR] = 1e6
     return scale
-
-
-def _uncertainty(model: WithPrior, result: LMResult, free: np.ndarray, scale: np.ndarray):
-    """Standard deviations and covariance of the free unknowns and the robot's covariance, of the
-    fit as it was weighted (stated noise, robust weights), each instrument's rows with the noise
-    the fit found (``scale``, per group)."""
-    noise, shared = row_noise(model, scale), None
-    blocks = sweep_blocks(model)
-    if blocks is not None:  # a sweep's rows share their errors: their blocks' spread, not the noise's
-        noise = np.where(blocks >= 0, 0.0, noise)
-        shared = _swept_covariance(model, result, free, blocks)
-    cov, robot_cov = covariance(model, result.x, free, result.weights, noise, shared)
-    return np.sqrt(np.diag(cov)), cov, robot_cov
-
-
-def _swept_covariance(model: WithPrior, result: LMResult, free: np.ndarray, blocks: np.ndarray) -> np.ndarray:
-    """The swept rows' covariance of the free unknowns (``calib.serial.block_covariance``); the
-    Jacobian freed before ``covariance`` takes its own."""
-    jac = model.residuals_and_jacobian(result.x)[1]
-    return block_covariance(jac, np.flatnonzero(free), result.weights, result.residuals, blocks)
-
-
-def sweep_blocks(model: WithPrior) -> np.ndarray | None:
-    """Each residual's block of a sweep pass (m,) (``calib.serial.pass_blocks``; -1 for rows of no
-    pass and the prior); None for a set without passes."""
-    samples = model.model.samples
-    if getattr(samples, "sweep_pass", None) is None:
-        return None
-    blocks = np.append(pass_blocks(samples.sweep_pass, samples.t_s), -1)
-    return blocks[np.where(model.rows >= 0, model.rows, -1)]
-
-
-def row_noise(model: WithPrior, scale: np.ndarray) -> np.ndarray:
-    """Each row's fitted noise in units of its stated noise (m,): its group's ``scale``; 1 for the
-    prior rows (what was known before measuring does not shrink because the instruments read
-    better than stated)."""
-    return np.where(model.groups == GROUP_PRIOR, 1.0, scale[model.groups])
-
-
-def covariance(
-    model: WithPrior,
-    x: np.ndarray,
-    free: np.ndarray,
-    row_weights: np.ndarray | float = 1.0,
-    noise: np.ndarray | float = 1.0,
-    shared: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Covariance of the ``free`` unknowns and of the robot, the held parameters considered.
-
-    The fit minimised ``|W r|^2`` with ``r`` the rows whitened by their stated noise and ``W`` the
-    robust weights; the rows' actual noise is ``noise`` (stated units). Where the instruments read
-    otherwise than stated, that fit is not the best-weighted one, and its covariance is the
-    sandwich::
-
-        A = W J,   C = (A^T A)^-1 A^T diag(W^2 noise^2) A (A^T A)^-1
-
-    (``(A^T A)^-1`` when the noise is as stated). A held parameter moves the fit by
-    ``-(A^T A)^-1 A^T W J_held`` per unit (``accuracy.robot_covariance``). The robot here is what the
-    TCP's workspace error depends on (``workspace_mask``): the table, the terms and, where the model
-    fits it (``model.tool_mask``: a tracker's probe), the TCP in the flange frame; so a held
-    parameter the fitted TCP absorbs (any change of the last link, on a tracker) shifts the TCP
-    instead and leaves the measured point where it is. Each held robot parameter counts at its
-    prior (``model.prior_sigma()``).
-
-    Parameters
-    ----------
-    model : WithPrior
-        The prior-augmented model.
-    x : ndarray, shape (n,)
-        Where to linearise, internal units.
-    free : ndarray of bool, shape (n,)
-        The fitted unknowns (k of them).
-    row_weights : ndarray, shape (m,), or float
-        The fit's robust weights ``W``.
-    noise : ndarray, shape (m,), or float
-        Each row's actual noise in units of its stated noise (``row_noise``).
-    shared : ndarray, shape (k, k), optional
-        Covariance of the free unknowns from rows whose ``noise`` is 0 here: a sweep's rows, which
-        share their errors (``calib.serial.block_covariance``).
-
-    Returns
-    -------
-    covariance : ndarray, shape (k, k)
-        Of the free unknowns, internal units.
-    robot_covariance : ndarray, shape (r, r)
-        Of ``workspace_mask(model)``'s entries, internal units, with the held ones considered.
-    """
-    _, jac = model.residuals_and_jacobian(x)
-    w, noise = np.broadcast_to(row_weights, model.groups.shape), np.broadcast_to(noise, model.groups.shape)
-    held = np.flatnonzero(~model.setup_mask & ~free)
-    inverse = np.linalg.pinv(block_sum(a.T @ a for a in weighted_blocks(jac, np.flatnonzero(free), w)))
-    cov = cross = None
-    for a, a_held, w_block, noise_block in zip(
-        weighted_blocks(jac, np.flatnonzero(free), w),
-        weighted_blocks(jac, held, w),
-        row_blocks(w),
-        row_blocks(noise),
-        strict=True,
-    ):
-        gain = inverse @ a.T  # the fit's response to these weighted rows
-        spread = gain * w_block * noise_block
-        products = spread @ spread.T, -gain @ a_held
-        cov, cross = products if cov is None else (cov + products[0], cross + products[1])
-    cov = cov if shared is None else cov + shared
-    robot = np.flatnonzero(workspace_mask(model))
-    robot_cov = robot_covariance(
-        cov, cross, np.flatnonzero(free), held, model.model.prior_sigma()[held], robot
-    )
-    return cov, robot_cov
-
-
-def workspace_mask(model: MeasurementModel) -> np.ndarray:
-    """What the TCP's workspace error depends on, shape (n,) of bool: the robot's parameters (the
-    table, the terms) and the TCP's flange coordinates where the model fits them; in ``x``'s order,
-    which is table, TCP, terms (``accuracy.workspace_error_modes`` takes them so)."""
-    return ~model.setup_mask | model.tool_mask
 
 
 def robust_weights(

@@ -16,9 +16,10 @@ import numpy as np
 
 from calib import ik
 from calib.accuracy import workspace_error_modes
-from calib.calibrate import CalibrationOptions, covariance, fit_setup, row_noise
+from calib.calibrate import CalibrationOptions, fit_setup
 from calib.kinematics import dh_table, tcp_position
 from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
+from calib.uncertainty import covariance, row_noise
 
 MIN_CONDITIONING = 0.04
 """Inverse condition number of the scaled geometric Jacobian below which a pose counts as near a

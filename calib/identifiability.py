@@ -8,14 +8,23 @@ Two views that must agree:
   priority order: a column is kept when the part of it that the kept columns cannot produce is
   larger than ``rtol`` of its norm;
 - ``weakly_determined``: of the columns left, those the data pins down no better than the
-  robot is made to (``TOLERANCE``: 0.2 deg, 1 mm), from the covariance under the stated noise.
+  robot is made to (``TOLERANCE``: 0.2 deg, 1 mm), from the covariance under the stated noise;
+- ``identify``: all three on a model at a point, with each held parameter's reason (the
+  pipeline's step 2, ``calib.calibrate``).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from calib.kinematics import parallel_axis_pairs
+from calib.kinematics import N_DH, parallel_axis_pairs
+from calib.lm import NORMAL_ROWS, row_blocks
+from calib.params import display_unit
+
+if TYPE_CHECKING:
+    from calib.models import MeasurementModel
 
 TOLERANCE_DEG, TOLERANCE_MM = 0.2, 1.0
 """Manufacturing tolerance of a link parameter (1 sigma): what is known before measuring."""
@@ -179,3 +188,94 @@ def weakly_determined(jac: np.ndarray, cols: np.ndarray, candidates, tol: np.nda
             return held
         held[worst] = float(sigma[cols.index(worst)])
         cols.remove(worst)
+
+
+def identify(
+    model: MeasurementModel,
+    x: np.ndarray,
+    free_setup: np.ndarray,
+    gauges: dict[str, str],
+    rtol: float,
+    hold_weak: bool = True,
+) -> tuple[np.ndarray, dict[str, str]]:
+    """The robot parameters (table and terms) the data determines at ``x``, and why the others are
+    held.
+
+    Structural ``gauges`` are held first; a rank-revealing selection over the column-scaled
+    Jacobian (setup unknowns first, then the table joint by joint, then the terms) holds what the
+    data cannot tell apart; then a parameter is held where the data pins it down no better than
+    what is known before measuring (``model.prior_sigma()``: a table parameter's manufacturing
+    tolerance, a term's prior).
+
+    Parameters
+    ----------
+    model : MeasurementModel
+        The data's model.
+    x : ndarray, shape (n,)
+        Where to linearise (the setup fit), internal units.
+    free_setup : ndarray of bool, shape (n,)
+        Setup unknowns that are fitted.
+    gauges : dict of str to str
+        Parameters held by structure, with reasons.
+    rtol : float
+        Relative column size below which a scaled column counts as produced by the others.
+    hold_weak : bool
+        Whether to hold what the data determines no better than its prior (else it is estimated,
+        its prior keeping it near where the robot was built).
+
+    Returns
+    -------
+    robot : ndarray of bool, shape (n,)
+        The identified robot parameters.
+    held : dict of str to str
+        Every held parameter of ``model.names`` and why.
+    """
+    jac = column_geometry(model.residuals_and_jacobian(x)[1])
+    names = model.names
+    candidates = [k for k in np.flatnonzero(~model.setup_mask) if names[k] not in gauges]
+    order = np.concatenate([np.flatnonzero(free_setup), candidates]).astype(int)
+    kept = select_columns(jac, order, rtol)
+    held = {n: r for n, r in gauges.items() if n in names}
+    norms = np.linalg.norm(jac, axis=0)
+    for k in candidates:
+        if kept[k]:
+            continue
+        if norms[k] <= 1e-9 * norms.max():
+            held[names[k]] = "it moves none of the measured points"
+        else:
+            partners = ", ".join(redundancy_partners(jac, k, kept, names))
+            held[names[k]] = f"the data cannot tell it apart from {partners}"
+    kept_robot = [k for k in candidates if kept[k]]
+    prior = model.prior_sigma()
+    weak = {}
+    if hold_weak:
+        weak = weakly_determined(jac, np.flatnonzero(free_setup | kept), set(kept_robot), prior)
+    for k, sigma in weak.items():
+        held[names[k]] = weak_reason(
+            names[k], sigma, prior[k], "manufacturing tolerance" if k < N_DH else "prior"
+        )
+    robot = np.zeros(len(names), bool)
+    robot[[k for k in kept_robot if k not in weak]] = True
+    return robot, held
+
+
+def column_geometry(jac: np.ndarray) -> np.ndarray:
+    """``jac`` (m, n) itself on rows that fit one block (``NORMAL_ROWS``: planning's, as before);
+    on more, ``R`` (n, n) of its QR factorisation, built block by block: the same column norms and
+    angles (``R^T R = J^T J``, all ``identify`` looks at) in n rows instead of m."""
+    if len(jac) <= NORMAL_ROWS:
+        return jac
+    r = np.empty((0, jac.shape[1]))
+    for block in row_blocks(jac):
+        r = np.linalg.qr(np.vstack([r, block]), mode="r")
+    return r
+
+
+def weak_reason(name: str, sigma: float, prior: float, what: str) -> str:
+    """Why a parameter is held although the data sees it: its ``sigma`` from the data against its
+    ``prior`` (both internal units), ``what`` the prior is (a tolerance, a prior)."""
+    factor, unit = display_unit(name)
+    return (
+        f"the data determines it only to +-{sigma * factor:.3g} {unit}, no better than its "
+        f"{what} (+-{prior * factor:.3g} {unit})"
+    )

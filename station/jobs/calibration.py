@@ -24,9 +24,7 @@ from calib.calibrate import (
     WithPrior,
     calibrate,
     correlate,
-    covariance,
     fit_setup,
-    row_noise,
 )
 from calib.kinematics import dh_table
 from calib.methods import ALL_METHODS, BASELINES
@@ -43,6 +41,7 @@ from calib.params import DH_NAMES, dh_from_degrees, display_factor
 from calib.position import PositionModel, PositionSamples
 from calib.residual_map import ResidualMap, left_share
 from calib.selection import TermSelection
+from calib.uncertainty import covariance, row_noise
 from errors import InputError, ParameterError
 from station.formats.samples import Samples
 from station.formats.tables import Payload, RobotFile, SetupFile

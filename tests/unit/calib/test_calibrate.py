@@ -7,9 +7,9 @@ import pytest
 
 import configs
 from calib import calibrate as calibrate_module
-from calib import lm
-from calib.calibrate import CalibrationOptions, column_geometry, fit_setup, identify
-from calib.identifiability import select_columns, structural_holds
+from calib import identifiability, lm
+from calib.calibrate import CalibrationOptions, fit_setup
+from calib.identifiability import column_geometry, identify, select_columns, structural_holds
 from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
@@ -191,7 +191,7 @@ def test_column_geometry_keeps_what_identify_looks_at(rng, monkeypatch):
     jac[:, 4] = jac[:, 0] + jac[:, 2]
     order = np.arange(6)
     assert column_geometry(jac) is jac
-    monkeypatch.setattr(calibrate_module, "NORMAL_ROWS", 32)
+    monkeypatch.setattr(identifiability, "NORMAL_ROWS", 32)
     r = column_geometry(jac)
     assert r.shape == (6, 6)
     np.testing.assert_allclose(r.T @ r, jac.T @ jac, rtol=1e-12, atol=1e-12 * np.abs(jac.T @ jac).max())
