@@ -272,7 +272,7 @@ def fit_check(
     options = CalibrationOptions() if lm else CalibrationOptions(loss="linear")
     weights = robust_weights(r, model.groups, cal.scale, options)
     found = absorbed.findings(model, cal, weights)
-    nominal = workspace and nominal_q is not None and absorbed.nominal_rmse(model, cal, nominal_q)
+    nominal = None if workspace is None or nominal_q is None else absorbed.nominal_rmse(model, cal, nominal_q)
     test = noise_test(r, weights, int(cal.identified.sum()))
     agreement = _agreement(model, cal) if _beyond_noise(test) else None
     capped = bool(lm and cal.after.status == 0)
