@@ -37,7 +37,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.ipa_ur10 import ROOT, SERIES, Series, load, position_set  # noqa: E402
 from calib.kinematics import dh_table  # noqa: E402
 from calib.position import PositionModel, PositionSamples, register  # noqa: E402
-from calib.residual_map import ResidualMap, fit_map, rms3  # noqa: E402
+from calib.residual_map import ResidualMap, fit_map  # noqa: E402
+from calib.shared_error import rms3  # noqa: E402
 from station.formats.samples import Samples  # noqa: E402
 from station.formats.tables import load_robot  # noqa: E402
 from station.jobs.calibration import CalibrationOutcome, calibrate_samples  # noqa: E402

@@ -79,16 +79,8 @@ from calib.compliance import (
 from calib.kinematics import N_DH, THETA, tcp_jacobian
 from calib.map_rows import model_observations
 from calib.models import thinned
-from calib.residual_map import (
-    ABSORBED,
-    TOOL,
-    ResidualMap,
-    fit_observed_shared,
-    fit_rows_map,
-    frame_response,
-    rms3,
-    table_response,
-)
+from calib.residual_map import ABSORBED, TOOL, ResidualMap, fit_rows_map, frame_response, table_response
+from calib.shared_error import fit_observed_shared, rms3
 
 MAP_ROWS = 20_000
 """Rows the angle errors are fitted on at most: a larger calibration's fixed draw (the errors are

@@ -2,7 +2,7 @@
 so that the residual map (``calib.residual_map``) is learnt where the robot will be used.
 
 Nearness is the map's own: the chord distance ``2 sin(dq / 2)`` of joints 1-3 (those that carry the
-arm; ``calib.residual_map.embedding``), shown in degrees. A contact near a program pose is found by
+arm; ``calib.shared_error.embedding``), shown in degrees. A contact near a program pose is found by
 inverse kinematics from that pose: its TCP moved to the nearest point of the gauge line (and a little
 along it), the tool turned as little as it takes to meet the edge within the line's tilt allowance.
 """
@@ -13,7 +13,7 @@ import numpy as np
 
 from calib import ik
 from calib.experiment import _valid, _wrap_into
-from calib.residual_map import distance2, embedding, neighbours
+from calib.shared_error import distance2, embedding, neighbours
 
 NEAR_DEG = 5.0
 """A contact counts as near a program pose within this chord distance of joints 1-3 [deg]."""

@@ -16,8 +16,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from calib.absorbed_angles import fit_model_map
+from calib.angle_errors import FOLDS, MIN_GAIN
 from calib.map_rows import model_observations
-from calib.residual_map import FOLDS, MIN_GAIN, ResidualMap, fit_rows_map, mapped_readings
+from calib.residual_map import ResidualMap, fit_rows_map, mapped_readings
 
 
 @dataclass(frozen=True)

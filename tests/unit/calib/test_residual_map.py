@@ -2,7 +2,7 @@
 have a cyclic error of 17 cycles a turn and whose TCP sags with its reach (``sim_fixtures.
 unmodelled``), calibrated from a tracker; near the poses measured the map takes the error the table
 leaves down toward the tracker's noise and bounds it; far from them it falls back to the table; a
-cell of table and white noise keeps it off. The local solve is the dense Gaussian process's."""
+cell of table and white noise keeps it off."""
 
 import dataclasses
 
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import calib.angle_errors as angle_errors
-import calib.residual_map as residual_map
+import calib.shared_error as shared_error
 import configs
 from calib.calibrate import CalibrationOptions, calibrate
-from calib.discrepancy import joint_kernel
 from calib.position import PositionModel, PositionSamples
-from calib.residual_map import fit_map, rms3
+from calib.residual_map import fit_map, map_arrays, map_from_arrays
+from calib.shared_error import rms3
 from sim_fixtures.unmodelled import UR10_LIKE, TrackerCell, Unmodelled
 from sim_fixtures.world import Robot
 
@@ -110,10 +110,10 @@ def test_the_shared_error_falls_back_far_from_its_rows():
     rng = np.random.default_rng(8)
     q = work_region(rng, 400)
     error = 0.1 * np.sin(5 * q[:, :3]) + rng.normal(0, 0.01, (400, 3))  # smooth over joints 1-3
-    shared = residual_map.fit_shared(q, error)
+    shared = shared_error.fit_shared(q, error)
     assert shared is not None
     candidates = np.radians(rng.uniform(-180, 180, (2000, 6)))
-    d2 = residual_map.distance2(residual_map.embedding(candidates), residual_map.embedding(q))
+    d2 = shared_error.distance2(shared_error.embedding(candidates), shared_error.embedding(q))
     far = candidates[np.min(d2, axis=1) > (8 * np.radians(shared.length_scale_deg)) ** 2]
     assert len(far) >= 20
     mean, variance = shared.predict(far)
@@ -136,73 +136,9 @@ def test_cells_of_table_and_white_noise_keep_the_map_off():
     assert on <= 1
 
 
-def test_the_local_solve_is_the_dense_gaussian_process_with_the_discrepancys_kernel():
-    """With every row a neighbour, the posterior is the textbook one under ``joint_kernel``."""
-    rng = np.random.default_rng(3)
-    q, queries = rng.uniform(-0.3, 0.3, (30, 6)), rng.uniform(-0.3, 0.3, (7, 6))
-    values = rng.normal(0, 0.1, (30, 3))
-    local, textbook = local_and_textbook(q, queries, values, 0.1, 0.02, 0.003)
-    np.testing.assert_allclose(local[0], textbook[0], atol=1e-10)
-    np.testing.assert_allclose(local[1], textbook[1], atol=1e-10)
-
-
-def local_and_textbook(q, queries, values, length, shared, noise):
-    """``local_posterior`` at ``queries`` (M, 6) with every one of the rows ``q`` (N, 6) a
-    neighbour, and the dense textbook posterior under ``joint_kernel``: (mean, variance) each."""
-    m, n = len(queries), len(q)
-    points, at = residual_map.embedding(q), residual_map.embedding(queries)
-    index = residual_map.neighbours(at, points, n)
-    distances = residual_map.local_distances(at, points, index)
-    local = residual_map.local_posterior(distances, values[index], length, shared, noise)
-    both = joint_kernel(np.vstack([queries, q]), length)
-    cov, cross = shared * both[m:, m:] + noise * np.eye(n), shared * both[:m, m:]
-    variance = shared - np.sum(cross * np.linalg.solve(cov, cross.T).T, axis=1)
-    return local, (cross @ np.linalg.solve(cov, values), variance)
-
-
-def test_poses_read_again_and_again_leave_the_local_solve_the_textbook_one():
-    """A session reads each pose several times (five captures at one target): the neighbours'
-    kernel is singular, only a small noise keeps the covariance positive definite, and the bordered
-    Cholesky (``whitened``) must still give the dense posterior."""
-    rng = np.random.default_rng(5)
-    q = np.repeat(rng.uniform(-0.3, 0.3, (6, 6)), 5, axis=0)  # 30 rows, 6 distinct poses
-    queries = rng.uniform(-0.3, 0.3, (7, 6))
-    values = rng.normal(0, 0.1, (30, 3))
-    local, textbook = local_and_textbook(q, queries, values, 0.5, 0.02, 1e-7)
-    np.testing.assert_allclose(local[0], textbook[0], rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(local[1], textbook[1], atol=1e-9)
-
-
-def test_the_neighbours_are_the_nearest_rows_of_the_other_folds():
-    rng = np.random.default_rng(4)
-    points, fold = rng.normal(size=(200, 6)), np.arange(200) % 5
-    index = residual_map.neighbours(points[:50], points, 12, fold, fold[:50])
-    for i in range(50):
-        d2 = np.sum((points - points[i]) ** 2, axis=1)
-        d2[fold == fold[i]] = np.inf
-        assert set(index[i]) == set(np.argsort(d2)[:12])
-
-
-@pytest.mark.parametrize("folded", [False, True])
-def test_the_k_d_tree_finds_the_neighbours_the_scan_finds(folded, monkeypatch):
-    """Above ``SCAN_PAIRS`` the search takes a k-d tree (100,000 rows: 40 s and 10 GB by the scan);
-    the same neighbours (distinct distances here), with and without folds."""
-    rng = np.random.default_rng(6)
-    points, fold = residual_map.embedding(rng.uniform(-3, 3, (3000, 6))), np.arange(3000) % 5
-    queries = points[::7]
-    folds = (fold, fold[::7]) if folded else ()
-    scan = residual_map.neighbours(queries, points, 40, *folds)
-    monkeypatch.setattr(residual_map, "SCAN_PAIRS", 0)
-    tree = residual_map.neighbours(queries, points, 40, *folds)
-    assert tree.shape == scan.shape == (queries.shape[0], 40)
-    assert all(set(a) == set(b) for a, b in zip(tree, scan, strict=True))
-    if folded:
-        assert np.all(fold[tree] != fold[::7, None])
-
-
 def test_too_few_rows_or_an_exact_fit_give_no_map():
     rng = np.random.default_rng(5)
-    q, error = rng.normal(size=(2 * residual_map.FOLDS - 1, 6)), rng.normal(size=(9, 3))
+    q, error = rng.normal(size=(2 * angle_errors.FOLDS - 1, 6)), rng.normal(size=(9, 3))
     assert fit_map(q, error, NOMINAL, np.zeros(3)) is None
     q = rng.normal(size=(50, 6))
     assert fit_map(q, np.zeros((50, 3)), NOMINAL, np.zeros(3)) is None  # nothing left to map
@@ -293,9 +229,9 @@ def test_the_map_as_arrays_predicts_what_the_map_did(stages):
     assert found is not None and found.angles is not None and found.shared is not None
     if stages != "both":
         found = dataclasses.replace(found, **{"shared" if stages == "angles" else "angles": None})
-    arrays = residual_map.map_arrays(found)
+    arrays = map_arrays(found)
     assert arrays.get("shared_q", np.zeros((0, 3))).shape[1] == 3
-    read = residual_map.map_from_arrays(arrays)
+    read = map_from_arrays(arrays)
     new = work_region(rng, 50)
     for got, want in zip(read.predict(new), found.predict(new), strict=True):
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import calib.residual_map as residual_map
+import calib.shared_error as shared_error
 import configs
 from calib.absorbed_angles import fit_model_map
 from calib.angle_errors import HARMONICS
@@ -99,20 +100,20 @@ def test_the_observation_operator_of_the_three_axes_is_the_component_posterior()
     error = rng.normal(0, 0.1, (12, 3))
     rows = Observations.of_positions(q, error)
     length, shared, noise = 0.1, 0.02, 0.003
-    at = residual_map.embedding(queries)
-    by_row = residual_map.neighbours(at, residual_map.embedding(q), 12)
-    mean, variance = residual_map.local_posterior(
-        residual_map.local_distances(at, residual_map.embedding(q), by_row),
+    at = shared_error.embedding(queries)
+    by_row = shared_error.neighbours(at, shared_error.embedding(q), 12)
+    mean, variance = shared_error.local_posterior(
+        shared_error.local_distances(at, shared_error.embedding(q), by_row),
         error[by_row],
         length,
         shared,
         noise,
     )
-    points = residual_map.embedding(q[rows.row])
-    index = residual_map.neighbours(at, points, 36)
+    points = shared_error.embedding(q[rows.row])
+    index = shared_error.neighbours(at, points, 36)
     near = rows.direction[index]
-    got_mean, got_variance = residual_map.observed_posterior(
-        residual_map.local_distances(at, points, index),
+    got_mean, got_variance = shared_error.observed_posterior(
+        shared_error.local_distances(at, points, index),
         near @ near.transpose(0, 2, 1),
         near,
         rows.value_mm[index],
