@@ -2,7 +2,7 @@
 
     python benchmarks/sweep_plan_study.py [--passes 2] [--extra 2] [--tilt 25] [--roll 60]
         [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed] [--static]
-        [--noise-free] [--row-hz 240]
+        [--noise-free | --noise-of drawstring|dial] [--row-hz 240] [--compare]
 
 ``station plan --sweep`` on the demo's robot and setup (``--passes`` a line, ``--extra`` more,
 ``--tilt`` / ``--roll`` the largest tool turns [deg], default the demo's
@@ -18,10 +18,13 @@ earlier in its round trip than the station assumes); ``--untimed``: the rows wit
 ``--noise-free``: the drawstring and the dial read without noise (their 1 um resolution kept):
 what the plan's rows cannot tell of the table, whatever its noise: its floor (a direction the rows
 barely determine: on seed 0 the same with the prior weakened a hundredfold or removed, and the
-true table fits the rows no better than the fitted one).
+true table fits the rows no better than the fitted one). ``--noise-of``: only that instrument's
+noise (which of the two a plan's error comes from).
 ``--row-hz``: rows a second along the sweeps (the planner's and the rows'; default the station's).
 ``--static``: the static demo's plan instead (``station plan``, each pose read 5 times and
 averaged), through the same pipeline: the comparison over draws that one demo run cannot give.
+``--compare``: both, the static plan first, and per seed how many pairs of their draws find the
+sweep no worse (a seed's one demo run of each is one such pair).
 ``--draws K``: the rows read K times with fresh noise (the first draw is the one-draw run's), each
 calibrated; their true errors, mean and range (one seed's error moves by a factor 2-3 between
 draws of the noise alone, so a single draw compares plans poorly).
@@ -57,8 +60,12 @@ READINGS = 5
 
 
 def read_noise(args) -> Noise:
-    """The simulator's instrument noise, the joints exact; none at all with ``--noise-free``."""
-    return Noise(length_mm=0.0, dial_mm=0.0, q_deg=0.0) if args.noise_free else Noise(q_deg=0.0)
+    """The simulator's instrument noise, the joints exact; none at all with ``--noise-free``, one
+    instrument's alone with ``--noise-of``."""
+    if args.noise_free:
+        return Noise(length_mm=0.0, dial_mm=0.0, q_deg=0.0)
+    quiet = {"drawstring": {"dial_mm": 0.0}, "dial": {"length_mm": 0.0}}.get(args.noise_of, {})
+    return Noise(q_deg=0.0, **quiet)
 
 
 def sweep_reads(args, robot_file, setup, setup_path):
@@ -113,7 +120,9 @@ def main() -> None:
     parser.add_argument("--late-ms", type=float, default=0.0)
     parser.add_argument("--untimed", action="store_true")
     parser.add_argument("--static", action="store_true")
+    parser.add_argument("--compare", action="store_true")
     parser.add_argument("--noise-free", action="store_true")
+    parser.add_argument("--noise-of", choices=["drawstring", "dial"])
     parser.add_argument("--row-hz", type=float, default=sweeping.SWEEP.row_hz)
     args = parser.parse_args()
     robot_file, setup_path = (
@@ -121,29 +130,44 @@ def main() -> None:
         configs.path("setups/sim.toml"),
     )
     setup = load_setup(setup_path)
-    said, cells = (static_reads if args.static else sweep_reads)(args, robot_file, setup, setup_path)
-    print(said)
-    print("seed | robot time [s] | rows | true error [mm]")
+    kinds = [static_reads, sweep_reads] if args.compare else [static_reads if args.static else sweep_reads]
     folder = Path(tempfile.mkdtemp(prefix="sweep-plan-study-"))
-    for seed in args.seeds:
-        world, write, n_rows, robot_time = cells(seed)
-        world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([seed, 4])).to_csv(folder / "holdout.csv")
-        trues = []
-        for draw in range(args.draws):
-            write(np.random.default_rng([seed, 1] + ([draw] if draw else [])), folder / "rows.csv")
-            outcome = calibration.calibrate_samples(
-                load_samples(folder / "rows.csv"),
-                robot_file,
-                setup,
-                setup_where=str(setup_path),
-                holdout=load_samples(folder / "holdout.csv"),
-                method="lmlc",
-                terms=DEFAULT_TERM_MODEL,
-            )
-            trues.append(float(truth_line(world, outcome).split("->")[1].split()[0]))
-        spread = f" (mean {np.mean(trues):.3f}, {min(trues):.3f}-{max(trues):.3f})" if args.draws > 1 else ""
-        listed = " / ".join(f"{v:.3f}" for v in trues)
-        print(f"{seed} | {robot_time} | {n_rows} | {listed}{spread}", flush=True)
+    trues = {}
+    for reads in kinds:
+        said, cells = reads(args, robot_file, setup, setup_path)
+        print(said)
+        print("seed | robot time [s] | rows | true error [mm]")
+        trues[reads] = {
+            seed: true_errors(args, cells, seed, robot_file, setup, setup_path, folder) for seed in args.seeds
+        }
+    if args.compare:
+        print("seed | pairs of draws where the sweep is no worse than the static plan")
+        for seed in args.seeds:
+            static, swept = np.array(trues[static_reads][seed]), np.array(trues[sweep_reads][seed])
+            print(f"{seed} | {np.sum(swept[:, None] <= static[None, :])} of {static.size * swept.size}")
+
+
+def true_errors(args, cells, seed, robot_file, setup, setup_path, folder) -> list[float]:
+    """One seed's true workspace errors [mm], a calibration per draw of the noise, printed as a row."""
+    world, write, n_rows, robot_time = cells(seed)
+    world.sample_set(HOLDOUT_PER_LINE, np.random.default_rng([seed, 4])).to_csv(folder / "holdout.csv")
+    trues = []
+    for draw in range(args.draws):
+        write(np.random.default_rng([seed, 1] + ([draw] if draw else [])), folder / "rows.csv")
+        outcome = calibration.calibrate_samples(
+            load_samples(folder / "rows.csv"),
+            robot_file,
+            setup,
+            setup_where=str(setup_path),
+            holdout=load_samples(folder / "holdout.csv"),
+            method="lmlc",
+            terms=DEFAULT_TERM_MODEL,
+        )
+        trues.append(float(truth_line(world, outcome).split("->")[1].split()[0]))
+    spread = f" (mean {np.mean(trues):.3f}, {min(trues):.3f}-{max(trues):.3f})" if args.draws > 1 else ""
+    listed = " / ".join(f"{v:.3f}" for v in trues)
+    print(f"{seed} | {robot_time} | {n_rows} | {listed}{spread}", flush=True)
+    return trues
 
 
 if __name__ == "__main__":
