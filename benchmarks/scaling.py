@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calib.baselines import BaselineOptions, run_method  # noqa: E402
 from calib.calibrate import calibrate  # noqa: E402
-from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
+from calib.drawstring import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup  # noqa: E402
 from sim_fixtures.world import World  # noqa: E402
 from station.jobs.comparison import LABELS  # noqa: E402
 

@@ -14,7 +14,7 @@ row kept; LMLC as ``station calibrate`` runs it; the true workspace error on 1,0
 What ``benchmarks/demo_sweep.py`` measures, less the stream's timing and flags: a plan's limit.
 ``--late-ms D``: the drawstring's lengths true ``D`` ms after the rows' stamps (a device measuring
 earlier in its round trip than the station assumes); ``--untimed``: the rows without their
-``pass`` and ``t_s`` columns, so the calibration fits no timing (``calib.models.TIMING_NAME``).
+``pass`` and ``t_s`` columns, so the calibration fits no timing (``calib.drawstring.TIMING_NAME``).
 ``--noise-free``: the drawstring and the dial read without noise (their 1 um resolution kept):
 what the plan's rows cannot tell of the table, whatever its noise: its floor (a direction the rows
 barely determine: on seed 0 the same with the prior weakened a hundredfold or removed, and the

@@ -17,8 +17,8 @@ import numpy as np
 from calib import ik
 from calib.accuracy import workspace_error_modes
 from calib.calibrate import CalibrationOptions, fit_setup
+from calib.drawstring import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.kinematics import dh_table, tcp_position
-from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.uncertainty import covariance, row_noise
 
 MIN_CONDITIONING = 0.04

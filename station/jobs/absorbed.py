@@ -207,7 +207,7 @@ DIAL_MODE_TEXT = {
     "gated": "dial gated, no dial_axis (each reading bounds the offset from the edge: |dial_mm|)",
     "none": "no dial (contact_sigma_mm)",
 }
-"""How a line's rows were held to its edge (``calib.models.DrawstringLineModel.dial_mode``)."""
+"""How a line's rows were held to its edge (``calib.drawstring.DrawstringLineModel.dial_mode``)."""
 
 
 def line_modes(model) -> dict[int, str]:

@@ -26,16 +26,11 @@ from calib.calibrate import (
     correlate,
     fit_setup,
 )
+from calib.drawstring import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.kinematics import dh_table
 from calib.methods import ALL_METHODS, BASELINES
 from calib.metrics import error_metrics
-from calib.models import (
-    DrawstringFrame,
-    DrawstringLineModel,
-    DrawstringSamples,
-    DrawstringSetup,
-    MeasurementModel,
-)
+from calib.models import MeasurementModel
 from calib.observability import MCSResult, select_configurations
 from calib.params import DH_NAMES, dh_from_degrees, display_factor
 from calib.position import PositionModel, PositionSamples

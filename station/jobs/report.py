@@ -12,9 +12,10 @@ import numpy as np
 from calib.calibrate import Calibration
 from calib.conventions import mdh_from_dh
 from calib.discrepancy import Discrepancy
+from calib.drawstring import DrawstringSetupEstimate
 from calib.joint_terms import TERM_KINDS
 from calib.kinematics import N_DH, dh_table
-from calib.models import GROUP_PRIOR, DrawstringSetupEstimate
+from calib.models import GROUP_PRIOR
 from calib.params import DH_KEYS, DH_NAMES, dh_to_degrees, display_factor
 from calib.position import TrackerSetupEstimate
 from station.formats.samples import Samples
@@ -192,7 +193,7 @@ def now_utc() -> str:
 @dataclass(frozen=True)
 class CalibrationReport:
     """What a calibration found (the contract's "The report"); ``setup`` is the model's setup
-    estimate (``calib.models.DrawstringSetupEstimate`` or ``calib.position.TrackerSetupEstimate``),
+    estimate (``calib.drawstring.DrawstringSetupEstimate`` or ``calib.position.TrackerSetupEstimate``),
     whose fields the JSON spreads at the top level. Beyond the contract's keys: ``model`` (the
     ``--model``), ``terms`` (the identified joint-space terms, as ``parameters``) and, for
     ``--model auto``, ``cross_validation``; ``discrepancy``, the joint-space error the fit was

@@ -10,8 +10,8 @@ import calib.discrepancy as discrepancy
 import configs
 from calib.calibrate import CalibrationOptions, calibrate
 from calib.discrepancy import Blocks, Discrepancy, joint_kernel
+from calib.drawstring import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.kinematics import tcp_position
-from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.position import PositionModel, PositionSamples, rotation_from_vector
 from sim_fixtures.world import Robot
 from tests.unit.calib.test_terms_recovery import TRACKER_SIGMA_MM, position_set

@@ -4,9 +4,9 @@ import pytest
 import configs
 from calib import lm
 from calib.calibrate import WithPrior
+from calib.drawstring import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.joint_terms import JointTerms, compliance_group, harmonic_group
 from calib.lines import LineReference, fit_line, line_residual
-from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.params import DH_NAMES
 from calib.uncertainty import covariance
 from sim_fixtures.world import JR680_FILE, Robot

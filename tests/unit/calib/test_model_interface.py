@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import tomllib
 
+from calib.drawstring import DrawstringSetup, least_aligned_direction
 from calib.experiment import design_model
 from calib.kinematics import tcp_position
-from calib.models import DrawstringSetup, least_aligned_direction
 from calib.params import dh_from_degrees
 from calib.position import PositionModel, PositionSamples, rotation_from_vector
 

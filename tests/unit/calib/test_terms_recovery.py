@@ -10,9 +10,9 @@ import pytest
 
 import configs
 from calib.calibrate import CalibrationOptions, calibrate
+from calib.drawstring import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.joint_terms import JointTerms, LinkMasses, Term, compliance_group, harmonic_group
 from calib.kinematics import tcp_position
-from calib.models import DrawstringFrame, DrawstringLineModel, DrawstringSamples, DrawstringSetup
 from calib.position import PositionModel, PositionSamples, rotation_from_vector
 from calib.selection import cross_validated_errors, kfold, select_terms
 from sim_fixtures.world import JointError, Robot, World

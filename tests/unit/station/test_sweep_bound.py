@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import configs
+from calib.drawstring import TIMING_NAME
 from calib.kinematics import dh_table, tcp_position
 from calib.metrics import aligned_errors
-from calib.models import TIMING_NAME
 from sim_fixtures.scenario import setup_dict
 from sim_fixtures.world import World
 from station.formats.samples import Samples, load_samples

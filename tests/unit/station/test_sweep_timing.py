@@ -1,5 +1,5 @@
 """A sweep whose drawstring measured later than its rows are stamped (a device measures somewhere
-inside its round trip): the calibration fits that timing (``calib.models.TIMING_NAME``) and its
+inside its round trip): the calibration fits that timing (``calib.drawstring.TIMING_NAME``) and its
 table is as good as on rows read on time; without it, a fraction of a millisecond ruins the table.
 Against the simulated truth: the demo's cell sweeping a plan of one pass a line."""
 
@@ -10,7 +10,7 @@ import pytest
 
 import configs
 from calib.alignment import pass_rates
-from calib.models import TIMING_NAME
+from calib.drawstring import TIMING_NAME
 from sim_fixtures.station_sim import sweep_cell, sweep_robot
 from sim_fixtures.sweep_program import swept_rows, write_swept
 from sim_fixtures.world import Noise
