@@ -1,8 +1,8 @@
 """Sweep plans compared offline (issue 37): a plan's true workspace error over seeds in a minute.
 
     python benchmarks/sweep_plan_study.py [--passes 2] [--extra 2] [--tilt 25] [--roll 60]
-        [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed] [--static]
-        [--noise-free | --noise-of drawstring|dial] [--row-hz 240] [--compare]
+        [--seeds 0 1 2 3] [--draws 1] [--late-ms 0] [--untimed] [--static | --compare]
+        [--noise-free | --noise-of drawstring|dial] [--row-hz 240]
 
 ``station plan --sweep`` on the demo's robot and setup (``--passes`` a line, ``--extra`` more,
 ``--tilt`` / ``--roll`` the largest tool turns [deg], default the demo's
@@ -119,10 +119,12 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=1)
     parser.add_argument("--late-ms", type=float, default=0.0)
     parser.add_argument("--untimed", action="store_true")
-    parser.add_argument("--static", action="store_true")
-    parser.add_argument("--compare", action="store_true")
-    parser.add_argument("--noise-free", action="store_true")
-    parser.add_argument("--noise-of", choices=["drawstring", "dial"])
+    plans = parser.add_mutually_exclusive_group()
+    plans.add_argument("--static", action="store_true")
+    plans.add_argument("--compare", action="store_true")
+    noise = parser.add_mutually_exclusive_group()
+    noise.add_argument("--noise-free", action="store_true")
+    noise.add_argument("--noise-of", choices=["drawstring", "dial"])
     parser.add_argument("--row-hz", type=float, default=sweeping.SWEEP.row_hz)
     args = parser.parse_args()
     robot_file, setup_path = (
